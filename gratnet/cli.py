@@ -1,0 +1,60 @@
+"""The ``gratnet`` command: one entry point, one subcommand per module.
+
+Each subcommand module exposes ``register(subparsers)``, which adds its parser and sets
+``handler=function(arguments) -> int``. Modules are imported lazily so that ``gratnet --help`` and
+the runtime subcommands never import torch.
+"""
+
+from __future__ import annotations
+
+import argparse
+import importlib
+import sys
+from collections.abc import Sequence
+
+from gratnet import __version__
+from gratnet.errors import GratNetError
+
+# Subcommand name -> module that registers it (imported only when needed).
+SUBCOMMAND_MODULES: dict[str, str] = {
+    "heightfield": "trainer.heightfield_cli",
+    "groundtruth": "trainer.groundtruth_cli",
+}
+
+
+def build_parser(only: str | None = None) -> argparse.ArgumentParser:
+    """The full parser; with ``only``, import and register just that subcommand."""
+    parser = argparse.ArgumentParser(
+        prog="gratnet", description="GratNet: neural rendering of diffractive surfaces."
+    )
+    parser.add_argument("--version", action="version", version=f"gratnet {__version__}")
+    subparsers = parser.add_subparsers(dest="command", metavar="SUBCOMMAND")
+    for name, module_name in SUBCOMMAND_MODULES.items():
+        if only is not None and name != only:
+            subparsers.add_parser(name, help=f"(see gratnet {name} --help)")
+            continue
+        importlib.import_module(module_name).register(subparsers)
+    return parser
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """Run the ``gratnet`` command; bad input exits with one clear line and a non-zero status."""
+    argv = list(sys.argv[1:] if argv is None else argv)
+    command = next((word for word in argv if not word.startswith("-")), None)
+    parser = build_parser(only=command if command in SUBCOMMAND_MODULES else None)
+    arguments = parser.parse_args(argv)
+    if not getattr(arguments, "handler", None):
+        parser.print_help()
+        return 0 if not argv else 2
+    try:
+        return int(arguments.handler(arguments) or 0)
+    except GratNetError as error:
+        print(f"gratnet {arguments.command}: error: {error}", file=sys.stderr)
+        return error.exit_code
+    except KeyboardInterrupt:
+        print(f"gratnet {arguments.command}: interrupted; no output was written", file=sys.stderr)
+        return 130
+
+
+if __name__ == "__main__":
+    sys.exit(main())

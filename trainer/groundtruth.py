@@ -1,0 +1,95 @@
+"""Ground-truth reflectance volumes (physics.md, "Sampling" and "The volume file").
+
+``compute_volume`` samples XYZ(u, v, w) of a height field on the grid of a sampling scheme; the
+result is a :class:`gratnet.volume.Volume` ready for :func:`gratnet.volume.write_volume`.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import datetime
+import os
+from collections.abc import Callable
+
+import numpy as np
+
+from gratnet import __version__
+from gratnet.config import config_field
+from gratnet.errors import GratNetError
+from gratnet.volume import Volume
+from trainer.fourier import FTerm, OpticsConfig, PreparedSurface, prepare_surface
+from trainer.heightfield import HeightField
+from trainer.sampling import Scheme, check_scheme, grid_axis, grid_to_key, physical_mask, slice_t, slice_w
+from trainer.spectral import ILLUMINANT, OBSERVER, spectral_weights
+
+
+@dataclasses.dataclass(frozen=True)
+class VolumeConfig:
+    """The ground-truth volume's grid: resolution, slices and sampling scheme."""
+
+    resolution: int = config_field(1001, "samples R along u* and v* on [−2, 2], both ends included", flag="--res")
+    slices: int = config_field(11, "number S of w-slices, t_s = s/(S−1)", flag="--slices")
+    sampling: Scheme = config_field("regular", "sampling scheme of the key-vector domain", flag="--sampling")
+
+    def __post_init__(self) -> None:
+        check_scheme(self.sampling)
+        if self.resolution < 2:
+            raise GratNetError(f"--res must be at least 2, got {self.resolution}")
+        if self.slices < 1:
+            raise GratNetError(f"--slices must be at least 1, got {self.slices}")
+
+
+def volume_key_vectors(config: VolumeConfig) -> tuple[np.ndarray, np.ndarray, list[float | np.ndarray]]:
+    """The key components u (columns), v (rows) and each slice's w (scalar or per-sample array)."""
+    grid = grid_axis(config.resolution)
+    u = grid_to_key(grid, config.sampling)
+    v = u.copy()
+    w_slices: list[float | np.ndarray] = []
+    for t in slice_t(config.slices):
+        w = slice_w(config.sampling, float(t), u, v)
+        w_slices.append(float(w.flat[0]) if config.sampling != "simple-max" else w)
+    return u, v, w_slices
+
+
+def compute_volume(
+    field: HeightField,
+    config: VolumeConfig,
+    optics: OpticsConfig,
+    report: Callable[[str], None] | None = None,
+    progress: bool = True,
+    surface: PreparedSurface | None = None,
+) -> Volume:
+    """Sample CIE XYZ(u, v, w) of ``field`` on ``config``'s grid (eq. 1–3 of physics.md)."""
+    surface = surface or prepare_surface(field, optics, report)
+    spectral = spectral_weights(optics.wavelength_start_nm, optics.wavelength_end_nm, optics.wavelength_step_nm)
+    u, v, w_slices = volume_key_vectors(config)
+    engine = FTerm(surface, spectral, optics.tolerance)
+    xyz = engine.xyz_grid(u, v, w_slices, progress="ground truth" if progress else False)
+    xyz[:, ~physical_mask(u, v)] = 0.0  # u² + v² > 4: no pair of directions reaches it
+    grid_samples = surface.heights_um.shape
+    metadata = {
+        "scheme": config.sampling,
+        "resolution": config.resolution,
+        "slices": config.slices,
+        "slice_t": [float(t) for t in slice_t(config.slices)],
+        "slice_w": [w if isinstance(w, float) else None for w in w_slices],
+        "sigma_s_um": optics.sigma_s_um,
+        "window_extent_um": optics.extent_um,
+        "window_extent_sigmas": optics.window_extent_sigmas,
+        "dx_um": surface.dx_um,
+        "patch_size_um": [float(size) for size in surface.source_patch_um],
+        "grid_samples": [int(n) for n in grid_samples],
+        "height_span_um": 2.0 * surface.half_span_um,
+        "repeat": optics.repeat,
+        "wavelengths_nm": [float(x) for x in spectral.wavelengths_nm],
+        "illuminant": ILLUMINANT,
+        "observer": OBSERVER,
+        "chebyshev_nodes": engine.last_node_count,
+        "interpolation_tolerance": optics.tolerance,
+        "source": field.source,
+        "preparation_notes": list(surface.notes),
+        "gratnet_version": __version__,
+        "created": datetime.datetime.now(datetime.timezone.utc).isoformat(timespec="seconds"),
+        "host_cpus": os.cpu_count() or 0,
+    }
+    return Volume(xyz.astype(np.float32), metadata)

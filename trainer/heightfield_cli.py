@@ -1,0 +1,135 @@
+"""``gratnet heightfield``: generate, convert, preview and list height fields.
+
+    gratnet heightfield list
+    gratnet heightfield generate NAME [--PARAM VALUE ...] --out F.npz|F.gsf [--preview P.png]
+    gratnet heightfield convert IN --out OUT.npz|OUT.gsf [--dx-um ...] [--height-scale-um ...] [--channel ...]
+    gratnet heightfield preview IN --out P.png [--dx-um ...] [--height-scale-um ...] [--channel ...]
+
+Each generator is its own sub-command with one flag per parameter (``gratnet heightfield generate
+blazed --help`` lists them with units and defaults). The resolved configuration is saved as
+``NAME.config.json`` beside every output.
+"""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+from pathlib import Path
+from typing import Any
+
+from gratnet.config import add_arguments, from_arguments, save_config
+from gratnet.errors import GratNetError
+from trainer import generators
+from trainer.heightfield import HeightField
+from trainer.loaders import LoadOptions, load_heightfield, preview_png, save_heightfield
+
+FIELD_SUFFIXES = (".npz", ".gsf")
+
+
+def register(subparsers: argparse._SubParsersAction) -> None:
+    """Add the ``heightfield`` subcommand and its actions to the ``gratnet`` parser."""
+    parser = subparsers.add_parser(
+        "heightfield", help="generate, convert and preview height fields",
+        description="Height fields: heights in µm on a square grid of spacing dx (µm).",
+    )
+    actions = parser.add_subparsers(dest="action", metavar="ACTION", required=True)
+
+    listing = actions.add_parser("list", help="list the built-in generators with their parameters")
+    listing.set_defaults(handler=_list)
+
+    generate = actions.add_parser(
+        "generate", help="generate a built-in height field",
+        description="Generate a built-in height field; 'gratnet heightfield generate NAME --help' lists "
+                    "NAME's parameters.",
+    )
+    names = generate.add_subparsers(dest="generator", metavar="NAME", required=True)
+    for name, (params_class, function) in generators.GENERATORS.items():
+        summary = (function.__doc__ or "").strip().splitlines()[0]
+        generator = names.add_parser(name, help=summary, description=summary)
+        add_arguments(generator, params_class)
+        _add_outputs(generator, FIELD_SUFFIXES)
+        generator.set_defaults(handler=_generate, params_class=params_class)
+
+    convert = actions.add_parser("convert", help="convert a height-field file (or generator) to .npz or .gsf")
+    convert.add_argument("input", metavar="IN", help="file (.npy .npz .gsf .png .exr) or generator name")
+    add_arguments(convert, LoadOptions)
+    _add_outputs(convert, FIELD_SUFFIXES)
+    convert.set_defaults(handler=_convert)
+
+    preview = actions.add_parser("preview", help="write a colour-mapped PNG of a height field (axes in µm)")
+    preview.add_argument("input", metavar="IN", help="file (.npy .npz .gsf .png .exr) or generator name")
+    add_arguments(preview, LoadOptions)
+    preview.add_argument("--out", required=True, type=Path, help="output preview image (.png)")
+    preview.set_defaults(handler=_preview)
+
+
+def _add_outputs(parser: argparse.ArgumentParser, suffixes: tuple[str, ...]) -> None:
+    parser.add_argument("--out", required=True, type=Path, help=f"output height field ({' or '.join(suffixes)})")
+    parser.add_argument("--preview", type=Path, default=None, help="also write a preview image (.png)")
+
+
+def _check_suffix(path: Path, suffixes: tuple[str, ...], what: str) -> None:
+    # Checked before any work so that a typo costs nothing.
+    if path.suffix.lower() not in suffixes:
+        raise GratNetError(f"{path}: {what} must end in {' or '.join(suffixes)}")
+
+
+def _summary(field: HeightField) -> dict[str, Any]:
+    rows, columns = field.shape
+    return {"rows": rows, "columns": columns, "dx_um": field.dx_um, "span_um": field.span_um, "source": field.source}
+
+
+def _describe(field: HeightField) -> str:
+    rows, columns = field.shape
+    return f"{columns} × {rows} samples, dx = {field.dx_um:.4g} µm, height span {field.span_um:.4g} µm"
+
+
+def _write(field: HeightField, arguments: argparse.Namespace, **configs: Any) -> None:
+    """Save the field (and its optional preview) with the resolved config beside the field."""
+    save_heightfield(arguments.out, field)
+    # One config, beside the field; it names the preview (which may share the field's stem).
+    preview = None if arguments.preview is None else str(arguments.preview)
+    save_config(arguments.out, **configs, field=_summary(field), preview=preview)
+    print(f"wrote {arguments.out}: {_describe(field)}")
+    if arguments.preview is not None:
+        preview_png(field, arguments.preview)
+        print(f"wrote {arguments.preview}")
+
+
+def _list(arguments: argparse.Namespace) -> int:
+    for name, (params_class, function) in generators.GENERATORS.items():
+        print(f"{name}: {(function.__doc__ or '').strip().splitlines()[0]}")
+        for field in dataclasses.fields(params_class):
+            flag = "--" + field.name.replace("_", "-")
+            print(f"    {flag:26} {field.default!r:>8}  {field.metadata.get('help', '')}")
+    return 0
+
+
+def _generate(arguments: argparse.Namespace) -> int:
+    _check_suffix(arguments.out, FIELD_SUFFIXES, "--out")
+    if arguments.preview is not None:
+        _check_suffix(arguments.preview, (".png",), "--preview")
+    params = from_arguments(arguments.params_class, arguments)
+    field = generators.GENERATORS[arguments.generator][1](params)
+    _write(field, arguments, generator=arguments.generator, parameters=params)
+    return 0
+
+
+def _convert(arguments: argparse.Namespace) -> int:
+    _check_suffix(arguments.out, FIELD_SUFFIXES, "--out")
+    if arguments.preview is not None:
+        _check_suffix(arguments.preview, (".png",), "--preview")
+    options = from_arguments(LoadOptions, arguments)
+    field = load_heightfield(arguments.input, options)
+    _write(field, arguments, input=arguments.input, load_options=options)
+    return 0
+
+
+def _preview(arguments: argparse.Namespace) -> int:
+    _check_suffix(arguments.out, (".png",), "--out")
+    options = from_arguments(LoadOptions, arguments)
+    field = load_heightfield(arguments.input, options)
+    preview_png(field, arguments.out)
+    save_config(arguments.out, input=arguments.input, load_options=options, field=_summary(field))
+    print(f"wrote {arguments.out}: {_describe(field)}")
+    return 0
