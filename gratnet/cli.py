@@ -19,6 +19,7 @@ from gratnet.errors import GratNetError
 SUBCOMMAND_MODULES: dict[str, str] = {
     "heightfield": "trainer.heightfield_cli",
     "groundtruth": "trainer.groundtruth_cli",
+    "brdfslice": "trainer.brdfslice_cli",
 }
 
 
