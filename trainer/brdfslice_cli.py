@@ -6,7 +6,6 @@ import argparse
 import dataclasses
 
 from gratnet.config import add_arguments, from_arguments, save_config
-from gratnet.errors import GratNetError
 
 
 def parse_angles(text: str) -> tuple[float, float]:
@@ -21,22 +20,18 @@ def parse_angles(text: str) -> tuple[float, float]:
 def register(subparsers: argparse._SubParsersAction) -> None:
     """Add the ``brdfslice`` subcommand."""
     from trainer.brdfslice import SliceConfig
-    from trainer.fourier import OpticsConfig
-    from trainer.loaders import LoadOptions
+    from trainer.cli_support import add_heightfield_input
 
     parser = subparsers.add_parser(
         "brdfslice", help="render a ground-truth BRDF slice (fixed light, every view direction) as PNG",
         description="Fix the light direction and show exposure · A · XYZ for every view direction, each "
         "pixel an orthographic projection of the view direction onto the base plane (display sRGB).",
     )
-    parser.add_argument("heightfield", metavar="HEIGHTFIELD", help="height-field file or built-in generator name")
+    add_heightfield_input(parser)
     parser.add_argument("--light", type=parse_angles, default=(30.0, 0.0), metavar="θ,φ",
                         help="light direction: polar angle and azimuth in degrees (default: 30,0)")
     parser.add_argument("--out", required=True, metavar="SLICE.png", help="output image (PNG, display sRGB)")
-    parser.add_argument("--quiet", action="store_true", help="no progress bar")
     add_arguments(parser, SliceConfig)
-    add_arguments(parser, OpticsConfig)
-    add_arguments(parser, LoadOptions)
     parser.set_defaults(handler=run)
 
 
@@ -47,19 +42,16 @@ def run(arguments: argparse.Namespace) -> int:
     from gratnet.atomic import atomic_path
     from gratnet.display import xyz_to_display_srgb8
     from trainer.brdfslice import SliceConfig, brdf_slice_xyz
-    from trainer.fourier import OpticsConfig, prepare_surface
-    from trainer.loaders import LoadOptions, load_heightfield
+    from trainer.cli_support import read_heightfield_input, reporter, require_suffix
+    from trainer.fourier import prepare_surface
 
-    if not str(arguments.out).lower().endswith(".png"):
-        raise GratNetError(f"--out must name a PNG file, got {arguments.out}")
+    require_suffix(arguments.out, ".png", "a PNG image")
     config = dataclasses.replace(
         from_arguments(SliceConfig, arguments),
         light_theta_degrees=arguments.light[0], light_phi_degrees=arguments.light[1],
     )
-    optics = from_arguments(OpticsConfig, arguments)
-    load_options = from_arguments(LoadOptions, arguments)
-    field = load_heightfield(arguments.heightfield, load_options)
-    surface = prepare_surface(field, optics, report=lambda message: print(f"gratnet brdfslice: {message}"))
+    field, optics, load_options = read_heightfield_input(arguments)
+    surface = prepare_surface(field, optics, report=reporter("brdfslice"))
     xyz = brdf_slice_xyz(surface, config, optics, progress=not arguments.quiet)
     with atomic_path(arguments.out) as temporary:
         Image.fromarray(xyz_to_display_srgb8(xyz, 1.0)).save(temporary, format="PNG")

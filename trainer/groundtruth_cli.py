@@ -6,19 +6,16 @@ Public flags (keep them): --out, --res, --slices, --sampling, --sigma-s, --previ
 from __future__ import annotations
 
 import argparse
-import sys
 import time
 
 from gratnet.config import add_arguments, from_arguments, save_config
-from gratnet.errors import GratNetError
 from gratnet.volume import write_volume
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
     """Add the ``groundtruth`` subcommand."""
-    from trainer.fourier import OpticsConfig
+    from trainer.cli_support import add_heightfield_input
     from trainer.groundtruth import VolumeConfig
-    from trainer.loaders import LoadOptions
 
     parser = subparsers.add_parser(
         "groundtruth",
@@ -26,16 +23,13 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         description="Compute CIE XYZ(u,v,w) of a height field (a file or a built-in generator's name) "
         "with the windowed Kirchhoff integral, spectrally (D65, CIE 1931 2°), and write it as OpenEXR.",
     )
-    parser.add_argument("heightfield", metavar="HEIGHTFIELD", help="height-field file or built-in generator name")
+    add_heightfield_input(parser)
     parser.add_argument("--out", required=True, metavar="VOLUME.exr", help="output volume (OpenEXR)")
     parser.add_argument("--preview", metavar="PNG", help="also write a PNG of one slice (display sRGB)")
     parser.add_argument("--preview-slice", type=int, default=-1, help="slice shown by --preview (default: last)")
     parser.add_argument("--exposure", type=float, default=None,
                         help="preview exposure (default: chosen so the slice's brightest 0.1%% is white)")
-    parser.add_argument("--quiet", action="store_true", help="no progress bar")
     add_arguments(parser, VolumeConfig)
-    add_arguments(parser, OpticsConfig)
-    add_arguments(parser, LoadOptions)
     parser.set_defaults(handler=run)
 
 
@@ -43,23 +37,16 @@ def run(arguments: argparse.Namespace) -> int:
     """Load, compute, write atomically (volume, config, optional preview)."""
     import numpy as np
 
-    from trainer.fourier import OpticsConfig
+    from trainer.cli_support import read_heightfield_input, reporter, require_suffix
     from trainer.groundtruth import VolumeConfig, compute_volume
-    from trainer.loaders import LoadOptions, load_heightfield
     from trainer.preview import save_slice_preview
 
-    if not str(arguments.out).lower().endswith(".exr"):
-        raise GratNetError(f"--out must name an OpenEXR file (.exr), got {arguments.out}")
+    require_suffix(arguments.out, ".exr", "an OpenEXR file")
     volume_config = from_arguments(VolumeConfig, arguments)
-    optics = from_arguments(OpticsConfig, arguments)
-    load_options = from_arguments(LoadOptions, arguments)
-    field = load_heightfield(arguments.heightfield, load_options)
-
-    def report(message: str) -> None:
-        print(f"gratnet groundtruth: {message}", file=sys.stderr)
-
+    field, optics, load_options = read_heightfield_input(arguments)
     started = time.perf_counter()
-    volume = compute_volume(field, volume_config, optics, report=report, progress=not arguments.quiet)
+    volume = compute_volume(field, volume_config, optics, report=reporter("groundtruth"),
+                            progress=not arguments.quiet)
     elapsed = time.perf_counter() - started
     volume.metadata["compute_seconds"] = round(elapsed, 3)
     write_volume(arguments.out, volume)

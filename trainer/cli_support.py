@@ -1,0 +1,43 @@
+"""What the ground-truth subcommands share: the HEIGHTFIELD argument with its optics and load flags."""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from collections.abc import Callable
+from pathlib import Path
+
+from gratnet.config import add_arguments, from_arguments
+from gratnet.errors import GratNetError
+from trainer.fourier import OpticsConfig
+from trainer.heightfield import HeightField
+from trainer.loaders import LoadOptions, load_heightfield
+
+
+def add_heightfield_input(parser: argparse.ArgumentParser) -> None:
+    """HEIGHTFIELD (file or generator name), --quiet, and the OpticsConfig and LoadOptions flags."""
+    parser.add_argument("heightfield", metavar="HEIGHTFIELD", help="height-field file or built-in generator name")
+    parser.add_argument("--quiet", action="store_true", help="no progress bar")
+    add_arguments(parser, OpticsConfig)
+    add_arguments(parser, LoadOptions)
+
+
+def require_suffix(path: str, suffix: str, what: str) -> None:
+    """Refuse an output path whose extension is not ``suffix`` (before any work is done)."""
+    if Path(path).suffix.lower() != suffix:
+        raise GratNetError(f"--out must name {what} ({suffix}), got {path}")
+
+
+def read_heightfield_input(arguments: argparse.Namespace) -> tuple[HeightField, OpticsConfig, LoadOptions]:
+    """The loaded height field with the resolved optics and load options."""
+    optics = from_arguments(OpticsConfig, arguments)
+    load_options = from_arguments(LoadOptions, arguments)
+    return load_heightfield(arguments.heightfield, load_options), optics, load_options
+
+
+def reporter(command: str) -> Callable[[str], None]:
+    """A callback that prints preparation messages (resampled, repeated) to stderr."""
+    def report(message: str) -> None:
+        print(f"gratnet {command}: {message}", file=sys.stderr)
+
+    return report
