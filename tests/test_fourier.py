@@ -161,3 +161,15 @@ def test_small_patch_is_repeated_with_a_message_and_huge_grids_are_refused():
     assert surface.heights_um.shape == (240, 240)
     with pytest.raises(GratNetError, match="integration grid"):
         prepare_surface(_rough_field(0.1, 0.05, 40), OpticsConfig(sigma_s_um=100.0))
+
+
+def test_scattered_points_match_brute_force(coarse_spectrum):
+    field = _rough_field(0.8, 0.05, 120, seed=4)
+    surface = prepare_surface(field, OpticsConfig(sigma_s_um=1.0, window_extent_sigmas=6.0))
+    rng = np.random.default_rng(7)
+    u, v = rng.uniform(-1.4, 1.4, (2, 37))
+    w = -rng.uniform(0, 1, 37) * np.sqrt(4 - u**2 - v**2)
+    got = FTerm(surface, coarse_spectrum).xyz_points(u, v, w, chunk=16)
+    reference = brute_force_xyz(surface, u, v, w, coarse_spectrum)
+    assert got.shape == (37, 3)
+    assert np.linalg.norm(got - reference) / np.linalg.norm(reference) < 1e-5

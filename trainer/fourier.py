@@ -280,6 +280,41 @@ class FTerm:
         return result
 
 
+    def xyz_points(self, u: np.ndarray, v: np.ndarray, w: np.ndarray, chunk: int = 4096,
+                   progress: bool | str = False) -> np.ndarray:
+        """CIE XYZ at arbitrary key vectors (u, v, w) (broadcast together); shape (…, 3).
+
+        Scattered points have no grid to share, so each costs one Ny×Nx product per Chebyshev node
+        and wavelength: P = Σ_m Ey[p, m] · (exp(i k w H) · Exᵀ)[m, p]. Prefer :meth:`xyz_grid` when
+        (u, v) form a grid (volumes, BRDF slices).
+        """
+        u, v, w = np.broadcast_arrays(*(np.asarray(a, dtype=np.float64) for a in (u, v, w)))
+        shape = u.shape
+        u, v, w = u.ravel(), v.ravel(), w.ravel()
+        result = np.zeros((u.size, 3))
+        wavelengths = self.spectral.wavelengths_um
+        chunks = range(0, u.size, chunk)
+        bar = tqdm(total=len(chunks) * len(wavelengths), desc=progress if isinstance(progress, str) else "F-term",
+                   unit="λ", disable=not progress, leave=False)
+        with bar:
+            for start in chunks:
+                part = slice(start, start + chunk)
+                plan = _ChebyshevPlan(w[part], self.surface.half_span_um,
+                                      2.0 * np.pi / wavelengths.min(), self.tolerance)
+                for wavelength, weights in zip(wavelengths, self.spectral.xyz_weights, strict=True):
+                    wavenumber = 2.0 * np.pi / wavelength
+                    kernel_x = self._kernel(u[part], self.surface.x_um, self.surface.window_x, wavenumber)
+                    kernel_y = self._kernel(v[part], self.surface.y_um, self.surface.window_y, wavenumber)
+
+                    def transform(w_node: float, kx: np.ndarray = kernel_x, ky: np.ndarray = kernel_y,
+                                  k: float = wavenumber) -> np.ndarray:
+                        return np.einsum("mp,pm->p", self._height_phasor(k, w_node) @ kx.T, ky)
+
+                    result[part] += plan.power(transform, wavenumber)[:, None] * weights
+                    bar.update(1)
+        return result.reshape(shape + (3,))
+
+
 class _ChebyshevPlan:
     """Interpolation in w between exact transforms at Chebyshev–Lobatto nodes (see module docstring)."""
 
