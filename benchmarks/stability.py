@@ -14,10 +14,10 @@ import json
 import numpy as np
 from scipy import ndimage
 
-from tests.conftest import single_wavelength
 from trainer.fourier import FTerm, OpticsConfig, prepare_surface
 from trainer.heightfield import HeightField
 from trainer.reference import brute_force_amplitude, taylor_amplitude
+from trainer.spectral import monochromatic
 
 
 def main() -> None:
@@ -37,7 +37,7 @@ def main() -> None:
                                   OpticsConfig(sigma_s_um=1.0, window_extent_sigmas=6.0))
         w = np.full_like(u_grid, -2.0)
         reference = np.abs(brute_force_amplitude(surface, u_grid, v_grid, w, 0.38)) ** 2
-        direct = FTerm(surface, single_wavelength(380.0)).xyz_grid(u, u, [-2.0])[0, ..., 1].ravel()
+        direct = FTerm(surface, monochromatic(380.0)).xyz_grid(u, u, [-2.0])[0, ..., 1].ravel()
         taylor = np.abs(taylor_amplitude(surface, u_grid, v_grid, w, 0.38)) ** 2
         ours.append(float(np.linalg.norm(direct - reference) / np.linalg.norm(reference)))
         paper.append(float(np.linalg.norm(taylor - reference) / np.linalg.norm(reference)))

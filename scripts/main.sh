@@ -6,5 +6,5 @@ set -euo pipefail
 cd "$(dirname "$0")/.."
 bash scripts/setup.sh
 out="${1:-out}"
-gratnet groundtruth cd --out "$out/cd.exr" --preview "$out/cd_volume_slice.png" --preview-slice 5
+gratnet groundtruth cd --out "$out/cd.exr" --preview "$out/cd_volume_slice.png" --preview-slice 5 --exposure 3000
 gratnet brdfslice cd --light 30,0 --size 256 --exposure 5000 --out "$out/cd_brdf_slice_30_0.png"

@@ -4,7 +4,6 @@ from __future__ import annotations
 
 from pathlib import Path
 
-import numpy as np
 import pytest
 
 from trainer.spectral import SpectralWeights, spectral_weights
@@ -18,7 +17,3 @@ def coarse_spectrum() -> SpectralWeights:
     """Nine wavelengths, 380…780 nm every 50 nm, D65 × CIE 1931 2° weights."""
     return spectral_weights(380.0, 780.0, 50.0)
 
-
-def single_wavelength(wavelength_nm: float) -> SpectralWeights:
-    """One wavelength whose 'Y' weight is 1: XYZ[..., 1] is then F itself."""
-    return SpectralWeights(np.array([wavelength_nm]), np.array([[0.0, 1.0, 0.0]]))

@@ -9,10 +9,10 @@ from scipy import ndimage
 from scipy.special import jv
 
 from gratnet.errors import GratNetError
-from tests.conftest import single_wavelength
 from trainer.fourier import FTerm, OpticsConfig, chebyshev_node_count, prepare_surface, required_spacing_um
 from trainer.heightfield import HeightField
 from trainer.reference import brute_force_amplitude, brute_force_xyz, taylor_amplitude
+from trainer.spectral import monochromatic
 
 SMALL = OpticsConfig(sigma_s_um=2.0, window_extent_sigmas=6.0)
 
@@ -37,7 +37,7 @@ def test_flat_mirror_lobe_is_the_windows_gaussian():
     field = HeightField(np.zeros((8, 8)), 0.05, "flat")
     surface = prepare_surface(field, OpticsConfig(sigma_s_um=sigma_um, window_extent_sigmas=10.0))
     u = np.linspace(-0.06, 0.06, 13)
-    power = FTerm(surface, single_wavelength(wavelength_nm)).xyz_grid(u, np.array([0.01]), [-1.0])[0, 0, :, 1]
+    power = FTerm(surface, monochromatic(wavelength_nm)).xyz_grid(u, np.array([0.01]), [-1.0])[0, 0, :, 1]
     wavenumber = 2 * np.pi / (wavelength_nm / 1000)
     expected = np.exp(-(wavenumber * sigma_um) ** 2 * (u**2 + 0.01**2))
     np.testing.assert_allclose(power, expected, rtol=1e-4, atol=1e-9)
@@ -51,7 +51,7 @@ def test_sinusoidal_grating_orders_obey_grating_equation_and_bessel_powers(w):
     x = np.arange(side) * dx
     field = stripes(amplitude_um * np.sin(2 * np.pi * x / period_um), dx)
     surface = prepare_surface(field, SMALL)
-    engine = FTerm(surface, single_wavelength(wavelength_nm))
+    engine = FTerm(surface, monochromatic(wavelength_nm))
     wavelength_um = wavelength_nm / 1000
     u = np.linspace(-2, 2, 4001)
     power = engine.xyz_grid(u, np.array([0.0]), [w])[0, 0, :, 1]
@@ -70,7 +70,7 @@ def test_blazed_grating_sends_energy_to_positive_u():
     dx, period = 0.04, 2.5
     x = np.arange(int(12 / dx)) * dx
     field = stripes(0.25 * (x % period) / period, dx)
-    engine = FTerm(prepare_surface(field, SMALL), single_wavelength(500.0))
+    engine = FTerm(prepare_surface(field, SMALL), monochromatic(500.0))
     u = np.linspace(-2, 2, 801)
     power = engine.xyz_grid(u, np.array([0.0]), [-1.5])[0, 0, :, 1]
     assert power[u > 0.02].sum() > 5 * power[u < -0.02].sum()
@@ -128,7 +128,7 @@ def test_tall_field_is_stable_where_the_papers_taylor_series_fails():
     u_grid, v_grid = np.meshgrid(u, u)
     w = np.full_like(u_grid, -2.0)
     reference = np.abs(brute_force_amplitude(surface, u_grid, v_grid, w, 0.38)) ** 2
-    engine = FTerm(surface, single_wavelength(380.0))
+    engine = FTerm(surface, monochromatic(380.0))
     direct = engine.xyz_grid(u, u, [-2.0])[0, ..., 1].ravel()
     assert np.linalg.norm(direct - reference) / np.linalg.norm(reference) < 1e-4
     varying = -2.0 * np.sqrt(np.clip(1 - (u_grid**2 + v_grid**2) / 8, 0, None))  # spans [−2, −1.41]

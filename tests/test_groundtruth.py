@@ -98,3 +98,19 @@ def test_brdfslice_cli_writes_png(tmp_path):
 
     image = np.asarray(Image.open(out))
     assert image.shape == (32, 32, 3) and image.max() > 0 and image[0, 0].sum() == 0
+
+
+def test_real_afm_scan_through_groundtruth(tmp_path):
+    from tests.conftest import SHARED_DATA
+
+    scan = SHARED_DATA / "elaphe_guttata_afm_100x100.png"
+    if not scan.exists():
+        pytest.skip("shared AFM example not present")
+    out = tmp_path / "afm.exr"
+    # ~0.1 µm pixels, 0.375 µm full scale (approximate, per shared/data/README.md); mirrored repeat.
+    assert main(["groundtruth", str(scan), "--dx-um", "0.1", "--height-scale-um", "0.375", "--repeat", "mirror",
+                 "--out", str(out), *TINY_FLAGS]) == 0
+    volume = read_volume(out)
+    assert "elaphe_guttata" in volume.metadata["source"] and volume.metadata["repeat"] == "mirror"
+    assert volume.metadata["patch_size_um"] == pytest.approx([10.0, 10.0])
+    assert np.isfinite(volume.xyz).all() and volume.xyz[..., 1].max() > 0

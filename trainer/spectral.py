@@ -52,3 +52,8 @@ def spectral_weights(start_nm: float = 380.0, end_nm: float = 780.0, step_nm: fl
     wavelengths.setflags(write=False)
     weights.setflags(write=False)
     return SpectralWeights(wavelengths, weights)
+
+
+def monochromatic(wavelength_nm: float) -> SpectralWeights:
+    """One wavelength whose Y weight is 1 (X = Z = 0): XYZ[..., 1] is then F itself (studies, tests)."""
+    return SpectralWeights(np.array([float(wavelength_nm)]), np.array([[0.0, 1.0, 0.0]]))
