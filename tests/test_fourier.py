@@ -173,3 +173,18 @@ def test_scattered_points_match_brute_force(coarse_spectrum):
     reference = brute_force_xyz(surface, u, v, w, coarse_spectrum)
     assert got.shape == (37, 3)
     assert np.linalg.norm(got - reference) / np.linalg.norm(reference) < 1e-5
+
+
+@pytest.mark.parametrize("mode", ["periodic", "mirror"])
+def test_cover_window_keeps_the_patch_centred(mode):
+    from trainer.heightfield import cover_window
+
+    patch = np.random.default_rng(2).uniform(0, 1, (10, 14))
+    covered = cover_window(HeightField(patch, 0.1, "patch"), 40, mode).heights_um
+    assert covered.shape == (40, 40)
+    np.testing.assert_array_equal(covered[15:25, 13:27], patch)  # original patch at the centre
+    neighbour = covered[15:25, 27:41] if mode == "periodic" else covered[15:25, 27:40][:, ::-1]
+    expected = patch if mode == "periodic" else patch[:, 1:]
+    np.testing.assert_array_equal(neighbour, expected[:, : neighbour.shape[1]])
+    cropped = cover_window(HeightField(covered, 0.1, "big"), 20, mode).heights_um
+    np.testing.assert_array_equal(cropped, covered[10:30, 10:30])

@@ -29,7 +29,7 @@ from tqdm.auto import tqdm
 
 from gratnet.config import config_field
 from gratnet.errors import GratNetError
-from trainer.heightfield import HeightField, RepeatMode, resample
+from trainer.heightfield import HeightField, RepeatMode, cover_window, resample
 from trainer.spectral import SpectralWeights, spectral_weights
 
 Report = Callable[[str], None]
@@ -105,18 +105,6 @@ def required_spacing_um(field: HeightField, wavelength_min_um: float, safety: fl
     return safety * wavelength_min_um / (2.0 + 2.0 * slope)
 
 
-def _pad_centred(heights: np.ndarray, rows: int, columns: int, mode: RepeatMode) -> np.ndarray:
-    """Repeat ``heights`` around itself (periodic or mirrored) so the original patch stays centred."""
-    pad_rows = max(0, rows - heights.shape[0])
-    pad_columns = max(0, columns - heights.shape[1])
-    pad = ((pad_rows // 2, pad_rows - pad_rows // 2), (pad_columns // 2, pad_columns - pad_columns // 2))
-    padded = np.pad(heights, pad, mode="wrap" if mode == "periodic" else "symmetric")
-    # Crop a patch larger than the window around its centre.
-    top = (padded.shape[0] - rows) // 2
-    left = (padded.shape[1] - columns) // 2
-    return padded[top : top + rows, left : left + columns]
-
-
 def prepare_surface(
     field: HeightField, optics: OpticsConfig, report: Report | None = None
 ) -> PreparedSurface:
@@ -156,7 +144,8 @@ def prepare_surface(
             f"repeated ({optics.repeat}): the {field.size_um[0]:.4g}×{field.size_um[1]:.4g} µm patch is narrower "
             f"than the {optics.extent_um:.4g} µm integration width ({optics.window_extent_sigmas:g} σs)"
         )
-    heights = _pad_centred(field.heights_um, side, side, optics.repeat)
+    covered = cover_window(field, side, optics.repeat)
+    heights = covered.heights_um
     low, high = float(heights.min()), float(heights.max())
     centred = (heights - 0.5 * (low + high)).astype(np.float32)
     positions = (np.arange(side) - (side - 1) / 2.0) * field.dx_um
@@ -172,7 +161,7 @@ def prepare_surface(
         window_x=window,
         window_y=window,
         half_span_um=0.5 * (high - low),
-        source=field.source,
+        source=covered.source,
         source_patch_um=field.size_um,
         notes=tuple(notes),
     )
@@ -329,10 +318,8 @@ class _ChebyshevPlan:
         low, high = float(w.min()), float(w.max())
         self.centre, self.half_width = 0.5 * (low + high), 0.5 * (high - low)
         phase_range = wavenumber_max * half_span_um * self.half_width
-        self.count = 1 if self.half_width * wavenumber_max * half_span_um < 1e-12 else chebyshev_node_count(
-            phase_range, tolerance
-        )
-        self.count = max(self.count, 1 if self.count == 1 else 2)
+        # A (nearly) single w needs one exact transform; otherwise chebyshev_node_count gives ≥ 2 nodes.
+        self.count = 1 if phase_range < 1e-12 else chebyshev_node_count(phase_range, tolerance)
         if self.count == 1:
             return
         order = np.arange(self.count)

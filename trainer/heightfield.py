@@ -77,26 +77,27 @@ class HeightField:
         return float(np.percentile(np.hypot(gradient_x, gradient_y), percentile))
 
 
-def tile_to_cover(field: HeightField, width_um: float, mode: RepeatMode = "periodic") -> HeightField:
-    """Repeat ``field`` (periodically or mirrored) until it is at least ``width_um`` wide on both axes.
+def cover_window(field: HeightField, samples: int, mode: RepeatMode = "periodic") -> HeightField:
+    """A ``samples``×``samples`` field centred on ``field``'s centre: repeated around it where it is
+    narrower (periodically, or mirrored: no height jump at the seams), cropped where it is wider.
 
-    The paper repeats a patch narrower than the coherence window to cover it. A field already wide
-    enough is returned unchanged.
+    The paper repeats a patch narrower than the coherence window to cover it; repeating around the
+    patch keeps the original patch at the window centre.
     """
     if mode not in ("periodic", "mirror"):
         raise GratNetError(f"repeat mode must be 'periodic' or 'mirror', got {mode!r}")
-    needed = math.ceil(width_um / field.dx_um - 1e-9)
-    rows, columns = field.shape
-    if rows >= needed and columns >= needed:
+    heights = field.heights_um
+    pad_rows = max(0, samples - heights.shape[0])
+    pad_columns = max(0, samples - heights.shape[1])
+    pad = ((pad_rows // 2, pad_rows - pad_rows // 2), (pad_columns // 2, pad_columns - pad_columns // 2))
+    padded = np.pad(heights, pad, mode="wrap" if mode == "periodic" else "symmetric")
+    top = (padded.shape[0] - samples) // 2
+    left = (padded.shape[1] - samples) // 2
+    covered = padded[top : top + samples, left : left + samples]
+    if covered.shape == heights.shape:
         return field
-    tile = field.heights_um
-    if mode == "mirror":
-        # Mirrored repeat: no height jump at the seams (a slope reversal instead).
-        tile = np.concatenate([tile, tile[::-1, :]], axis=0)
-        tile = np.concatenate([tile, tile[:, ::-1]], axis=1)
-    repeats = (max(1, math.ceil(needed / tile.shape[0])), max(1, math.ceil(needed / tile.shape[1])))
-    tiled = np.tile(tile, repeats)[: max(rows, needed), : max(columns, needed)]
-    return HeightField(tiled, field.dx_um, f"{field.source} [repeated {mode} to {width_um:.4g} µm]")
+    action = f"repeated {mode}" if pad_rows or pad_columns else "cropped"
+    return HeightField(covered, field.dx_um, f"{field.source} [{action} to {samples * field.dx_um:.4g} µm]")
 
 
 def resample(field: HeightField, dx_um: float, mode: RepeatMode | Literal["edge"] = "edge") -> HeightField:
