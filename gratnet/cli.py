@@ -20,6 +20,8 @@ SUBCOMMAND_MODULES: dict[str, str] = {
     "heightfield": "trainer.heightfield_cli",
     "groundtruth": "trainer.groundtruth_cli",
     "brdfslice": "trainer.brdfslice_cli",
+    "train": "trainer.train_cli",
+    "evaluate": "trainer.train_cli",
 }
 
 
@@ -30,11 +32,12 @@ def build_parser(only: str | None = None) -> argparse.ArgumentParser:
     )
     parser.add_argument("--version", action="version", version=f"gratnet {__version__}")
     subparsers = parser.add_subparsers(dest="command", metavar="SUBCOMMAND")
-    for name, module_name in SUBCOMMAND_MODULES.items():
-        if only is not None and name != only:
-            subparsers.add_parser(name, help=f"(see gratnet {name} --help)")
-            continue
+    wanted = [SUBCOMMAND_MODULES[only]] if only is not None else list(SUBCOMMAND_MODULES.values())
+    for module_name in dict.fromkeys(wanted):  # a module may register several subcommands
         importlib.import_module(module_name).register(subparsers)
+    for name in SUBCOMMAND_MODULES:
+        if name not in subparsers.choices:
+            subparsers.add_parser(name, help=f"(see gratnet {name} --help)")
     return parser
 
 

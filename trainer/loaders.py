@@ -10,6 +10,7 @@ from __future__ import annotations
 import dataclasses
 import math
 import os
+import re
 import zipfile
 import zlib
 from pathlib import Path
@@ -72,6 +73,8 @@ def load_heightfield(spec: str | os.PathLike[str], options: LoadOptions | None =
 
     options = options or LoadOptions()
     path = Path(spec)
+    if str(spec).startswith("generator:"):
+        return generator_from_source(str(spec))
     if not path.exists():
         if str(spec) in generators.GENERATORS:
             return generators.generate(str(spec))
@@ -92,6 +95,28 @@ def load_heightfield(spec: str | os.PathLike[str], options: LoadOptions | None =
         return readers[suffix](path, options)
     except OSError as error:
         raise GratNetError(f"cannot read {path}: {error.strerror or error}") from error
+
+
+def generator_from_source(source: str) -> HeightField:
+    """Regenerate a built-in field from its recorded source, ``generator:NAME(key=value, …)``.
+
+    Every volume and model records this string, so a generated field can always be rebuilt exactly
+    (e.g. to compute ground-truth BRDF slices for a model); anything after the closing parenthesis
+    (a note such as ``[repeated …]``) is ignored.
+    """
+    import ast
+
+    from trainer import generators
+
+    match = re.fullmatch(r"generator:(\w+)\((.*?)\)(\s*\[.*\])?", source.strip())
+    if not match:
+        raise GratNetError(f"not a generator source string: {source!r} (expected generator:NAME(key=value, ...))")
+    try:
+        call = ast.parse(f"f({match.group(2)})", mode="eval").body
+        overrides = {keyword.arg: ast.literal_eval(keyword.value) for keyword in call.keywords}  # type: ignore[attr-defined]
+    except (SyntaxError, ValueError) as error:
+        raise GratNetError(f"cannot parse the parameters of {source!r}: {error}") from error
+    return generators.generate(match.group(1), **overrides)
 
 
 def _needs_dx(path: Path, options: LoadOptions, how: str) -> float:

@@ -1,0 +1,160 @@
+"""The network's input and output contract (docs/physics.md, "Network input and output").
+
+One implementation for numpy arrays and torch tensors alike (array-api-compat picks the namespace), used
+by the trainer (torch, with autograd) and the runtime's numpy evaluator; the GLSL shader implements the
+same formulas and a parity test ties them together.
+
+Input: a key vector (u, v, w) → grid coordinates (u*, v*) (inverse of the volume's domain transform) and
+t ∈ [0, 1] (w remapped) → network coordinates c_u = u*/2, c_v = v*/2, c_t = 2t − 1, each in [−1, 1] →
+encoding (physics.md eq. 6):
+
+    [c_u, c_v, c_t,
+     sin(s^j π c), j = 0…L−1, then cos(s^j π c), j = 0…L−1,   for c in (c_u, c_v, c_u + c_v, c_u − c_v),
+     sin(s_t^j π c_t), j = 0…L_t−1, then cos(s_t^j π c_t), j = 0…L_t−1]
+
+3 + 2·(4·L + L_t) features (163 for L = 19, L_t = 4). The scales put the top frequency at the Nyquist rate
+of the training grid: s = ((R − 1)/2)^(1/(L−1)) (≈ 1.41 for R = 1001), s_t = ((S − 1)/2)^(1/(L_t−1)).
+
+Output: the range transform y = T(x) of each CIE XYZ channel (eq. 7), applied to x = XYZ / XYZ_white
+(channel by channel, XYZ_white = the D65 white of eq. 3, (0.9504, 1, 1.0888)) so that a perfect mirror
+maps to 1 in every channel instead of clipping Z:
+
+    power-log (default):  y = clamp(1 + log2(x)/B, 0, 1)^n            (B = 48, n = 8)
+    log:                  y = clamp(1 + log2(x)/B, 0, 1)
+    log1p:                y = log2(1 + x)
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from typing import Any, Literal
+
+import array_api_compat
+import numpy as np
+
+from gratnet.errors import GratNetError
+
+RangeKind = Literal["power-log", "log", "log1p"]
+Scheme = Literal["regular", "simple", "simple-max"]
+TINY = 1e-30  # floor before log2: x ≤ 1e-30 maps to y = 0 for any B ≤ 99
+
+
+def _namespace(*arrays: Any) -> Any:
+    return array_api_compat.array_namespace(*arrays)
+
+
+@dataclasses.dataclass(frozen=True)
+class EncodingSpec:
+    """Sinusoidal input encoding: frequency counts and scales (see module docstring)."""
+
+    frequencies: int = 19  # L, for c_u, c_v, c_u + c_v, c_u − c_v
+    t_frequencies: int = 4  # L_t, for c_t
+    scale: float = 1.4125  # s
+    t_scale: float = 1.7100  # s_t
+
+    @classmethod
+    def for_grid(cls, resolution: int, slices: int, frequencies: int = 19, t_frequencies: int = 4) -> EncodingSpec:
+        """Scales with the top frequency at the Nyquist rate of an R × R × S training grid."""
+        if frequencies < 1 or t_frequencies < 0:
+            raise GratNetError(f"frequency counts must be ≥ 1 and ≥ 0, got {frequencies}, {t_frequencies}")
+        scale = ((resolution - 1) / 2.0) ** (1.0 / (frequencies - 1)) if frequencies > 1 else 1.0
+        t_scale = ((max(slices, 2) - 1) / 2.0) ** (1.0 / (t_frequencies - 1)) if t_frequencies > 1 else 1.0
+        return cls(frequencies, t_frequencies, float(scale), float(t_scale))
+
+    @property
+    def features(self) -> int:
+        """Encoded input width: 3 + 2·(4·L + L_t)."""
+        return 3 + 2 * (4 * self.frequencies + self.t_frequencies)
+
+    def angular_frequencies(self) -> tuple[np.ndarray, np.ndarray]:
+        """π·s^j (j < L) and π·s_t^j (j < L_t), float64."""
+        return (math.pi * self.scale ** np.arange(self.frequencies, dtype=np.float64),
+                math.pi * self.t_scale ** np.arange(self.t_frequencies, dtype=np.float64))
+
+
+@dataclasses.dataclass(frozen=True)
+class RangeSpec:
+    """Range transform of the XYZ targets (module docstring, eq. 7)."""
+
+    kind: RangeKind = "power-log"
+    bits: float = 48.0  # B
+    power: float = 8.0  # n (power-log only)
+    white: tuple[float, float, float] = (0.9504297, 1.0, 1.0888006)  # XYZ of a perfect mirror (eq. 3)
+
+    def __post_init__(self) -> None:
+        if self.kind not in ("power-log", "log", "log1p"):
+            raise GratNetError(f"unknown range transform {self.kind!r}; choose power-log, log or log1p")
+        if not (self.bits > 0 and self.power > 0):
+            raise GratNetError(f"range transform needs B > 0 and n > 0, got B={self.bits}, n={self.power}")
+
+
+def key_to_grid(key: Any, scheme: Scheme) -> Any:
+    """u → u* (inverse of the volume's domain transform; physics.md "Sampling")."""
+    xp = _namespace(key)
+    if scheme == "regular":
+        return key
+    if scheme in ("simple", "simple-max"):
+        return xp.sign(key) * 2.0 * xp.sqrt(xp.clip(xp.abs(key) * 0.5, 0.0, None))
+    raise GratNetError(f"unknown sampling scheme {scheme!r}")
+
+
+def key_to_t(u: Any, v: Any, w: Any, scheme: Scheme) -> Any:
+    """w → t ∈ [0, 1]: t = w/−2, or for simple-max t = w/−sqrt(4 − u² − v²) (0 where that is 0)."""
+    xp = _namespace(u, v, w)
+    if scheme == "simple-max":
+        depth = xp.sqrt(xp.clip(4.0 - u * u - v * v, 0.0, None))
+        t = xp.where(depth > 1e-12, -w / xp.clip(depth, 1e-12, None), xp.zeros_like(w))
+    else:
+        t = -w * 0.5
+    return xp.clip(t, 0.0, 1.0)
+
+
+def network_coordinates(u: Any, v: Any, w: Any, scheme: Scheme) -> Any:
+    """(c_u, c_v, c_t) ∈ [−1, 1]³ stacked on a new last axis."""
+    xp = _namespace(u, v, w)
+    return xp.stack([key_to_grid(u, scheme) * 0.5, key_to_grid(v, scheme) * 0.5,
+                     2.0 * key_to_t(u, v, w, scheme) - 1.0], axis=-1)
+
+
+def encode(coordinates: Any, spec: EncodingSpec) -> Any:
+    """Sinusoidal encoding (eq. 6) of network coordinates (…, 3) → (…, spec.features)."""
+    xp = _namespace(coordinates)
+    omega, omega_t = spec.angular_frequencies()
+    omega = xp.asarray(omega, dtype=coordinates.dtype, device=array_api_compat.device(coordinates))
+    omega_t = xp.asarray(omega_t, dtype=coordinates.dtype, device=array_api_compat.device(coordinates))
+    c_u, c_v, c_t = coordinates[..., 0:1], coordinates[..., 1:2], coordinates[..., 2:3]
+    parts = [coordinates]
+    for c in (c_u, c_v, c_u + c_v, c_u - c_v):
+        phase = c * omega
+        parts += [xp.sin(phase), xp.cos(phase)]
+    if spec.t_frequencies:
+        phase_t = c_t * omega_t
+        parts += [xp.sin(phase_t), xp.cos(phase_t)]
+    return xp.concat(parts, axis=-1)
+
+
+def _white(reference: Any, spec: RangeSpec) -> Any:
+    xp = _namespace(reference)
+    return xp.asarray(spec.white, dtype=reference.dtype, device=array_api_compat.device(reference))
+
+
+def range_forward(xyz: Any, spec: RangeSpec) -> Any:
+    """CIE XYZ (…, 3) → network targets y (…, 3) (eq. 7); x ≤ 1e-30 (and 0) maps to 0 for the log kinds."""
+    xp = _namespace(xyz)
+    x = xyz / _white(xyz, spec)
+    if spec.kind == "log1p":
+        return xp.log1p(xp.clip(x, 0.0, None)) / math.log(2.0)  # log2(1 + x) without losing small x
+    y = xp.clip(1.0 + xp.log2(xp.clip(x, TINY, None)) / spec.bits, 0.0, 1.0)
+    return y**spec.power if spec.kind == "power-log" else y
+
+
+def range_inverse(y: Any, spec: RangeSpec) -> Any:
+    """Network outputs y (…, 3) → CIE XYZ, the exact inverse of :func:`range_forward` on its image; y ≤ 0 → 0."""
+    xp = _namespace(y)
+    if spec.kind == "log1p":
+        return xp.clip(xp.expm1(xp.clip(y, 0.0, None) * math.log(2.0)), 0.0, None) * _white(y, spec)
+    clipped = xp.clip(y, 0.0, 1.0)
+    root = clipped ** (1.0 / spec.power) if spec.kind == "power-log" else clipped
+    x = xp.where(clipped > 0.0, 2.0 ** (spec.bits * (root - 1.0)), xp.zeros_like(clipped))
+    return x * _white(y, spec)

@@ -1,0 +1,725 @@
+"""Trained model files: the MLP's weights, its input/output contract and the shader's weight texture.
+
+A *model file* is what the offline stage hands to the runtime: the weights of a fully connected
+network (``layer_sizes[0]`` encoded inputs → hidden layers → 3 outputs), the hidden and output
+activations, the input encoding (:class:`~gratnet.encoding.EncodingSpec`), the output range transform
+(:class:`~gratnet.encoding.RangeSpec`), the volume's sampling scheme (for the key → network-coordinate
+transform) and free-form JSON metadata. With these, :func:`evaluate_keys` maps key vectors
+``(u, v, w)`` to CIE XYZ exactly as the GLSL shader does.
+
+File layout (a contract; also documented in ``docs/formats.md``, section "Model file (.npz)"):
+
+* one uncompressed ``.npz`` archive (``np.savez``) holding
+  ``metadata_json`` (0-d unicode array: one JSON object), ``weight_0``, ``weight_1``, … and
+  ``bias_0``, ``bias_1``, … (``float32``; ``weight_k`` is ``(out, in)`` like ``torch.nn.Linear``)
+  and ``texture`` (``float32``, ``(H, W, 4)``: the packed weights exactly as the shader uploads them);
+* the JSON object has the keys ``format`` (``"gratnet-model"``), ``format_version`` (``1``),
+  ``layer_sizes``, ``activation``, ``output_activation``, ``encoding``, ``range``, ``scheme``,
+  ``texture_layout`` and ``metadata``.
+
+Texture layout (a contract with the GLSL shader), for layer ``k`` with ``inputs`` → ``outputs``:
+``in_blocks = ceil(inputs / 4)``, ``out_blocks = ceil(outputs / 4)``; the layer occupies rows
+``row_offset_k … row_offset_k + out_blocks − 1``. Row ``row_offset_k + o`` holds output block ``o``
+(outputs ``4o … 4o+3``): texel ``(row, 4i + j)`` is column ``j`` of the 4×4 weight block of input block
+``i``, i.e. ``(W[4o, 4i+j], W[4o+1, 4i+j], W[4o+2, 4i+j], W[4o+3, 4i+j])``, so that
+``mat4(t0, t1, t2, t3) * x_i`` is the block's contribution; texel ``(row, 4·in_blocks)`` is the bias
+``vec4``. Padding (inputs/outputs beyond the layer's size) is 0. ``W = max(4·in_blocks + 1)``,
+``H = Σ out_blocks``.
+
+This module is runtime-side: it needs only numpy and never imports torch.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import math
+import os
+import zipfile
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from gratnet.atomic import atomic_path
+from gratnet.encoding import EncodingSpec, RangeSpec, encode, network_coordinates, range_inverse
+from gratnet.errors import GratNetError
+
+__all__ = [
+    "ACTIVATIONS",
+    "FORMAT_NAME",
+    "FORMAT_VERSION",
+    "LEAKY_RELU_SLOPE",
+    "OUTPUT_ACTIVATIONS",
+    "SCHEMES",
+    "ModelFile",
+    "evaluate_keys",
+    "load_model",
+    "mlp_forward",
+    "pack_texture",
+    "save_model",
+    "texture_forward",
+]
+
+FORMAT_NAME = "gratnet-model"
+FORMAT_VERSION = 1
+
+#: Hidden-layer activations. ``leaky_relu`` has negative slope :data:`LEAKY_RELU_SLOPE`.
+ACTIVATIONS = ("relu", "leaky_relu", "silu")
+#: Output activations: ``clamp`` clips to [0, 1], ``sigmoid`` is 1 / (1 + e^−x), ``none`` is the identity.
+OUTPUT_ACTIVATIONS = ("clamp", "sigmoid", "none")
+#: Sampling schemes of the source volume (see ``gratnet.encoding.key_to_grid``).
+SCHEMES = ("regular", "simple", "simple-max")
+LEAKY_RELU_SLOPE = 0.01
+#: Number of network outputs: the three range-transformed CIE XYZ channels.
+OUTPUTS = 3
+
+_METADATA_ARRAY = "metadata_json"
+_TEXTURE_ARRAY = "texture"
+_ZIP_MAGIC = b"PK\x03\x04"
+_EMPTY_ZIP_MAGIC = b"PK\x05\x06"
+_NPY_MAGIC = b"\x93NUMPY"
+_JSON_KEYS = (
+    "format",
+    "format_version",
+    "layer_sizes",
+    "activation",
+    "output_activation",
+    "encoding",
+    "range",
+    "scheme",
+    "texture_layout",
+    "metadata",
+)
+_LAYOUT_KEYS = ("row_offset", "in_blocks", "out_blocks", "inputs", "outputs")
+
+
+@dataclass(eq=False)
+class ModelFile:
+    """A trained network with everything the runtime needs to evaluate it.
+
+    Attributes:
+        layer_sizes: widths of every layer, input first: ``[inputs, hidden…, 3]``, e.g.
+            ``[163, 108, 66, 40, 24, 3]``. ``layer_sizes[0]`` must equal ``encoding.features``.
+        weights: one ``float32`` array per linear layer; ``weights[k]`` has shape
+            ``(layer_sizes[k+1], layer_sizes[k])`` (``torch.nn.Linear`` layout: out × in).
+        biases: one ``float32`` array per linear layer; ``biases[k]`` has shape ``(layer_sizes[k+1],)``.
+        activation: hidden-layer activation, one of :data:`ACTIVATIONS`.
+        output_activation: activation after the last layer, one of :data:`OUTPUT_ACTIVATIONS`.
+        encoding: the sinusoidal input encoding the network was trained with.
+        range: the range transform of the XYZ targets (network outputs are in that domain).
+        scheme: the source volume's sampling scheme (``regular``, ``simple`` or ``simple-max``),
+            which defines the key vector → network coordinate transform.
+        metadata: JSON-able dict: the source volume's physical parameters, training information, …
+
+    Two model files compare equal when every field is equal and the arrays are bit-identical.
+    """
+
+    layer_sizes: list[int]
+    weights: list[np.ndarray]
+    biases: list[np.ndarray]
+    activation: str
+    output_activation: str
+    encoding: EncodingSpec
+    range: RangeSpec
+    scheme: str
+    metadata: dict[str, Any] = field(default_factory=dict)
+
+    @property
+    def parameter_count(self) -> int:
+        """Number of weights and biases: Σ (inputs·outputs + outputs) over the linear layers."""
+        return sum(a * b + b for a, b in zip(self.layer_sizes[:-1], self.layer_sizes[1:], strict=False))
+
+    @property
+    def macs_per_evaluation(self) -> int:
+        """Multiply-adds of one network evaluation (one pixel): Σ inputs·outputs over the layers."""
+        return sum(a * b for a, b in zip(self.layer_sizes[:-1], self.layer_sizes[1:], strict=False))
+
+    def __eq__(self, other: object) -> bool:
+        if not isinstance(other, ModelFile):
+            return NotImplemented
+        return (
+            list(self.layer_sizes) == list(other.layer_sizes)
+            and _arrays_equal(self.weights, other.weights)
+            and _arrays_equal(self.biases, other.biases)
+            and self.activation == other.activation
+            and self.output_activation == other.output_activation
+            and self.encoding == other.encoding
+            and self.range == other.range
+            and self.scheme == other.scheme
+            and self.metadata == other.metadata
+        )
+
+    __hash__ = None  # type: ignore[assignment]  # mutable (holds arrays)
+
+
+def _arrays_equal(first: list[np.ndarray], second: list[np.ndarray]) -> bool:
+    if len(first) != len(second):
+        return False
+    for a, b in zip(first, second, strict=True):
+        a, b = np.asarray(a), np.asarray(b)
+        if a.dtype != b.dtype or a.shape != b.shape or a.tobytes() != b.tobytes():
+            return False
+    return True
+
+
+# --------------------------------------------------------------------------------------------------
+# Validation
+# --------------------------------------------------------------------------------------------------
+
+
+def _is_int(value: object) -> bool:
+    return isinstance(value, (int, np.integer)) and not isinstance(value, (bool, np.bool_))
+
+
+def _is_number(value: object) -> bool:
+    return isinstance(value, (int, float, np.integer, np.floating)) and not isinstance(value, (bool, np.bool_))
+
+
+def _check_layer_sizes(sizes: object, where: str) -> list[int]:
+    if not isinstance(sizes, (list, tuple)) or not all(_is_int(s) for s in sizes):
+        raise GratNetError(f"{where}: layer_sizes must be a list of integers, got {sizes!r}")
+    result = [int(s) for s in sizes]
+    if len(result) < 2:
+        raise GratNetError(f"{where}: layer_sizes needs at least an input and an output width, got {result}")
+    if min(result) < 1:
+        raise GratNetError(f"{where}: every layer width must be at least 1, got {result}")
+    if result[-1] != OUTPUTS:
+        raise GratNetError(f"{where}: the last layer must have {OUTPUTS} outputs (X, Y, Z), got {result}")
+    return result
+
+
+def _check_choice(value: object, choices: tuple[str, ...], what: str, where: str) -> str:
+    if not isinstance(value, str) or value not in choices:
+        raise GratNetError(f"{where}: unknown {what} {value!r}; choose one of {', '.join(choices)}")
+    return value
+
+
+def _encoding_from_dict(fields: object, where: str) -> EncodingSpec:
+    """An :class:`EncodingSpec` from its JSON form, with every field checked."""
+    names = [f.name for f in dataclasses.fields(EncodingSpec)]
+    if not isinstance(fields, dict) or sorted(fields) != sorted(names):
+        raise GratNetError(f"{where}: 'encoding' must be an object with exactly the keys {', '.join(names)}")
+    frequencies, t_frequencies = fields["frequencies"], fields["t_frequencies"]
+    if not _is_int(frequencies) or frequencies < 1 or not _is_int(t_frequencies) or t_frequencies < 0:
+        raise GratNetError(
+            f"{where}: encoding frequency counts must be integers ≥ 1 (frequencies) and ≥ 0 (t_frequencies), "
+            f"got {frequencies!r}, {t_frequencies!r}"
+        )
+    for name in ("scale", "t_scale"):
+        value = fields[name]
+        if not _is_number(value) or not math.isfinite(value) or value <= 0:
+            raise GratNetError(f"{where}: encoding {name} must be a finite number > 0, got {value!r}")
+    return EncodingSpec(int(frequencies), int(t_frequencies), float(fields["scale"]), float(fields["t_scale"]))
+
+
+def _range_from_dict(fields: object, where: str) -> RangeSpec:
+    """A :class:`RangeSpec` from its JSON form, with every field checked."""
+    names = [f.name for f in dataclasses.fields(RangeSpec)]
+    if not isinstance(fields, dict) or sorted(fields) != sorted(names):
+        raise GratNetError(f"{where}: 'range' must be an object with exactly the keys {', '.join(names)}")
+    for name in ("bits", "power"):
+        value = fields[name]
+        if not _is_number(value) or not math.isfinite(value):
+            raise GratNetError(f"{where}: range {name} must be a finite number, got {value!r}")
+    white = fields["white"]
+    if (
+        not isinstance(white, (list, tuple))
+        or len(white) != 3
+        or not all(_is_number(c) and math.isfinite(c) and c > 0 for c in white)
+    ):
+        raise GratNetError(f"{where}: range white must be three finite numbers > 0 (XYZ), got {white!r}")
+    try:
+        return RangeSpec(
+            kind=fields["kind"],
+            bits=float(fields["bits"]),
+            power=float(fields["power"]),
+            white=(float(white[0]), float(white[1]), float(white[2])),
+        )
+    except GratNetError as error:
+        raise GratNetError(f"{where}: {error}") from error
+
+
+def _json_default(value: object) -> object:
+    """Let ``json.dumps`` accept numpy scalars and arrays and tuples (as Python numbers / lists)."""
+    if isinstance(value, np.generic):
+        return value.item()
+    if isinstance(value, np.ndarray):
+        return value.tolist()
+    if isinstance(value, tuple):
+        return list(value)
+    raise TypeError(f"{type(value).__name__} is not JSON-serialisable")
+
+
+def _plain_metadata(metadata: object, where: str) -> dict[str, Any]:
+    """Check that ``metadata`` is a JSON-able dict; return it as plain Python values."""
+    if not isinstance(metadata, dict):
+        raise GratNetError(f"{where}: model metadata must be a dict, got {type(metadata).__name__}")
+    if any(not isinstance(key, str) for key in metadata):
+        raise GratNetError(f"{where}: model metadata keys must be strings")
+    try:
+        text = json.dumps(metadata, allow_nan=False, default=_json_default)
+    except (TypeError, ValueError) as error:
+        raise GratNetError(
+            f"{where}: model metadata must be JSON-able (dicts with string keys, lists, str, int, float, bool, "
+            f"None; no NaN or inf - use null for a missing value): {error}"
+        ) from error
+    return json.loads(text)
+
+
+def _check_parameters(
+    label: str, values: object, expected_shape: tuple[int, ...], where: str, *, from_file: bool
+) -> np.ndarray:
+    """Check one weight or bias array; return it as C-contiguous ``float32``."""
+    array = np.asarray(values)
+    if from_file:
+        if array.dtype != np.float32:
+            raise GratNetError(f"{where}: {label} must be float32, got {array.dtype}; the file is corrupt")
+    elif array.dtype.kind not in "biuf":
+        raise GratNetError(f"{where}: {label} must hold real numbers, got dtype {array.dtype}")
+    if array.shape != expected_shape:
+        raise GratNetError(
+            f"{where}: {label} has shape {array.shape} but layer_sizes call for {expected_shape} "
+            f"(weights are (outputs, inputs) like torch.nn.Linear)"
+        )
+    with np.errstate(over="ignore", invalid="ignore"):
+        array = np.ascontiguousarray(array, dtype=np.float32)
+    finite = np.isfinite(array)
+    if not finite.all():
+        count = int(finite.size - np.count_nonzero(finite))
+        first = tuple(int(i) for i in np.argwhere(~finite)[0])
+        reason = "NaN or inf" if from_file else "NaN, inf, or too large for float32"
+        raise GratNetError(
+            f"{where}: {label} has {count} non-finite value(s) ({reason}), "
+            f"first at index {first}: {array[first]}"
+        )
+    return array
+
+
+def _validated(model: object, where: str = "model", *, from_file: bool = False) -> ModelFile:
+    """Check every field of ``model``; return a copy with ``float32`` arrays and plain lists.
+
+    Raises:
+        GratNetError: naming ``where`` and the first problem found.
+    """
+    if not isinstance(model, ModelFile):
+        raise GratNetError(f"{where}: expected a gratnet.modelfile.ModelFile, got {type(model).__name__}")
+    sizes = _check_layer_sizes(model.layer_sizes, where)
+    activation = _check_choice(model.activation, ACTIVATIONS, "hidden activation", where)
+    output_activation = _check_choice(model.output_activation, OUTPUT_ACTIVATIONS, "output activation", where)
+    scheme = _check_choice(model.scheme, SCHEMES, "sampling scheme", where)
+    if not isinstance(model.encoding, EncodingSpec):
+        raise GratNetError(f"{where}: encoding must be a gratnet.encoding.EncodingSpec")
+    if not isinstance(model.range, RangeSpec):
+        raise GratNetError(f"{where}: range must be a gratnet.encoding.RangeSpec")
+    encoding = _encoding_from_dict(dataclasses.asdict(model.encoding), where)
+    range_spec = _range_from_dict(dataclasses.asdict(model.range), where)
+    if sizes[0] != encoding.features:
+        raise GratNetError(
+            f"{where}: layer_sizes[0] is {sizes[0]} but the encoding (L = {encoding.frequencies}, "
+            f"L_t = {encoding.t_frequencies}) produces {encoding.features} features"
+        )
+    layers = len(sizes) - 1
+    for name, values in (("weights", model.weights), ("biases", model.biases)):
+        if not isinstance(values, (list, tuple)) or len(values) != layers:
+            count = len(values) if isinstance(values, (list, tuple)) else type(values).__name__
+            raise GratNetError(f"{where}: layer_sizes {sizes} call for {layers} {name} arrays, got {count}")
+    weights = [
+        _check_parameters(f"weight_{k}", model.weights[k], (sizes[k + 1], sizes[k]), where, from_file=from_file)
+        for k in range(layers)
+    ]
+    biases = [
+        _check_parameters(f"bias_{k}", model.biases[k], (sizes[k + 1],), where, from_file=from_file)
+        for k in range(layers)
+    ]
+    return ModelFile(
+        layer_sizes=sizes,
+        weights=weights,
+        biases=biases,
+        activation=activation,
+        output_activation=output_activation,
+        encoding=encoding,
+        range=range_spec,
+        scheme=scheme,
+        metadata=_plain_metadata(model.metadata, where),
+    )
+
+
+# --------------------------------------------------------------------------------------------------
+# Texture packing (the contract with the GLSL shader)
+# --------------------------------------------------------------------------------------------------
+
+
+def texture_layout(layer_sizes: list[int]) -> list[dict[str, int]]:
+    """Where each layer lies in the weight texture (see the module docstring).
+
+    Returns one dict per linear layer ``k`` with ``row_offset`` (first texture row of the layer),
+    ``in_blocks = ceil(inputs / 4)``, ``out_blocks = ceil(outputs / 4)``, ``inputs`` and ``outputs``
+    (the layer's true widths). Layers are stacked top to bottom in order, with no gaps.
+    """
+    layout = []
+    row = 0
+    for inputs, outputs in zip(layer_sizes[:-1], layer_sizes[1:], strict=False):
+        in_blocks, out_blocks = -(-int(inputs) // 4), -(-int(outputs) // 4)
+        layout.append(
+            {"row_offset": row, "in_blocks": in_blocks, "out_blocks": out_blocks,
+             "inputs": int(inputs), "outputs": int(outputs)}
+        )
+        row += out_blocks
+    return layout
+
+
+def _pack(weights: list[np.ndarray], biases: list[np.ndarray], layout: list[dict[str, int]]) -> np.ndarray:
+    """Pack already-validated ``float32`` weights and biases into the ``(H, W, 4)`` texture."""
+    width = max(4 * entry["in_blocks"] + 1 for entry in layout)
+    height = sum(entry["out_blocks"] for entry in layout)
+    texture = np.zeros((height, width, 4), dtype=np.float32)
+    for weight, bias, entry in zip(weights, biases, layout, strict=True):
+        row, in_blocks, out_blocks = entry["row_offset"], entry["in_blocks"], entry["out_blocks"]
+        padded = np.zeros((4 * out_blocks, 4 * in_blocks), dtype=np.float32)
+        padded[: entry["outputs"], : entry["inputs"]] = weight
+        # texture[row + o, c, r] = padded[4o + r, c]: texel c = 4i + j is column j of block (o, i).
+        texture[row : row + out_blocks, : 4 * in_blocks, :] = padded.reshape(out_blocks, 4, 4 * in_blocks).transpose(
+            0, 2, 1
+        )
+        padded_bias = np.zeros(4 * out_blocks, dtype=np.float32)
+        padded_bias[: entry["outputs"]] = bias
+        texture[row : row + out_blocks, 4 * in_blocks, :] = padded_bias.reshape(out_blocks, 4)
+    return texture
+
+
+def pack_texture(model: ModelFile) -> tuple[np.ndarray, list[dict[str, int]]]:
+    """Pack the weights and biases into the shader's RGBA32F weight texture.
+
+    Returns:
+        ``(texture, layout)``: ``texture`` is ``float32`` of shape ``(H, W, 4)`` (row ``y``, column
+        ``x``, RGBA), to be uploaded as is (array row 0 = texture row ``y = 0`` of ``texelFetch``);
+        ``layout`` is :func:`texture_layout` of the model's layer sizes.
+
+    Raises:
+        GratNetError: the model is invalid (shapes, non-finite values, …).
+    """
+    valid = _validated(model)
+    layout = texture_layout(valid.layer_sizes)
+    return _pack(valid.weights, valid.biases, layout), layout
+
+
+# --------------------------------------------------------------------------------------------------
+# Evaluation
+# --------------------------------------------------------------------------------------------------
+
+
+def _sigmoid(x: np.ndarray) -> np.ndarray:
+    """Logistic function 1 / (1 + e^−x), written with tanh so that it never overflows."""
+    return 0.5 * (1.0 + np.tanh(0.5 * x))
+
+
+def _hidden_activation(x: np.ndarray, name: str) -> np.ndarray:
+    if name == "relu":
+        return np.maximum(x, 0.0)
+    if name == "leaky_relu":
+        return np.where(x > 0.0, x, LEAKY_RELU_SLOPE * x)
+    if name == "silu":
+        return x * _sigmoid(x)
+    raise GratNetError(f"unknown hidden activation {name!r}; choose one of {', '.join(ACTIVATIONS)}")
+
+
+def _output_activation(x: np.ndarray, name: str) -> np.ndarray:
+    if name == "clamp":
+        return np.clip(x, 0.0, 1.0)
+    if name == "sigmoid":
+        return _sigmoid(x)
+    if name == "none":
+        return x
+    raise GratNetError(f"unknown output activation {name!r}; choose one of {', '.join(OUTPUT_ACTIVATIONS)}")
+
+
+def _as_batch(encoded: object, width: int) -> tuple[np.ndarray, tuple[int, ...]]:
+    array = np.asarray(encoded, dtype=np.float64)
+    if array.ndim < 1 or array.shape[-1] != width:
+        raise GratNetError(f"network input must have shape (…, {width}), got {array.shape}")
+    return array.reshape(-1, width), array.shape[:-1]
+
+
+def mlp_forward(model: ModelFile, encoded: np.ndarray) -> np.ndarray:
+    """Evaluate the network on encoded inputs, in ``float64``.
+
+    Args:
+        model: the network.
+        encoded: ``(…, layer_sizes[0])`` encoded network inputs (see :func:`gratnet.encoding.encode`).
+
+    Returns:
+        ``float64`` ``(…, 3)``: the network outputs after the output activation, i.e. range-transformed
+        XYZ (``range_inverse`` turns them into CIE XYZ).
+    """
+    return _forward(_validated(model), encoded)
+
+
+def _forward(valid: ModelFile, encoded: object) -> np.ndarray:
+    """:func:`mlp_forward` of an already validated model."""
+    x, batch_shape = _as_batch(encoded, valid.layer_sizes[0])
+    last = len(valid.weights) - 1
+    for k, (weight, bias) in enumerate(zip(valid.weights, valid.biases, strict=True)):
+        x = x @ weight.astype(np.float64).T + bias.astype(np.float64)
+        x = _output_activation(x, valid.output_activation) if k == last else _hidden_activation(x, valid.activation)
+    return x.reshape(*batch_shape, OUTPUTS)
+
+
+def texture_forward(
+    texture: np.ndarray,
+    layout: list[dict[str, int]],
+    activation: str,
+    output_activation: str,
+    encoded: np.ndarray,
+    dtype: type[np.floating] | np.dtype = np.float64,
+) -> np.ndarray:
+    """Shader emulator: evaluate the MLP reading ONLY the packed texture, block by block like the GLSL.
+
+    For each layer (``row_offset``, ``in_blocks``, ``out_blocks`` from ``layout``) and output block
+    ``o``, the shader does::
+
+        vec4 acc = texelFetch(weights, ivec2(4 * in_blocks, row_offset + o), 0);          // bias
+        for (int i = 0; i < in_blocks; ++i)
+            acc += mat4(texelFetch(weights, ivec2(4 * i + 0, row_offset + o), 0),
+                        texelFetch(weights, ivec2(4 * i + 1, row_offset + o), 0),
+                        texelFetch(weights, ivec2(4 * i + 2, row_offset + o), 0),
+                        texelFetch(weights, ivec2(4 * i + 3, row_offset + o), 0)) * x[i];
+        y[o] = activation(acc);
+
+    where ``x[i]`` is the ``vec4`` of inputs ``4i … 4i+3`` (zero beyond the layer's inputs). Here the
+    same sums are computed for all points at once: ``acc[n, o, r] = bias[o, r] + Σ_i Σ_j
+    texel(o, 4i+j)[r] · x[n, i, j]`` (``mat4 * vec4`` = Σ_j column_j · x_j).
+
+    Args:
+        texture: ``(H, W, 4)`` packed weights (:func:`pack_texture`).
+        layout: the per-layer layout dicts (:func:`texture_layout`).
+        activation, output_activation: as in :class:`ModelFile`.
+        encoded: ``(…, layout[0]["inputs"])`` encoded inputs.
+        dtype: arithmetic precision; ``float64`` (default) for exact comparisons, ``float32`` to
+            mimic the GPU's precision.
+
+    Returns:
+        ``(…, layout[-1]["outputs"])`` network outputs after the output activation, in ``dtype``.
+    """
+    _check_choice(activation, ACTIVATIONS, "hidden activation", "texture_forward")
+    _check_choice(output_activation, OUTPUT_ACTIVATIONS, "output activation", "texture_forward")
+    texture = np.asarray(texture)
+    if texture.ndim != 3 or texture.shape[2] != 4:
+        raise GratNetError(f"weight texture must have shape (H, W, 4), got {texture.shape}")
+    if not layout:
+        raise GratNetError("texture layout has no layers")
+    dtype = np.dtype(dtype)
+    x, batch_shape = _as_batch(encoded, int(layout[0]["inputs"]))
+    x = x.astype(dtype)
+    last = len(layout) - 1
+    for k, entry in enumerate(layout):
+        row, in_blocks, out_blocks = entry["row_offset"], entry["in_blocks"], entry["out_blocks"]
+        if row + out_blocks > texture.shape[0] or 4 * in_blocks + 1 > texture.shape[1]:
+            raise GratNetError(f"texture layout of layer {k} ({entry}) does not fit a {texture.shape} texture")
+        # The layer's input vector, padded with zeros to in_blocks vec4s.
+        padded = np.zeros((x.shape[0], 4 * in_blocks), dtype=dtype)
+        width = min(x.shape[1], 4 * in_blocks)
+        padded[:, :width] = x[:, :width]
+        inputs = padded.reshape(-1, in_blocks, 4)  # [n, i, j]
+        band = texture[row : row + out_blocks].astype(dtype)
+        blocks = band[:, : 4 * in_blocks, :].reshape(out_blocks, in_blocks, 4, 4)  # [o, i, j (column), r (row)]
+        bias = band[:, 4 * in_blocks, :]  # [o, r]
+        accumulated = bias[None, :, :] + np.einsum("oijr,nij->nor", blocks, inputs)
+        y = accumulated.reshape(-1, 4 * out_blocks)
+        y = _output_activation(y, output_activation) if k == last else _hidden_activation(y, activation)
+        x = y if k == last else y.astype(dtype)
+    outputs = int(layout[-1]["outputs"])
+    return x[:, :outputs].reshape(*batch_shape, outputs)
+
+
+def evaluate_keys(model: ModelFile, u: np.ndarray, v: np.ndarray, w: np.ndarray) -> np.ndarray:
+    """CIE XYZ predicted for key vectors ``(u, v, w)``: the whole runtime pipeline, in ``float64``.
+
+    ``network_coordinates(u, v, w, scheme)`` → ``encode`` → :func:`mlp_forward` → ``range_inverse``.
+
+    Args:
+        u, v, w: key vector components (dimensionless direction-cosine sums as in docs/physics.md;
+            ``u, v ∈ [−2, 2]``, ``w ∈ [−2, 0]``); numpy arrays or scalars, broadcast together.
+
+    Returns:
+        ``float64`` ``(…, 3)``: CIE XYZ of the D65-normalised reflectance (a flat mirror's specular
+        peak has ``Y = 1``), ``…`` the broadcast shape of ``u, v, w``.
+    """
+    valid = _validated(model)
+    u, v, w = np.broadcast_arrays(*(np.asarray(c, dtype=np.float64) for c in (u, v, w)))
+    coordinates = network_coordinates(u, v, w, valid.scheme)  # type: ignore[arg-type]
+    encoded = encode(coordinates, valid.encoding)
+    return range_inverse(_forward(valid, encoded), valid.range)
+
+
+# --------------------------------------------------------------------------------------------------
+# Saving
+# --------------------------------------------------------------------------------------------------
+
+
+def _header(model: ModelFile, layout: list[dict[str, int]]) -> dict[str, Any]:
+    return {
+        "format": FORMAT_NAME,
+        "format_version": FORMAT_VERSION,
+        "layer_sizes": list(model.layer_sizes),
+        "activation": model.activation,
+        "output_activation": model.output_activation,
+        "encoding": dataclasses.asdict(model.encoding),
+        "range": {**dataclasses.asdict(model.range), "white": list(model.range.white)},
+        "scheme": model.scheme,
+        "texture_layout": layout,
+        "metadata": model.metadata,
+    }
+
+
+def save_model(path: str | os.PathLike[str], model: ModelFile) -> None:
+    """Write ``model`` to ``path`` as a GratNet model ``.npz`` (layout in the module docstring).
+
+    The model is validated first (layer sizes, activations, scheme, encoding width, weight and bias
+    shapes, finite values after casting to ``float32``, JSON-able metadata); the file is written
+    atomically, so on any failure nothing appears at ``path`` (an existing file there is untouched).
+    The path is used as given (no ``.npz`` is appended).
+
+    Raises:
+        GratNetError: invalid model, or the file cannot be written.
+    """
+    target = Path(path)
+    valid = _validated(model, f"cannot save model {target}")
+    layout = texture_layout(valid.layer_sizes)
+    arrays: dict[str, np.ndarray] = {
+        _METADATA_ARRAY: np.array(json.dumps(_header(valid, layout), allow_nan=False, ensure_ascii=False)),
+    }
+    for k, (weight, bias) in enumerate(zip(valid.weights, valid.biases, strict=True)):
+        arrays[f"weight_{k}"] = weight
+        arrays[f"bias_{k}"] = bias
+    arrays[_TEXTURE_ARRAY] = _pack(valid.weights, valid.biases, layout)
+    with atomic_path(target) as temporary:
+        try:
+            with temporary.open("wb") as handle:
+                np.savez(handle, **arrays)  # type: ignore[arg-type]
+        except OSError as error:
+            raise GratNetError(f"cannot write model {target}: {error.strerror or error}") from error
+
+
+# --------------------------------------------------------------------------------------------------
+# Loading
+# --------------------------------------------------------------------------------------------------
+
+
+def _read_arrays(source: Path) -> dict[str, np.ndarray]:
+    """Every array of the ``.npz`` at ``source``, read eagerly so that corruption shows up here."""
+    if not source.exists():
+        raise GratNetError(f"model file {source} does not exist")
+    if not source.is_file():
+        raise GratNetError(f"model file {source} is not a regular file")
+    try:
+        with source.open("rb") as handle:
+            magic = handle.read(6)
+    except OSError as error:
+        raise GratNetError(f"cannot read model file {source}: {error.strerror or error}") from error
+    if magic.startswith(_NPY_MAGIC):
+        raise GratNetError(f"{source} is a single .npy array, not a GratNet model file (.npz)")
+    if not (magic.startswith(_ZIP_MAGIC) or magic.startswith(_EMPTY_ZIP_MAGIC)):
+        raise GratNetError(f"{source} is not a GratNet model file (not an .npz archive)")
+    try:
+        with np.load(source, allow_pickle=False) as archive:
+            return {name: archive[name] for name in archive.files}
+    except (zipfile.BadZipFile, zipfile.LargeZipFile, EOFError, ValueError, KeyError, OSError,
+            NotImplementedError, RuntimeError) as error:
+        raise GratNetError(f"model file {source} is truncated or corrupt: {error}") from error
+
+
+def _read_header(source: Path, arrays: dict[str, np.ndarray]) -> dict[str, Any]:
+    """The decoded ``metadata_json`` object, after the format name and version checks."""
+    if _METADATA_ARRAY not in arrays:
+        raise GratNetError(f"{source} is not a GratNet model file (no '{_METADATA_ARRAY}' array)")
+    text_array = arrays[_METADATA_ARRAY]
+    if text_array.shape != () or text_array.dtype.kind != "U":
+        raise GratNetError(f"{source}: '{_METADATA_ARRAY}' must be a 0-d string array; the file is corrupt")
+    try:
+        header = json.loads(str(text_array[()]))
+    except ValueError as error:
+        raise GratNetError(f"{source}: '{_METADATA_ARRAY}' is not valid JSON: {error}") from error
+    if not isinstance(header, dict):
+        raise GratNetError(f"{source}: '{_METADATA_ARRAY}' must hold a JSON object")
+    if header.get("format") != FORMAT_NAME:
+        raise GratNetError(
+            f"{source} is not a GratNet model file (format is {header.get('format')!r}, expected {FORMAT_NAME!r})"
+        )
+    version = header.get("format_version")
+    if version != FORMAT_VERSION or not _is_int(version):
+        raise GratNetError(
+            f"{source} is a {FORMAT_NAME} file of format version {version!r}, but this GratNet reads only "
+            f"version {FORMAT_VERSION}; read it with the GratNet version that wrote it, or re-train with this one"
+        )
+    missing = [key for key in _JSON_KEYS if key not in header]
+    if missing:
+        raise GratNetError(f"{source}: '{_METADATA_ARRAY}' lacks key(s) {', '.join(missing)}; the file is corrupt")
+    return header
+
+
+def load_model(path: str | os.PathLike[str]) -> ModelFile:
+    """Read and fully validate a GratNet model file written by :func:`save_model`.
+
+    Checks the archive, the format name and version, every header field, the presence, dtype
+    (``float32``), shape and finiteness of every weight and bias array, that no unexpected arrays
+    are present, and that the stored ``texture`` and ``texture_layout`` are exactly what packing the
+    weights gives (a mismatch means a corrupt file).
+
+    Returns:
+        the :class:`ModelFile` (``float32`` arrays, ``metadata`` decoded from JSON).
+
+    Raises:
+        GratNetError: the file is missing, not an ``.npz`` archive, truncated or corrupt, not a
+            GratNet model, of another format version (the message names both versions), or
+            inconsistent (shapes, NaN / inf, texture mismatch, invalid settings).
+    """
+    source = Path(path)
+    arrays = _read_arrays(source)
+    header = _read_header(source, arrays)
+    where = f"model file {source}"
+    sizes = _check_layer_sizes(header["layer_sizes"], where)
+    layers = len(sizes) - 1
+    expected = {_METADATA_ARRAY, _TEXTURE_ARRAY} | {f"{kind}_{k}" for kind in ("weight", "bias") for k in range(layers)}
+    missing = sorted(expected - set(arrays))
+    if missing:
+        raise GratNetError(f"{where}: lacks array(s) {', '.join(missing)} required by layer_sizes {sizes}")
+    unexpected = sorted(set(arrays) - expected)
+    if unexpected:
+        raise GratNetError(
+            f"{where}: has unexpected array(s) {', '.join(unexpected)} for layer_sizes {sizes}; the file is corrupt"
+        )
+    model = _validated(
+        ModelFile(
+            layer_sizes=sizes,
+            weights=[arrays[f"weight_{k}"] for k in range(layers)],
+            biases=[arrays[f"bias_{k}"] for k in range(layers)],
+            activation=header["activation"],
+            output_activation=header["output_activation"],
+            encoding=_encoding_from_dict(header["encoding"], where),
+            range=_range_from_dict(header["range"], where),
+            scheme=header["scheme"],
+            metadata=header["metadata"],
+        ),
+        where,
+        from_file=True,
+    )
+    layout = texture_layout(sizes)
+    if header["texture_layout"] != layout:
+        raise GratNetError(
+            f"{where}: texture_layout {header['texture_layout']!r} does not match layer_sizes {sizes} "
+            f"(expected {layout!r}); the file is corrupt"
+        )
+    stored = arrays[_TEXTURE_ARRAY]
+    packed = _pack(model.weights, model.biases, layout)
+    if stored.dtype != np.float32 or stored.shape != packed.shape:
+        raise GratNetError(
+            f"{where}: texture is {stored.dtype} {stored.shape}, expected float32 {packed.shape}; the file is corrupt"
+        )
+    if stored.tobytes() != packed.tobytes():
+        mismatched = int(np.count_nonzero(np.any(stored.view(np.uint32) != packed.view(np.uint32), axis=-1)))
+        raise GratNetError(
+            f"{where}: the stored weight texture differs from the weights in {mismatched} texel(s); the file is corrupt"
+        )
+    return model

@@ -1,0 +1,170 @@
+"""Evaluating a model file against ground truth: held-out volume slices and BRDF slices.
+
+BRDF slices (physics.md, "The A-term and BRDF slices") are rendered twice at the same key vectors:
+ground truth from the height field (exact F-term, no volume lookup) and the network through the runtime's
+numpy evaluator (gratnet.modelfile.evaluate_keys); both × exposure × A. Metrics (trainer/metrics.py):
+PSNR on exposed XYZ clipped to [0, 1], SSIM in display sRGB and YCbCr, mean FLIP.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import hashlib
+import json
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from gratnet.brdf import a_term, direction, slice_view_directions
+from gratnet.config import config_field, config_to_dict
+from gratnet.encoding import range_forward
+from gratnet.modelfile import ModelFile, evaluate_keys
+from gratnet.volume import Volume, volume_axes
+from trainer.brdfslice import SliceConfig, brdf_slice_xyz
+from trainer.fourier import OpticsConfig, prepare_surface
+from trainer.heightfield import HeightField
+from trainer.metrics import image_metrics
+from trainer.report import comparison_figure, write_report
+from trainer.sampling import grid_to_key, slice_w
+
+# The paper's evaluation slices: (θi, φi) in degrees and exposure ("RU").
+STANDARD_SLICES: tuple[tuple[float, float, float], ...] = (
+    (0.0, 0.0, 2000.0),
+    (30.0, 135.0, 5000.0),
+    (30.0, 0.0, 5000.0),
+    (72.0, 30.0, 5000.0),
+    (72.0, 270.0, 5000.0),
+)
+
+
+@dataclasses.dataclass(frozen=True)
+class EvaluateConfig:
+    """What to evaluate and at which resolution."""
+
+    size: int = config_field(256, "BRDF-slice image width and height (pixels)")
+    ior: float = config_field(1.5, "refractive index of the Fresnel term (0: off)")
+    brdf_slices: bool = config_field(True, "evaluate the paper's five BRDF slices (needs the height field)")
+    cache_dir: str = config_field("out/cache", "where ground-truth BRDF slices are cached (.npy)")
+    progress: bool = config_field(True, "progress bars while computing ground-truth slices", cli=False)
+
+
+def network_brdf_slice(model: ModelFile, config: SliceConfig) -> np.ndarray:
+    """exposure · A · XYZ_network for every pixel of a BRDF slice, (size, size, 3); 0 outside the disc."""
+    light = direction(config.light_theta_degrees, config.light_phi_degrees)
+    views, inside = slice_view_directions(config.size)
+    key = -(light + views)
+    xyz = np.zeros(views.shape)
+    xyz[inside] = evaluate_keys(model, key[inside][:, 0], key[inside][:, 1], key[inside][:, 2])
+    attenuation = a_term(light, views, ior=config.ior or None)
+    return np.where(inside[..., None], config.exposure * attenuation[..., None] * xyz, 0.0)
+
+
+def ground_truth_brdf_slice(
+    field: HeightField,
+    optics: OpticsConfig,
+    config: SliceConfig,
+    cache_dir: str | Path | None,
+    progress: bool = True,
+) -> np.ndarray:
+    """Ground-truth slice (exact key vectors), cached by (source, optics, slice config)."""
+    key = json.dumps([field.source, config_to_dict(optics), config_to_dict(config)], sort_keys=True)
+    path = Path(cache_dir) / f"brdf_{hashlib.sha256(key.encode()).hexdigest()[:20]}.npy" if cache_dir else None
+    if path is not None and path.exists():
+        return np.load(path)
+    xyz = brdf_slice_xyz(prepare_surface(field, optics), config, optics, progress=progress)
+    if path is not None:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        np.save(path, xyz)
+    return xyz
+
+
+def _slice_label(theta: float, phi: float, exposure: float) -> str:
+    return f"({theta:g}°, {phi:g}°) {exposure:g} RU"
+
+
+def evaluate_brdf_slices(
+    model: ModelFile, field: HeightField, optics: OpticsConfig, config: EvaluateConfig, out_dir: Path
+) -> list[dict[str, Any]]:
+    """Metrics and a comparison figure for the paper's five BRDF slices."""
+    rows, figure_rows = [], []
+    for theta, phi, exposure in STANDARD_SLICES:
+        slice_config = SliceConfig(theta, phi, size=config.size, exposure=exposure, ior=config.ior)
+        reference = ground_truth_brdf_slice(field, optics, slice_config, config.cache_dir, config.progress)
+        predicted = network_brdf_slice(model, slice_config)
+        _, inside = slice_view_directions(config.size)
+        metrics = image_metrics(reference, predicted, mask=inside)
+        rows.append(
+            {"slice": _slice_label(theta, phi, exposure), "theta": theta, "phi": phi, "exposure": exposure, **metrics}
+        )
+        figure_rows.append((_slice_label(theta, phi, exposure), reference, predicted))
+    comparison_figure(out_dir / "brdf_slices.png", figure_rows, title="BRDF slices: ground truth | network | FLIP")
+    return rows
+
+
+def evaluate_volume_slices(model: ModelFile, volume: Volume, slices: list[int], out_dir: Path) -> list[dict[str, Any]]:
+    """Metrics on whole volume slices (e.g. the held-out ones), shown at an exposure that puts the
+    slice's 99.9th-percentile Y at 1; also PSNR of the range-transformed values (full dynamic range)."""
+    scheme = volume.metadata["scheme"]
+    key = grid_to_key(volume_axes(volume.resolution), scheme)
+    u_grid, v_grid = np.meshgrid(key, key, indexing="xy")
+    reachable = u_grid**2 + v_grid**2 <= 4.0 + 1e-12
+    rows, figure_rows = [], []
+    for index in slices:
+        t = float((volume.metadata.get("slice_t") or np.linspace(0, 1, volume.slices))[index])
+        w = slice_w(scheme, t, key, key)
+        predicted = np.zeros(volume.xyz.shape[1:])
+        predicted[reachable] = evaluate_keys(model, u_grid[reachable], v_grid[reachable], w[reachable])
+        reference = volume.xyz[index].astype(np.float64)
+        bright = float(np.percentile(reference[reachable][:, 1], 99.9))
+        exposure = 1.0 / bright if bright > 0 else 1.0
+        metrics = image_metrics(exposure * reference, exposure * predicted, mask=reachable)
+        transformed_error = range_forward(reference[reachable], model.range) - range_forward(
+            predicted[reachable], model.range
+        )
+        mse = float(np.mean(np.square(transformed_error)))
+        metrics["psnr_transformed"] = float("inf") if mse == 0 else float(10 * np.log10(1.0 / mse))
+        rows.append({"slice": f"volume slice {index} (t = {t:.2f})", "exposure": exposure, **metrics})
+        figure_rows.append(
+            (f"slice {index}, t = {t:.2f}, exposure {exposure:.3g}", exposure * reference, exposure * predicted)
+        )
+    comparison_figure(out_dir / "volume_slices.png", figure_rows, title="Held-out volume slices")
+    return rows
+
+
+def evaluate_model(
+    model: ModelFile,
+    out_dir: str | Path,
+    config: EvaluateConfig,
+    volume: Volume | None = None,
+    field: HeightField | None = None,
+    optics: OpticsConfig | None = None,
+    volume_slices: list[int] | None = None,
+    extra: dict[str, Any] | None = None,
+) -> dict[str, Any]:
+    """Evaluate and write the report folder (metrics.json, report.md, PNG figures)."""
+    out_dir = Path(out_dir)
+    out_dir.mkdir(parents=True, exist_ok=True)
+    results: dict[str, Any] = {
+        "model": {
+            "layer_sizes": model.layer_sizes,
+            "parameters": model.parameter_count,
+            "macs_per_evaluation": model.macs_per_evaluation,
+        },
+        **(extra or {}),
+    }
+    table: list[dict[str, Any]] = []
+    if volume is not None and volume_slices:
+        results["volume_slices"] = evaluate_volume_slices(model, volume, volume_slices, out_dir)
+        table += results["volume_slices"]
+    if field is not None and config.brdf_slices:
+        results["brdf_slices"] = evaluate_brdf_slices(model, field, optics or OpticsConfig(), config, out_dir)
+        table += results["brdf_slices"]
+    write_report(
+        out_dir,
+        results,
+        table,
+        ["slice", "psnr_xyz", "ssim_ycbcr", "ssim_srgb", "flip", "psnr_transformed"],
+        title=f"GratNet evaluation: {model.metadata.get('volume', {}).get('source', '?')[:80]}",
+    )
+    return results

@@ -1,0 +1,130 @@
+"""The funnel MLP (torch): widest layer first, each next ≈ previous/φ, down to 16, then 3 outputs.
+
+The paper's default (163, 464, 288, 176, 108, 68, 40, 24, 16, 3) is ``funnel_sizes(464)``: 464/φᵏ
+rounded to a multiple of 4 (which also fills the shader's vec4 blocks exactly).
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import torch
+from torch import nn
+
+from gratnet.errors import GratNetError
+from gratnet.modelfile import ModelFile
+
+GOLDEN_RATIO = (1.0 + math.sqrt(5.0)) / 2.0
+
+
+def funnel_sizes(widest: int, narrowest: int = 16, multiple: int = 4) -> list[int]:
+    """Hidden widths widest, widest/φ, widest/φ², … rounded to ``multiple``, ending at ``narrowest``."""
+    if widest < narrowest or narrowest < 1:
+        raise GratNetError(f"a funnel needs widest ≥ narrowest ≥ 1, got {widest}, {narrowest}")
+    sizes = []
+    for step in range(64):
+        width = max(narrowest, multiple * round(widest / GOLDEN_RATIO**step / multiple))
+        sizes.append(width)
+        if width <= narrowest:
+            break
+    return sizes
+
+
+# Hidden widths of the paper's network sizes (the input width comes from the encoding, the output is 3).
+PRESETS: dict[str, list[int]] = {
+    "paper": funnel_sizes(464),  # 464-288-176-108-68-40-24-16: the paper's default (~290k parameters)
+    "funnel-176": funnel_sizes(176),  # 176-108-68-40-24-16: the widest funnel within 60k parameters
+    "medium": [280, 100, 48, 16],
+    "small": [108, 66, 40, 24],
+    "tiny": [21, 21],
+}
+
+
+def parse_hidden(preset: str, hidden: str = "") -> list[int]:
+    """Hidden widths from a preset name, or from an explicit comma list (which wins)."""
+    if hidden:
+        try:
+            sizes = [int(part) for part in hidden.split(",") if part.strip()]
+        except ValueError:
+            raise GratNetError(
+                f"--hidden must be comma-separated widths such as 108,66,40,24; got {hidden!r}"
+            ) from None
+        if not sizes or min(sizes) < 1:
+            raise GratNetError(f"--hidden widths must be positive, got {hidden!r}")
+        return sizes
+    if preset not in PRESETS:
+        raise GratNetError(f"unknown preset {preset!r}; choose one of {', '.join(PRESETS)}")
+    return list(PRESETS[preset])
+
+
+def _activation(name: str) -> nn.Module:
+    if name == "relu":
+        return nn.ReLU()
+    if name == "leaky_relu":
+        return nn.LeakyReLU(0.01)
+    if name == "silu":
+        return nn.SiLU()
+    raise GratNetError(f"unknown activation {name!r}; choose relu, leaky_relu or silu")
+
+
+class FunnelMLP(nn.Module):
+    """Linear layers with a hidden activation; 3 outputs in the range-transformed domain.
+
+    ``forward`` returns raw outputs (what the loss sees); :meth:`predict` applies the output
+    activation exactly as the runtime does ('clamp' clips to [0, 1], 'sigmoid', or 'none').
+    """
+
+    def __init__(
+        self, inputs: int, hidden: list[int], activation: str = "relu", output_activation: str = "clamp"
+    ) -> None:
+        super().__init__()
+        sizes = [inputs, *hidden, 3]
+        layers: list[nn.Module] = []
+        for index, (fan_in, fan_out) in enumerate(zip(sizes[:-1], sizes[1:], strict=True)):
+            layers.append(nn.Linear(fan_in, fan_out))
+            if index < len(sizes) - 2:
+                layers.append(_activation(activation))
+        self.network = nn.Sequential(*layers)
+        self.sizes = sizes
+        self.activation = activation
+        if output_activation not in ("clamp", "sigmoid", "none"):
+            raise GratNetError(f"unknown output activation {output_activation!r}; choose clamp, sigmoid or none")
+        self.output_activation = output_activation
+
+    def forward(self, encoded: torch.Tensor) -> torch.Tensor:
+        """Raw outputs (…, 3); for 'sigmoid' the sigmoid is part of the model and applied here."""
+        raw = self.network(encoded)
+        return torch.sigmoid(raw) if self.output_activation == "sigmoid" else raw
+
+    def predict(self, encoded: torch.Tensor) -> torch.Tensor:
+        """Outputs as the runtime computes them (clamped to [0, 1] for 'clamp')."""
+        out = self.forward(encoded)
+        return out.clamp(0.0, 1.0) if self.output_activation == "clamp" else out
+
+    @property
+    def parameter_count(self) -> int:
+        """Number of trainable parameters (weights and biases)."""
+        return sum(parameter.numel() for parameter in self.parameters())
+
+    def linear_layers(self) -> list[nn.Linear]:
+        """The Linear layers in order."""
+        return [layer for layer in self.network if isinstance(layer, nn.Linear)]
+
+    def to_model_file(self, **fields: object) -> ModelFile:
+        """A runtime model file of these weights; ``fields`` gives encoding, range, scheme, metadata."""
+        layers = self.linear_layers()
+        return ModelFile(
+            layer_sizes=list(self.sizes),
+            weights=[layer.weight.detach().cpu().numpy().astype(np.float32) for layer in layers],
+            biases=[layer.bias.detach().cpu().numpy().astype(np.float32) for layer in layers],
+            activation=self.activation,
+            output_activation=self.output_activation,
+            **fields,  # type: ignore[arg-type]
+        )
+
+
+def log_cosh_loss(prediction: torch.Tensor, target: torch.Tensor) -> torch.Tensor:
+    """Mean log(cosh(prediction − target)), computed stably as |d| + softplus(−2|d|) − log 2."""
+    difference = (prediction - target).abs()
+    return (difference + nn.functional.softplus(-2.0 * difference) - math.log(2.0)).mean()

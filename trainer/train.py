@@ -1,0 +1,250 @@
+"""Training the funnel MLP on a ground-truth volume: LogCosh loss, Adam, cosine schedule, checkpoints.
+
+Samples are the volume's (u*, v*, t) grid points with u² + v² ≤ 4 (the rest is unreachable); inputs go
+through the same contract as the runtime (gratnet/encoding.py): key vector → network coordinates →
+sinusoidal encoding; targets are the range-transformed XYZ.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import math
+import os
+import time
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import torch
+from tqdm.auto import tqdm
+
+from gratnet.atomic import atomic_path, write_text_atomic
+from gratnet.config import config_to_dict
+from gratnet.encoding import EncodingSpec, RangeSpec, encode, network_coordinates, range_forward
+from gratnet.errors import GratNetError
+from gratnet.modelfile import ModelFile
+from gratnet.volume import Volume, volume_axes
+from trainer.model import FunnelMLP, log_cosh_loss, parse_hidden
+from trainer.sampling import grid_to_key, slice_w
+from trainer.train_config import TrainConfig
+
+
+@dataclasses.dataclass
+class Samples:
+    """Network coordinates (N, 3) and targets (N, 3), float32."""
+
+    coordinates: np.ndarray
+    targets: np.ndarray
+
+    def __len__(self) -> int:
+        return len(self.targets)
+
+
+def volume_samples(volume: Volume, range_spec: RangeSpec) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Every reachable sample: network coordinates (N, 3), targets (N, 3), slice index (N,)."""
+    scheme = volume.metadata.get("scheme")
+    if scheme not in ("regular", "simple", "simple-max"):
+        raise GratNetError(f"volume has no known sampling scheme in its metadata (got {scheme!r})")
+    key = grid_to_key(volume_axes(volume.resolution), scheme)
+    u_grid, v_grid = np.meshgrid(key, key, indexing="xy")
+    reachable = u_grid**2 + v_grid**2 <= 4.0 + 1e-12
+    t_values = volume.metadata.get("slice_t") or list(np.linspace(0, 1, volume.slices))
+    coordinates, targets, slice_index = [], [], []
+    for index, t in enumerate(t_values):
+        w = slice_w(scheme, float(t), key, key)
+        coordinates.append(network_coordinates(u_grid[reachable], v_grid[reachable], w[reachable], scheme))
+        targets.append(range_forward(volume.xyz[index][reachable].astype(np.float64), range_spec))
+        slice_index.append(np.full(int(reachable.sum()), index, dtype=np.int16))
+    return (
+        np.concatenate(coordinates).astype(np.float32),
+        np.concatenate(targets).astype(np.float32),
+        np.concatenate(slice_index),
+    )
+
+
+def split_samples(volume: Volume, config: TrainConfig) -> tuple[Samples, Samples | None]:
+    """Training and held-out samples according to ``config.split``."""
+    coordinates, targets, slice_index = volume_samples(volume, config.range_spec())
+    rng = np.random.default_rng(config.seed)
+    if config.split == "slices":
+        try:
+            held_out = sorted({int(part) for part in config.test_slices.split(",") if part.strip()})
+        except ValueError:
+            raise GratNetError(f"--test-slices must be comma-separated integers, got {config.test_slices!r}") from None
+        if not held_out or min(held_out) < 0 or max(held_out) >= volume.slices:
+            raise GratNetError(f"--test-slices {config.test_slices} out of range for a {volume.slices}-slice volume")
+        test_mask = np.isin(slice_index, held_out)
+    elif config.split == "random":
+        if not 0 < config.test_fraction < 1:
+            raise GratNetError(f"--test-fraction must lie in (0, 1), got {config.test_fraction}")
+        test_mask = rng.random(len(targets)) < config.test_fraction
+    else:
+        test_mask = np.zeros(len(targets), dtype=bool)
+    train = Samples(coordinates[~test_mask], targets[~test_mask])
+    if config.max_train_samples and len(train) > config.max_train_samples:
+        keep = rng.choice(len(train), config.max_train_samples, replace=False)
+        train = Samples(train.coordinates[keep], train.targets[keep])
+    test = Samples(coordinates[test_mask], targets[test_mask]) if test_mask.any() else None
+    return train, test
+
+
+def pick_device(name: str) -> torch.device:
+    """'auto' → CUDA when present, else CPU."""
+    if name == "auto":
+        return torch.device("cuda" if torch.cuda.is_available() else "cpu")
+    if name.startswith("cuda") and not torch.cuda.is_available():
+        raise GratNetError("--device cuda was asked for, but torch sees no CUDA device")
+    return torch.device(name)
+
+
+@torch.no_grad()
+def held_out_loss(
+    model: FunnelMLP,
+    samples: Samples,
+    encoding: EncodingSpec,
+    device: torch.device,
+    batch_size: int,
+    limit: int = 1_000_000,
+) -> float:
+    """Mean LogCosh loss of the runtime's (clamped) prediction on up to ``limit`` held-out samples."""
+    count = min(len(samples), limit)
+    total = 0.0
+    for start in range(0, count, batch_size):
+        stop = min(count, start + batch_size)
+        coordinates = torch.from_numpy(samples.coordinates[start:stop]).to(device)
+        targets = torch.from_numpy(samples.targets[start:stop]).to(device)
+        total += float(log_cosh_loss(model.predict(encode(coordinates, encoding)), targets)) * (stop - start)
+    return total / max(count, 1)
+
+
+def train(
+    volume: Volume, config: TrainConfig, out_dir: str | os.PathLike[str], resume: bool = False, progress: bool = True
+) -> tuple[FunnelMLP, ModelFile, dict[str, Any]]:
+    """Train on ``volume``; writes checkpoint.pt (every epoch), model.npz and history.json to ``out_dir``."""
+    out_dir = Path(out_dir)
+    out_dir.mkdir(parents=True, exist_ok=True)
+    device = pick_device(config.device)
+    torch.manual_seed(config.seed)
+    encoding, range_spec = config.encoding_for(volume), config.range_spec()
+    train_samples, test_samples = split_samples(volume, config)
+    model = FunnelMLP(
+        encoding.features, parse_hidden(config.preset, config.hidden), config.activation, config.output_activation
+    ).to(device)
+    optimizer = torch.optim.Adam(model.parameters(), lr=config.learning_rate)
+    steps_per_epoch = math.ceil(len(train_samples) / config.batch_size)
+    scheduler = torch.optim.lr_scheduler.CosineAnnealingLR(
+        optimizer,
+        T_max=steps_per_epoch * config.epochs,
+        eta_min=config.learning_rate * config.final_learning_rate_ratio,
+    )
+    history: dict[str, Any] = {"epochs": [], "train_seconds": 0.0}
+    start_epoch = 0
+    checkpoint_path = out_dir / "checkpoint.pt"
+    if resume and checkpoint_path.exists():
+        state = torch.load(checkpoint_path, map_location=device, weights_only=False)
+        if state["config"] != config_to_dict(config):
+            raise GratNetError(
+                f"{checkpoint_path} was made with a different configuration; start afresh without --resume"
+            )
+        model.load_state_dict(state["model"])
+        optimizer.load_state_dict(state["optimizer"])
+        scheduler.load_state_dict(state["scheduler"])
+        history, start_epoch = state["history"], state["epoch"]
+        torch.set_rng_state(state["torch_rng"])
+    generator = torch.Generator().manual_seed(config.seed + start_epoch)
+    coordinates_all = torch.from_numpy(train_samples.coordinates)
+    targets_all = torch.from_numpy(train_samples.targets)
+    for epoch in range(start_epoch, config.epochs):
+        started = time.perf_counter()
+        order = torch.randperm(len(train_samples), generator=generator)
+        running = 0.0
+        bar = tqdm(
+            range(steps_per_epoch),
+            desc=f"epoch {epoch + 1}/{config.epochs}",
+            disable=not progress,
+            leave=False,
+            unit="batch",
+        )
+        for step in bar:
+            batch = order[step * config.batch_size : (step + 1) * config.batch_size]
+            coordinates = coordinates_all[batch].to(device, non_blocking=True)
+            targets = targets_all[batch].to(device, non_blocking=True)
+            loss = log_cosh_loss(model(encode(coordinates, encoding)), targets)
+            optimizer.zero_grad(set_to_none=True)
+            loss.backward()
+            optimizer.step()
+            scheduler.step()
+            value = loss.item()
+            running = 0.98 * running + 0.02 * value if step else value
+            if step % 20 == 0:
+                bar.set_postfix(loss=f"{running:.3e}", lr=f"{scheduler.get_last_lr()[0]:.2e}")
+        seconds = time.perf_counter() - started
+        record = {
+            "epoch": epoch + 1,
+            "train_loss": running,
+            "seconds": round(seconds, 2),
+            "learning_rate": scheduler.get_last_lr()[0],
+        }
+        if test_samples is not None:
+            record["held_out_loss"] = held_out_loss(model, test_samples, encoding, device, config.batch_size)
+        history["epochs"].append(record)
+        history["train_seconds"] = round(history["train_seconds"] + seconds, 2)
+        if progress:
+            tqdm.write(f"epoch {epoch + 1}: " + ", ".join(f"{k} {v:.4g}" for k, v in record.items() if k != "epoch"))
+        with atomic_path(checkpoint_path) as temporary:
+            torch.save(
+                {
+                    "model": model.state_dict(),
+                    "optimizer": optimizer.state_dict(),
+                    "scheduler": scheduler.state_dict(),
+                    "history": history,
+                    "epoch": epoch + 1,
+                    "config": config_to_dict(config),
+                    "torch_rng": torch.get_rng_state(),
+                },
+                temporary,
+            )
+    history.update(
+        {
+            "parameters": model.parameter_count,
+            "layer_sizes": model.sizes,
+            "device": str(device),
+            "train_samples": len(train_samples),
+            "held_out_samples": len(test_samples or []),
+        }
+    )
+    model_file = model.cpu().to_model_file(
+        encoding=encoding,
+        range=range_spec,
+        scheme=volume.metadata["scheme"],
+        metadata={
+            "volume": {
+                key: volume.metadata.get(key)
+                for key in (
+                    "source",
+                    "sigma_s_um",
+                    "window_extent_um",
+                    "dx_um",
+                    "patch_size_um",
+                    "resolution",
+                    "slices",
+                    "scheme",
+                    "wavelengths_nm",
+                    "illuminant",
+                    "observer",
+                    "repeat",
+                )
+            },
+            "training": {
+                "config": config_to_dict(config),
+                **{k: v for k, v in history.items() if k != "epochs"},
+                "final": history["epochs"][-1] if history["epochs"] else None,
+            },
+        },
+    )
+    from gratnet.modelfile import save_model
+
+    save_model(out_dir / "model.npz", model_file)
+    write_text_atomic(out_dir / "history.json", json.dumps(history, indent=2) + "\n")
+    return model, model_file, history

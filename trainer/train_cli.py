@@ -1,0 +1,152 @@
+"""``gratnet train VOLUME.exr --out DIR`` and ``gratnet evaluate MODEL.npz --out DIR``."""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import sys
+from pathlib import Path
+from typing import Any
+
+from gratnet.config import add_arguments, from_arguments, save_config
+from gratnet.errors import GratNetError
+
+
+def _add_evaluation_inputs(parser: argparse.ArgumentParser) -> None:
+    from trainer.evaluate import EvaluateConfig
+    from trainer.loaders import LoadOptions
+
+    parser.add_argument(
+        "--heightfield",
+        metavar="SPEC",
+        help="height field for ground-truth BRDF slices (default: the volume's recorded generator)",
+    )
+    add_arguments(parser, EvaluateConfig)
+    add_arguments(parser, LoadOptions)
+
+
+def register(subparsers: argparse._SubParsersAction) -> None:
+    """Add ``train`` and ``evaluate``."""
+    from trainer.train_config import TrainConfig
+
+    train = subparsers.add_parser(
+        "train",
+        help="train a funnel MLP on a ground-truth volume and evaluate it",
+        description="Train the funnel MLP on a volume (LogCosh, Adam, cosine schedule), write DIR/model.npz, "
+        "DIR/checkpoint.pt, DIR/history.json, then a report (metrics.json, report.md, PNG figures).",
+    )
+    train.add_argument("volume", metavar="VOLUME.exr", help="ground-truth volume from gratnet groundtruth")
+    train.add_argument("--out", required=True, metavar="DIR", help="output folder")
+    train.add_argument("--resume", action="store_true", help="continue from DIR/checkpoint.pt")
+    train.add_argument("--no-evaluate", action="store_true", help="skip the evaluation report")
+    train.add_argument("--quiet", action="store_true", help="no progress bars")
+    add_arguments(train, TrainConfig)
+    _add_evaluation_inputs(train)
+    train.set_defaults(handler=run_train)
+
+    evaluate = subparsers.add_parser(
+        "evaluate",
+        help="evaluate a model file on held-out volume slices and the paper's BRDF slices",
+        description="Write DIR/metrics.json, DIR/report.md and PNG figures (ground truth | network | FLIP).",
+    )
+    evaluate.add_argument("model", metavar="MODEL.npz", help="model file from gratnet train")
+    evaluate.add_argument("--out", required=True, metavar="DIR", help="report folder")
+    evaluate.add_argument("--volume", metavar="VOLUME.exr", help="ground-truth volume for the volume-slice metrics")
+    evaluate.add_argument("--volume-slices", default="4,7,10", help="volume slices to evaluate (default: 4,7,10)")
+    _add_evaluation_inputs(evaluate)
+    evaluate.set_defaults(handler=run_evaluate)
+
+
+def _ground_truth_inputs(arguments: argparse.Namespace, volume_metadata: dict[str, Any]) -> tuple[Any, Any]:
+    """Height field and optics for ground-truth BRDF slices, or (None, None) with a message."""
+    from trainer.fourier import OpticsConfig
+    from trainer.loaders import LoadOptions, load_heightfield
+
+    spec = arguments.heightfield or volume_metadata.get("source", "")
+    if not spec or not (arguments.heightfield or str(spec).startswith("generator:")):
+        print(
+            "gratnet: no --heightfield and the volume was not made by a built-in generator: skipping BRDF slices",
+            file=sys.stderr,
+        )
+        return None, None
+    field = load_heightfield(spec, from_arguments(LoadOptions, arguments))
+    wavelengths = volume_metadata.get("wavelengths_nm") or [380.0, 780.0]
+    sigma = float(volume_metadata.get("sigma_s_um") or OpticsConfig().sigma_s_um)
+    optics = OpticsConfig(
+        sigma_s_um=sigma,
+        window_extent_sigmas=float(volume_metadata.get("window_extent_um") or 6 * sigma) / sigma,
+        repeat=volume_metadata.get("repeat") or "periodic",
+        wavelength_start_nm=float(wavelengths[0]),
+        wavelength_end_nm=float(wavelengths[-1]),
+        wavelength_step_nm=float(wavelengths[1] - wavelengths[0]) if len(wavelengths) > 1 else 5.0,
+    )
+    return field, optics
+
+
+def _slice_list(text: str, what: str) -> list[int]:
+    try:
+        return sorted({int(part) for part in text.split(",") if part.strip()})
+    except ValueError:
+        raise GratNetError(f"{what} must be comma-separated integers, got {text!r}") from None
+
+
+def run_train(arguments: argparse.Namespace) -> int:
+    """Train, save, evaluate."""
+    from gratnet.volume import read_volume
+    from trainer.evaluate import EvaluateConfig, evaluate_model
+    from trainer.train import train
+    from trainer.train_config import TrainConfig
+
+    config = from_arguments(TrainConfig, arguments)
+    volume = read_volume(arguments.volume)
+    out = Path(arguments.out)
+    model, model_file, history = train(volume, config, out, resume=arguments.resume, progress=not arguments.quiet)
+    save_config(out / "model.npz", train=config, volume=arguments.volume)
+    print(
+        f"wrote {out / 'model.npz'}: {model.parameter_count} parameters, layers {model.sizes}, "
+        f"{history['train_seconds']:.0f} s of training"
+    )
+    if not arguments.no_evaluate:
+        evaluate_config = dataclasses.replace(from_arguments(EvaluateConfig, arguments), progress=not arguments.quiet)
+        field, optics = (
+            _ground_truth_inputs(arguments, volume.metadata) if evaluate_config.brdf_slices else (None, None)
+        )
+        held_out = _slice_list(config.test_slices, "--test-slices") if config.split == "slices" else []
+        evaluate_model(
+            model_file,
+            out,
+            evaluate_config,
+            volume=volume,
+            field=field,
+            optics=optics,
+            volume_slices=held_out,
+            extra={"training": {k: v for k, v in history.items() if k != "epochs"}},
+        )
+        print(f"wrote {out / 'report.md'}")
+    return 0
+
+
+def run_evaluate(arguments: argparse.Namespace) -> int:
+    """Evaluate an existing model file."""
+    from gratnet.modelfile import load_model
+    from gratnet.volume import read_volume
+    from trainer.evaluate import EvaluateConfig, evaluate_model
+
+    model = load_model(arguments.model)
+    evaluate_config = from_arguments(EvaluateConfig, arguments)
+    volume = read_volume(arguments.volume) if arguments.volume else None
+    metadata = volume.metadata if volume is not None else model.metadata.get("volume", {})
+    field, optics = _ground_truth_inputs(arguments, metadata) if evaluate_config.brdf_slices else (None, None)
+    slices = _slice_list(arguments.volume_slices, "--volume-slices") if volume is not None else []
+    evaluate_model(
+        model, arguments.out, evaluate_config, volume=volume, field=field, optics=optics, volume_slices=slices
+    )
+    save_config(
+        Path(arguments.out) / "metrics.json",
+        evaluate=evaluate_config,
+        model=arguments.model,
+        volume=arguments.volume,
+        heightfield=arguments.heightfield,
+    )
+    print(f"wrote {Path(arguments.out) / 'report.md'}")
+    return 0

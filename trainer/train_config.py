@@ -1,0 +1,54 @@
+"""The training run's configuration (torch-free, so that the CLI can list its flags without torch)."""
+
+from __future__ import annotations
+
+import dataclasses
+from typing import Literal
+
+from gratnet.config import config_field
+from gratnet.encoding import EncodingSpec, RangeSpec
+from gratnet.errors import GratNetError
+from gratnet.volume import Volume
+
+
+@dataclasses.dataclass(frozen=True)
+class TrainConfig:
+    """Network, encoding, range transform and optimisation of one training run."""
+
+    preset: str = config_field("small", "network size preset: paper, funnel-176, medium, small, tiny")
+    hidden: str = config_field("", "explicit hidden widths, comma-separated (overrides --preset)")
+    activation: str = config_field("relu", "hidden activation: relu, leaky_relu, silu")
+    output_activation: str = config_field("clamp", "output activation: clamp (to [0, 1]), sigmoid, none")
+    frequencies: int = config_field(19, "encoding frequencies L for u*, v*, u*+v*, u*−v*")
+    t_frequencies: int = config_field(4, "encoding frequencies L_t for t")
+    range_kind: str = config_field("power-log", "range transform: power-log, log, log1p")
+    range_bits: float = config_field(48.0, "B of the log range transforms")
+    range_power: float = config_field(8.0, "n of the power-log range transform")
+    split: Literal["slices", "random", "all"] = config_field(
+        "slices", "held-out data: whole slices, random samples, none"
+    )
+    test_slices: str = config_field("4,7,10", "held-out slice indices for --split slices")
+    test_fraction: float = config_field(0.1, "held-out fraction for --split random")
+    epochs: int = config_field(6, "passes over the training samples")
+    batch_size: int = config_field(32768, "samples per optimisation step")
+    learning_rate: float = config_field(3e-3, "Adam's initial learning rate")
+    final_learning_rate_ratio: float = config_field(0.02, "cosine schedule ends at learning_rate × this")
+    seed: int = config_field(0, "seed of initialisation, shuffling and the random split")
+    device: str = config_field("auto", "torch device: auto (CUDA when present), cpu, cuda")
+    max_train_samples: int = config_field(0, "use at most this many training samples (0: all)")
+
+    def __post_init__(self) -> None:
+        if self.epochs < 1 or self.batch_size < 1:
+            raise GratNetError(f"--epochs and --batch-size must be ≥ 1, got {self.epochs}, {self.batch_size}")
+        if not self.learning_rate > 0:
+            raise GratNetError(f"--learning-rate must be positive, got {self.learning_rate}")
+        if self.split not in ("slices", "random", "all"):
+            raise GratNetError(f"--split must be slices, random or all, got {self.split!r}")
+
+    def encoding_for(self, volume: Volume) -> EncodingSpec:
+        """Encoding scales for this volume's grid (top frequency at its Nyquist rate)."""
+        return EncodingSpec.for_grid(volume.resolution, volume.slices, self.frequencies, self.t_frequencies)
+
+    def range_spec(self) -> RangeSpec:
+        """The range transform of the targets."""
+        return RangeSpec(self.range_kind, self.range_bits, self.range_power)  # type: ignore[arg-type]
