@@ -17,7 +17,7 @@ class TrainConfig:
 
     preset: str = config_field("small", "network size preset: paper, funnel-176, medium, small, tiny")
     hidden: str = config_field("", "explicit hidden widths, comma-separated (overrides --preset)")
-    activation: str = config_field("relu", "hidden activation: relu, leaky_relu, silu")
+    activation: str = config_field("silu", "hidden activation: silu (measured best), relu, leaky_relu")
     output_activation: str = config_field("clamp", "output activation: clamp (to [0, 1]), sigmoid, none")
     frequencies: int = config_field(19, "encoding frequencies L for u*, v*, u*+v*, u*−v*")
     t_frequencies: int = config_field(4, "encoding frequencies L_t for t")
