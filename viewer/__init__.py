@@ -1,5 +1,6 @@
 """GratNet's runtime: the GL renderer and the interactive viewer (never imports torch).
 
-The renderer, shaders and viewer arrive with the GLSL-runtime milestone; the runtime-side data code
-they will use (volume format, A-term, XYZ → display sRGB) already lives in ``gratnet``.
+- ``viewer.context``: the one GL-context factory (headless EGL, or a window's current context).
+- ``viewer.glsl``: the GLSL preprocessor (#include with file/line-preserving errors, stage macros).
+- ``viewer.renderer``: ``NetworkRenderer``, the funnel MLP per pixel from a model file's packed texture.
 """

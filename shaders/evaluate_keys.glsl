@@ -1,0 +1,47 @@
+// Program: evaluate the runtime pipeline at arbitrary inputs, one per pixel, for parity tests and
+// tools. Pixel (x, y) reads its input from texel (x, y) of u_inputs (and u_inputs2):
+//   MODE_XYZ       key vector (u, v, w) -> CIE XYZ (eq. 6 -> MLP -> eq. 7)
+//   MODE_NETWORK   key vector -> the network's outputs (range-transformed XYZ, before eq. 7's inverse)
+//   MODE_ENCODING  key vector -> encoded input features 4*u_block ... 4*u_block+3 (eq. 6)
+//   MODE_A_TERM    light direction (u_inputs), view direction (u_inputs2) -> A (eq. 5) in .x
+// Needs the defines of mlp.glsl and encoding.glsl.
+#include "fullscreen.glsl"
+
+#ifdef FRAGMENT_SHADER
+precision highp float;
+precision highp int;
+
+#include "encoding.glsl"
+#include "mlp.glsl"
+#include "range.glsl"
+#include "brdf.glsl"
+
+const int MODE_XYZ = 0;
+const int MODE_NETWORK = 1;
+const int MODE_ENCODING = 2;
+const int MODE_A_TERM = 3;
+
+uniform highp sampler2D u_inputs;   // RGBA32F, .xyz per pixel
+uniform highp sampler2D u_inputs2;  // RGBA32F, MODE_A_TERM only
+uniform int u_mode;
+uniform int u_block;                // MODE_ENCODING only
+uniform float u_ior;                // MODE_A_TERM only; <= 0: Fresnel off
+
+layout(location = 0) out vec4 out_value;
+
+void main() {
+    ivec2 pixel = ivec2(gl_FragCoord.xy);
+    vec3 value = texelFetch(u_inputs, pixel, 0).xyz;
+    if (u_mode == MODE_A_TERM) {
+        out_value = vec4(a_term(value, texelFetch(u_inputs2, pixel, 0).xyz, u_ior), 0.0, 0.0, 0.0);
+        return;
+    }
+    encoding_set_key(value);
+    if (u_mode == MODE_ENCODING) {
+        out_value = encoded_block(u_block);
+        return;
+    }
+    vec3 y = mlp_evaluate();
+    out_value = vec4(u_mode == MODE_NETWORK ? y : range_inverse(y), 0.0);
+}
+#endif

@@ -1,0 +1,75 @@
+// The funnel MLP, weights read from the packed RGBA32F texture exactly per docs/formats.md
+// ("Weight texture layout"), on encoded inputs from encoding.glsl (physics.md eq. 6 -> eq. 7 domain).
+//
+// Needs #define MAX_BLOCKS (the widest layer's vec4 count, inputs included), MAX_LAYERS and
+// LEAKY_RELU_SLOPE, all set from the model file. Every loop is bounded by a uniform: constant bounds
+// make Mesa unroll everything and its JIT then takes minutes. Each step multiplies a mat4 built from
+// four texelFetches by a vec4, writing whole vec4s: llvmpipe miscompiles a scalar float[] scratch
+// array written at a variable index (shared/notes/opengl-on-this-machine.md).
+
+const int HIDDEN_RELU = 0;
+const int HIDDEN_LEAKY_RELU = 1;
+const int HIDDEN_SILU = 2;
+const int OUTPUT_CLAMP = 0;
+const int OUTPUT_SIGMOID = 1;
+const int OUTPUT_NONE = 2;
+
+uniform highp sampler2D u_weights;     // RGBA32F, NEAREST, no mipmaps: the model file's `texture`
+uniform int u_layer_count;             // linear layers
+uniform ivec4 u_layers[MAX_LAYERS];    // per layer: (row_offset, in_blocks, out_blocks, 0)
+uniform int u_hidden_activation;       // HIDDEN_*
+uniform int u_output_activation;       // OUTPUT_*
+
+vec4 sigmoid(vec4 x) {
+    return 1.0 / (1.0 + exp(-clamp(x, -80.0, 80.0)));  // clamp before exp: no overflow to inf
+}
+
+vec4 hidden_activation(vec4 x) {
+    if (u_hidden_activation == HIDDEN_RELU) {
+        return max(x, 0.0);
+    }
+    if (u_hidden_activation == HIDDEN_LEAKY_RELU) {
+        return max(x, LEAKY_RELU_SLOPE * x);  // equals x > 0 ? x : slope * x for 0 < slope < 1
+    }
+    return x * sigmoid(x);  // SiLU
+}
+
+vec4 output_activation(vec4 x) {
+    if (u_output_activation == OUTPUT_CLAMP) {
+        return clamp(x, 0.0, 1.0);
+    }
+    if (u_output_activation == OUTPUT_SIGMOID) {
+        return sigmoid(x);
+    }
+    return x;
+}
+
+// The network's three outputs (range-transformed XYZ, eq. 7 domain) for the key set by encoding_set_key.
+vec3 mlp_evaluate() {
+    vec4 x[MAX_BLOCKS];  // the current layer's inputs, whole vec4 blocks
+    vec4 y[MAX_BLOCKS];  // its outputs, copied back into x for the next layer
+    int input_blocks = u_layers[0].y;
+    for (int i = 0; i < input_blocks; ++i) {
+        x[i] = encoded_block(i);  // encode once per fragment, not once per output block
+    }
+    for (int k = 0; k < u_layer_count; ++k) {
+        ivec4 layer = u_layers[k];
+        bool last = k == u_layer_count - 1;
+        for (int o = 0; o < layer.z; ++o) {
+            int row = layer.x + o;
+            vec4 acc = texelFetch(u_weights, ivec2(4 * layer.y, row), 0);  // bias
+            for (int i = 0; i < layer.y; ++i) {
+                int c = 4 * i;
+                acc += mat4(texelFetch(u_weights, ivec2(c, row), 0),
+                            texelFetch(u_weights, ivec2(c + 1, row), 0),
+                            texelFetch(u_weights, ivec2(c + 2, row), 0),
+                            texelFetch(u_weights, ivec2(c + 3, row), 0)) * x[i];
+            }
+            y[o] = last ? output_activation(acc) : hidden_activation(acc);
+        }
+        for (int o = 0; o < layer.z; ++o) {
+            x[o] = y[o];
+        }
+    }
+    return x[0].xyz;
+}
