@@ -1,0 +1,51 @@
+"""Every shipped model loads, and the shader's BRDF slice of it matches the trainer's numpy slice."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from gratnet.errors import GratNetError
+from gratnet.modelfile import load_model
+from trainer.brdfslice import SliceConfig
+from trainer.evaluate import network_brdf_slice
+from trainer.metrics import flip
+
+ASSETS = Path(__file__).resolve().parents[1] / "assets"
+MODELS = sorted(ASSETS.glob("*/model.npz"))
+
+
+@pytest.fixture(scope="module")
+def gl_context():
+    from viewer.context import create_headless_context
+
+    try:
+        context = create_headless_context()
+    except GratNetError as error:
+        pytest.skip(f"no headless GL: {error}")
+    yield context
+    context.release()
+
+
+@pytest.mark.parametrize("path", MODELS, ids=[path.parent.name for path in MODELS])
+def test_shipped_model_loads_and_is_small(path):
+    model = load_model(path)
+    assert model.parameter_count <= 60_000  # the paper's footprint
+    assert path.stat().st_size < 1_000_000
+
+
+@pytest.mark.parametrize("path", MODELS, ids=[path.parent.name for path in MODELS])
+def test_shader_slice_matches_numpy_slice(path, gl_context):
+    from viewer.renderer import NetworkRenderer
+
+    model = load_model(path)
+    config = SliceConfig(30.0, 0.0, size=48, exposure=5000.0, ior=1.5)
+    expected = network_brdf_slice(model, config)
+    with NetworkRenderer(gl_context, model) as renderer:
+        rendered = renderer.render_brdf_slice(30.0, 0.0, 48, exposure=5000.0, ior=1.5).astype(np.float64)
+    mean_flip, _ = flip(expected, rendered)
+    assert mean_flip <= 0.005
+    scale = max(float(expected.max()), 1e-6)
+    assert np.max(np.abs(rendered - expected)) <= 1e-3 * scale
