@@ -22,6 +22,7 @@ SUBCOMMAND_MODULES: dict[str, str] = {
     "brdfslice": "trainer.brdfslice_cli",
     "train": "trainer.train_cli",
     "evaluate": "trainer.train_cli",
+    "render": "viewer.render_cli",
 }
 
 

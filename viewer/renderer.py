@@ -141,7 +141,8 @@ class NetworkRenderer:
         _set(program, "u_range_white", tuple(float(c) for c in model.range.white))
 
     def program(self, name: str) -> moderngl.Program:
-        """Program ``name`` (``brdf_slice``, ``evaluate_keys`` or ``display``), compiled on first use."""
+        """Program ``name`` (``brdf_slice``, ``evaluate_keys``, ``display``, or another program of the network
+        includes such as ``surface``, whose model uniforms are set likewise), compiled on first use."""
         if name not in self._programs:
             if name == "display":
                 program = compile_program(self.ctx, name, {}, self.shader_root)
@@ -157,6 +158,11 @@ class NetworkRenderer:
             self._programs[name] = program
             self._vertex_arrays[name] = self.ctx.vertex_array(program, [])  # full-screen triangle: no buffers
         return self._programs[name]
+
+    def use_weights(self, location: int = 0) -> None:
+        """Bind the weight texture to texture unit ``location`` (the programs' ``u_weights`` reads unit 0),
+        for callers that draw a :meth:`program` with their own geometry (viewer.scene)."""
+        self._weights.use(location=location)
 
     def _draw(self, name: str, framebuffer: moderngl.Framebuffer,
               textures: tuple[tuple[moderngl.Texture, int], ...] = ()) -> None:

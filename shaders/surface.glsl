@@ -1,0 +1,105 @@
+// Program: a mesh lit by one light, shaded by the network (docs/physics.md "Key vector", eq. 5-7).
+// Vertex stage: world-space position, normal and tangent (viewer/meshes.py: unit tangent along the
+// height field's x, bitangent = cross(normal, tangent)) -> clip space through u_view_projection.
+// Fragment stage: tangent frame from the interpolated normal and tangent (re-orthonormalised; a
+// degenerate tangent is replaced by one perpendicular to the normal); wi (to the light) and wo (to the
+// eye) in that frame; key = -(wi + wo); output 0 (RGBA32F) = exposure * irradiance * A(wi, wo) * XYZ(key)
+// (exposed CIE XYZ, linear) with alpha = 1 (coverage; the renderer clears to 0). Back faces, wi or wo
+// at or below the tangent plane, or a degenerate frame give XYZ 0 (never NaN). Output 1 (when a second
+// attachment is bound; tests and debugging): the key vector and A, 0 for back faces.
+// Needs the defines of mlp.glsl and encoding.glsl.
+
+#ifdef VERTEX_SHADER
+in vec3 in_position;  // metres, world space
+in vec3 in_normal;
+in vec3 in_tangent;
+
+uniform mat4 u_view_projection;  // world -> clip (viewer/camera.py)
+
+out vec3 v_position;
+out vec3 v_normal;
+out vec3 v_tangent;
+
+void main() {
+    v_position = in_position;
+    v_normal = in_normal;
+    v_tangent = in_tangent;
+    gl_Position = u_view_projection * vec4(in_position, 1.0);
+}
+#endif
+
+#ifdef FRAGMENT_SHADER
+precision highp float;
+precision highp int;
+
+#include "encoding.glsl"
+#include "mlp.glsl"
+#include "range.glsl"
+#include "brdf.glsl"
+
+const int LIGHT_DIRECTIONAL = 0;
+const int LIGHT_POINT = 1;
+
+uniform vec3 u_eye;              // camera position, metres
+uniform int u_light_kind;        // LIGHT_*
+uniform vec3 u_light;            // directional: unit vector towards the light; point: its position
+uniform float u_light_intensity; // directional: irradiance scale; point: at 1 m (falls off as 1/d^2)
+uniform float u_exposure;
+uniform float u_ior;             // <= 0: Fresnel off
+
+in vec3 v_position;
+in vec3 v_normal;
+in vec3 v_tangent;
+
+layout(location = 0) out vec4 out_exposed;
+layout(location = 1) out vec4 out_key;  // (key, A)
+
+// A unit tangent perpendicular to unit n (Duff et al. 2017; viewer.meshes.arbitrary_tangents).
+vec3 arbitrary_tangent(vec3 n) {
+    float s = n.z >= 0.0 ? 1.0 : -1.0;
+    float a = -1.0 / (s + n.z);
+    return normalize(vec3(1.0 + s * n.x * n.x * a, s * n.x * n.y * a, -s * n.x));
+}
+
+// v / |v|, or 0 when |v| is 0 or not finite (normalize would give NaN).
+vec3 safe_normalize(vec3 v) {
+    float length_squared = dot(v, v);
+    return length_squared > 1e-30 && length_squared < 1e30 ? v * inversesqrt(length_squared) : vec3(0.0);
+}
+
+void main() {
+    out_exposed = vec4(0.0, 0.0, 0.0, 1.0);  // covered, no light (yet)
+    out_key = vec4(0.0);
+    vec3 n = safe_normalize(v_normal);
+    if (!gl_FrontFacing || n == vec3(0.0)) {
+        return;
+    }
+    vec3 t = v_tangent - dot(v_tangent, n) * n;  // Gram-Schmidt: interpolation tilts the tangent
+    t = dot(t, t) > 1e-12 ? normalize(t) : arbitrary_tangent(n);
+    vec3 b = cross(n, t);
+    mat3 world_to_tangent = transpose(mat3(t, b, n));  // rows t, b, n
+
+    vec3 wi_world;
+    float irradiance = u_light_intensity;
+    if (u_light_kind == LIGHT_POINT) {
+        vec3 offset = u_light - v_position;
+        float distance_squared = dot(offset, offset);
+        wi_world = safe_normalize(offset);
+        irradiance = distance_squared > 0.0 ? u_light_intensity / distance_squared : 0.0;
+    } else {
+        wi_world = u_light;
+    }
+    vec3 wo_world = safe_normalize(u_eye - v_position);
+    vec3 wi = world_to_tangent * wi_world;
+    vec3 wo = world_to_tangent * wo_world;
+    vec3 key = -(wi + wo);  // physics.md "Key vector"
+    float a = a_term(wi, wo, u_ior);  // 0 below either horizon, at |w| <= 1e-6, or for a zero vector
+    out_key = vec4(key, a);
+    if (!(a > 0.0) || !(irradiance > 0.0)) {
+        return;  // and skip the network: nothing to light
+    }
+    encoding_set_key(key);
+    vec3 xyz = range_inverse(mlp_evaluate());
+    out_exposed = vec4(u_exposure * irradiance * a * xyz, 1.0);
+}
+#endif

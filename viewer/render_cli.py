@@ -1,0 +1,243 @@
+"""``gratnet render``: a shipped material (or any model file) on a mesh, or its BRDF slice, to PNG or EXR.
+
+    gratnet render --material blazed --mesh cd --light 45,90 --camera 0.25,-90,45 --exposure 20 \\
+        --size 512,512 --out cd.png
+
+- ``--mesh``: ``cd`` (viewer.meshes.compact_disc), ``sphere``, ``plane`` or a Wavefront ``.obj`` file
+  (metres); the world is +z up and the built-in meshes face +z.
+- ``--light θ,φ``: a directional light in world space (degrees; physics.md's convention with +z up), or
+  ``--point-light X,Y,Z`` (metres; irradiance 1 at 1 m, falling as 1/d²).
+- ``--camera DIST,AZIMUTH,ELEVATION``: an orbit camera around the origin (metres, degrees).
+- ``--slice``: instead of a mesh, the network's BRDF slice for the light θ,φ (physics.md "BRDF slice").
+- Output: ``.png`` = display sRGB, 8-bit (``gratnet.display``, like every GratNet PNG); ``.exr`` = linear
+  sRGB, float32 channels R, G, B, exposure applied, unclipped. The resolved config is saved beside it
+  (``NAME.config.json``); both are written atomically.
+
+Runtime-side: no torch, no glfw, no imgui.
+"""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import math
+from pathlib import Path
+
+from gratnet.config import add_arguments, config_field, from_arguments, save_config
+from gratnet.errors import GratNetError
+
+__all__ = ["ASSETS", "MESHES", "RenderConfig", "register", "resolve_material", "run", "shipped_materials"]
+
+#: Shipped materials: ``assets/NAME/model.npz``.
+ASSETS = Path(__file__).resolve().parents[1] / "assets"
+#: Built-in meshes for ``--mesh``.
+MESHES = ("cd", "sphere", "plane")
+_OUTPUT_SUFFIXES = (".png", ".exr")
+#: sRGB / Rec. 709 primaries and D65 white (x, y pairs) for the EXR ``chromaticities`` attribute.
+_SRGB_CHROMATICITIES = (0.64, 0.33, 0.30, 0.60, 0.15, 0.06, 0.3127, 0.3290)
+
+
+@dataclasses.dataclass
+class RenderConfig:
+    """Rendering a material on a mesh (or its BRDF slice) with one light and an orbit camera."""
+
+    material: str = config_field("blazed", "shipped material name (assets/NAME/model.npz) or a model-file path")
+    mesh: str = config_field("cd", "cd, sphere, plane, or the path of a Wavefront .obj file (metres, +z up)")
+    light_theta_degrees: float = config_field(45.0, "directional light: polar angle from +z, degrees", cli=False)
+    light_phi_degrees: float = config_field(90.0, "directional light: azimuth from +x, degrees", cli=False)
+    point_light: tuple[float, float, float] | None = config_field(
+        None, "point light position, metres (replaces the directional light)", cli=False)
+    camera_distance: float = config_field(0.25, "camera distance from the origin, metres", cli=False)
+    camera_azimuth_degrees: float = config_field(-90.0, "camera azimuth from +x, degrees", cli=False)
+    camera_elevation_degrees: float = config_field(45.0, "camera elevation above the xy-plane, degrees", cli=False)
+    fov_degrees: float = config_field(40.0, "vertical field of view, degrees", flag="--fov")
+    exposure: float = config_field(1.0, "exposure: the factor applied to XYZ before display (linear)")
+    width: int = config_field(512, "image width, pixels", cli=False)
+    height: int = config_field(512, "image height, pixels", cli=False)
+    ior: float = config_field(1.5, "refractive index for the Fresnel factor of the A-term (0: none)")
+    fresnel: bool = config_field(True, "apply the Fresnel factor (--no-fresnel: R/R0 = 1)")
+    slice: bool = config_field(False, "render the network's BRDF slice for the light θ,φ instead of a mesh")
+
+    @property
+    def effective_ior(self) -> float | None:
+        """The A-term's ``ior`` argument: ``None`` when Fresnel is off."""
+        return self.ior if self.fresnel and self.ior != 0 else None
+
+
+def _numbers(text: str, count: int | tuple[int, ...], flag: str, form: str) -> list[float]:
+    """Comma-separated finite numbers (``count`` of them) or a one-line GratNetError naming ``flag``."""
+    counts = (count,) if isinstance(count, int) else count
+    parts = [part.strip() for part in str(text).split(",")]
+    try:
+        values = [float(part) for part in parts]
+    except ValueError:
+        values = []
+    if len(values) not in counts or not all(math.isfinite(value) for value in values):
+        raise GratNetError(f"{flag} expects {form}, got {text!r}")
+    return values
+
+
+def parse_size(text: str) -> tuple[int, int]:
+    """'W,H' (or 'N' for N×N) → (W, H), integers in 1 … MAX_IMAGE_SIZE."""
+    from viewer.scene import MAX_IMAGE_SIZE
+
+    form = f"W,H: two integers in 1 … {MAX_IMAGE_SIZE} such as 512,512"
+    values = _numbers(text, (1, 2), "--size", form)
+    if not all(value.is_integer() and 1 <= value <= MAX_IMAGE_SIZE for value in values):
+        raise GratNetError(f"--size expects {form}, got {text!r}")
+    width = int(values[0])
+    return width, int(values[-1])
+
+
+def shipped_materials() -> list[str]:
+    """Names of the shipped materials (folders of ``assets/`` holding a ``model.npz``)."""
+    return sorted(path.parent.name for path in ASSETS.glob("*/model.npz"))
+
+
+def resolve_material(material: str) -> Path:
+    """A shipped material's model file, or ``material`` itself when it names a file."""
+    shipped = ASSETS / material / "model.npz"
+    if "/" not in material and "\\" not in material and shipped.is_file():
+        return shipped
+    path = Path(material).expanduser()
+    if path.is_file():
+        return path
+    names = ", ".join(shipped_materials()) or "none"
+    raise GratNetError(
+        f"unknown material {material!r}: neither a shipped material (choose {names}) nor an existing model file"
+    )
+
+
+def build_mesh(spec: str) -> object:
+    """The mesh named by ``--mesh``: a built-in name or an .obj path."""
+    from viewer import meshes
+
+    builders = {"cd": meshes.compact_disc, "sphere": meshes.sphere, "plane": meshes.plane}
+    if spec in builders:
+        return builders[spec]()
+    path = Path(spec).expanduser()
+    if path.suffix.lower() != ".obj":
+        raise GratNetError(f"unknown mesh {spec!r}: choose {', '.join(MESHES)} or the path of a Wavefront .obj file")
+    if not path.is_file():
+        raise GratNetError(f"mesh file {spec} does not exist")
+    return meshes.load_obj(path)
+
+
+def register(subparsers: argparse._SubParsersAction) -> None:
+    """Add the ``render`` subcommand."""
+    parser = subparsers.add_parser(
+        "render", help="render a material on a mesh (cd, sphere, plane, .obj) or its BRDF slice to PNG/EXR",
+        description="Rasterize a mesh lit by one light and shade every pixel with the trained network "
+        "(exposure · A · XYZ of the key vector in the surface's tangent frame); or, with --slice, the "
+        "network's BRDF slice. Headless OpenGL (EGL).",
+    )
+    parser.add_argument("--out", required=True, metavar="IMAGE.png|IMAGE.exr",
+                        help="output: .png (display sRGB, 8-bit) or .exr (linear sRGB float, R G B)")
+    parser.add_argument("--light", dest="light_text", default="45,90", metavar="θ,φ",
+                        help="directional light in world space: polar angle from +z and azimuth from +x, "
+                        "degrees (default: 45,90)")
+    parser.add_argument("--point-light", dest="point_light_text", default=None, metavar="X,Y,Z",
+                        help="point light position in metres instead of --light (irradiance 1 at 1 m)")
+    parser.add_argument("--camera", dest="camera_text", default="0.25,-90,45", metavar="DIST,AZIMUTH,ELEVATION",
+                        help="orbit camera around the origin: metres, degrees, degrees (default: 0.25,-90,45)")
+    parser.add_argument("--size", dest="size_text", default="512,512", metavar="W,H",
+                        help="image size in pixels (default: 512,512)")
+    add_arguments(parser, RenderConfig)
+    parser.set_defaults(handler=run)
+
+
+def _resolve_config(arguments: argparse.Namespace) -> RenderConfig:
+    """The config from the flags, every compound flag parsed and every value checked (no GL yet)."""
+    theta, phi = _numbers(arguments.light_text, 2, "--light", "θ,φ in degrees such as 45,90")
+    distance, azimuth, elevation = _numbers(arguments.camera_text, 3, "--camera",
+                                            "DIST,AZIMUTH,ELEVATION (metres, degrees, degrees) such as 0.25,-90,45")
+    point = None
+    if arguments.point_light_text is not None:
+        point = tuple(_numbers(arguments.point_light_text, 3, "--point-light", "X,Y,Z in metres such as 0,0.1,0.2"))
+    width, height = parse_size(arguments.size_text)
+    config = dataclasses.replace(
+        from_arguments(RenderConfig, arguments),
+        light_theta_degrees=theta, light_phi_degrees=phi, point_light=point, camera_distance=distance,
+        camera_azimuth_degrees=azimuth, camera_elevation_degrees=elevation, width=width, height=height,
+    )
+    if not (math.isfinite(config.exposure) and config.exposure >= 0.0):
+        raise GratNetError(f"--exposure must be a finite number ≥ 0, got {config.exposure!r}")
+    from viewer.renderer import _ior_uniform
+
+    _ior_uniform(config.effective_ior)  # checks --ior
+    if config.slice and width != height:
+        raise GratNetError(f"--slice renders a square image; give --size N,N (got {width},{height})")
+    if config.slice and point is not None:
+        raise GratNetError("--slice takes a directional light (--light θ,φ), not --point-light")
+    return config
+
+
+def run(arguments: argparse.Namespace) -> int:
+    """Check every input, render, write the image and its config atomically."""
+    import numpy as np
+
+    from gratnet.atomic import atomic_path
+    from gratnet.modelfile import load_model
+    from viewer.camera import Camera, Light
+
+    out = Path(arguments.out)
+    if out.suffix.lower() not in _OUTPUT_SUFFIXES:
+        raise GratNetError(f"--out must end in .png (display sRGB) or .exr (linear sRGB float), got {arguments.out}")
+    config = _resolve_config(arguments)
+    model_path = resolve_material(config.material)
+    model = load_model(model_path)
+    camera = Camera(config.camera_distance, config.camera_azimuth_degrees, config.camera_elevation_degrees,
+                    fov_deg=config.fov_degrees)
+    light = (Light.point(config.point_light) if config.point_light is not None
+             else Light.directional(config.light_theta_degrees, config.light_phi_degrees))
+    mesh = None if config.slice else build_mesh(config.mesh)
+
+    from viewer.context import create_headless_context
+    from viewer.scene import SceneRenderer
+
+    ctx = create_headless_context()
+    try:
+        with SceneRenderer(ctx, model) as renderer:
+            if config.slice:
+                xyz = renderer.render_brdf_slice(config.light_theta_degrees, config.light_phi_degrees,
+                                                 config.width, config.exposure, config.effective_ior)
+            else:
+                xyz = renderer.render(mesh, camera, light, (config.width, config.height), config.exposure,
+                                      config.effective_ior)
+    finally:
+        ctx.release()
+    if not np.all(np.isfinite(xyz)):
+        raise GratNetError("the render contains NaN or inf; nothing was written (please report this)")
+
+    if out.suffix.lower() == ".png":
+        from PIL import Image
+
+        with atomic_path(out) as temporary:
+            Image.fromarray(SceneRenderer.display_srgb8(xyz)).save(temporary, format="PNG")
+    else:
+        _write_exr(out, SceneRenderer.linear_srgb(xyz))
+    save_config(out, render=config, model_file=str(model_path))
+    what = (f"BRDF slice, light θ={config.light_theta_degrees:g}° φ={config.light_phi_degrees:g}°" if config.slice
+            else f"mesh {config.mesh}")
+    print(f"wrote {out}: {Path(model_path).parent.name if model_path.name == 'model.npz' else model_path.name}, "
+          f"{what}, {config.width}×{config.height}, exposure {config.exposure:g}")
+    return 0
+
+
+def _write_exr(path: Path, linear_srgb: object) -> None:
+    """Float32 channels R, G, B of a linear-sRGB image (row 0 at the top), ZIP-compressed, atomically."""
+    import numpy as np
+    import OpenEXR
+
+    from gratnet.atomic import atomic_path
+
+    image = np.asarray(linear_srgb, dtype=np.float32)
+    header = {"compression": OpenEXR.ZIP_COMPRESSION, "type": OpenEXR.scanlineimage,
+              "chromaticities": _SRGB_CHROMATICITIES}
+    channels = {name: np.ascontiguousarray(image[..., k]) for k, name in enumerate("RGB")}
+    with atomic_path(path) as temporary:
+        try:
+            with OpenEXR.File(header, channels) as exr:
+                exr.write(str(temporary))
+        except Exception as error:  # OpenEXR raises plain exceptions (RuntimeError, …)
+            raise GratNetError(f"cannot write {path}: {' '.join(str(error).split())}") from error

@@ -1,0 +1,221 @@
+"""Rendering a trained material on a mesh: one light, one camera, the network per pixel.
+
+:class:`SceneRenderer` rasterizes a :class:`~viewer.meshes.Mesh` with ``shaders/surface.glsl``: each
+covered pixel takes the light direction ωi and the view direction ωo into the surface's tangent frame
+(x = tangent, y = bitangent, z = normal), evaluates the network at the key vector ``−(ωi + ωo)``
+(docs/physics.md eq. 6–7) and multiplies by the A-term (eq. 5), the light's irradiance and the exposure.
+The output is **exposed CIE XYZ**, linear, ``float32`` ``(H, W, 3)`` with row 0 at the top; pixels the
+mesh does not cover are 0 (``render_rgba``'s alpha is the coverage, 1 or 0). The depth test is on, face
+culling off (back faces are covered but black).
+
+The network's weight texture, the model uniforms and the shader defines are those of
+:class:`~viewer.renderer.NetworkRenderer`, which this class owns; its BRDF slices are available too.
+
+Display: :meth:`SceneRenderer.display_srgb8` and :meth:`SceneRenderer.linear_srgb` use ``gratnet.display``
+(colour-science, float64), the path that the trainer's PNGs (``gratnet brdfslice``, evaluation reports)
+take, so a render and a ground-truth image of the same XYZ are byte-identical. The GLSL ``display``
+program that an interactive window would use agrees with it to 2e-6 before the 8-bit rounding
+(tests/test_shader_parity.py), i.e. at most one level where a value sits on a rounding boundary.
+
+Rendering only: no glfw, no imgui, no torch.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from pathlib import Path
+
+import moderngl
+import numpy as np
+
+from gratnet.display import xyz_to_display_srgb8, xyz_to_linear_srgb
+from gratnet.errors import GratNetError
+from gratnet.modelfile import ModelFile
+from viewer.camera import Camera, Light
+from viewer.meshes import Mesh
+from viewer.renderer import NetworkRenderer, _ior_uniform, _set
+
+__all__ = ["MAX_IMAGE_SIZE", "MeshBuffers", "SceneRenderer", "check_size"]
+
+#: Largest image side (pixels); GL implementations guarantee at least this much for render targets.
+MAX_IMAGE_SIZE = 16384
+_PROGRAM = "surface"
+_LIGHT_KINDS = {"directional": 0, "point": 1}  # LIGHT_* of shaders/surface.glsl
+_ATTRIBUTES = (("in_position", "positions"), ("in_normal", "normals"), ("in_tangent", "tangents"))
+
+
+def check_size(size: object) -> tuple[int, int]:
+    """``(width, height)`` from a pair of positive integers ≤ :data:`MAX_IMAGE_SIZE`, else GratNetError."""
+    try:
+        width, height = size  # type: ignore[misc]
+    except (TypeError, ValueError):
+        raise GratNetError(f"image size must be (width, height), got {size!r}") from None
+    for value in (width, height):
+        if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or not 1 <= value <= MAX_IMAGE_SIZE:
+            raise GratNetError(f"image width and height must be integers in 1 … {MAX_IMAGE_SIZE}, got {size!r}")
+    return int(width), int(height)
+
+
+@dataclasses.dataclass(eq=False)
+class MeshBuffers:
+    """A mesh uploaded to the GPU: one vertex buffer per attribute and the index buffer.
+
+    Keep one for a mesh that is drawn many times (an interactive view); :meth:`release` frees it.
+    """
+
+    mesh: Mesh
+    buffers: dict[str, moderngl.Buffer]
+    index_buffer: moderngl.Buffer | None
+    vertex_array: moderngl.VertexArray | None
+
+    def release(self) -> None:
+        if self.vertex_array is not None:
+            self.vertex_array.release()
+        for buffer in self.buffers.values():
+            buffer.release()
+        if self.index_buffer is not None:
+            self.index_buffer.release()
+        self.buffers.clear()
+        self.vertex_array = self.index_buffer = None
+
+
+class SceneRenderer:
+    """Renders meshes shaded by a trained network (see the module docstring).
+
+    Args:
+        ctx: an OpenGL ≥ 4.3 context (:func:`viewer.context.create_headless_context`).
+        model: the trained network.
+        shader_root: folder of the GLSL files (default: the repository's ``shaders/``).
+    """
+
+    def __init__(self, ctx: moderngl.Context, model: ModelFile, shader_root: str | Path | None = None) -> None:
+        self.ctx = ctx
+        self.network = NetworkRenderer(ctx, model, shader_root)
+        self.model = model
+
+    @property
+    def program(self) -> moderngl.Program:
+        """The ``surface`` program, compiled on first use with the network's defines and model uniforms."""
+        return self.network.program(_PROGRAM)
+
+    def upload(self, mesh: Mesh) -> MeshBuffers:
+        """Upload ``mesh`` for drawing (the caller releases the result)."""
+        if not isinstance(mesh, Mesh):
+            raise GratNetError(f"expected a viewer.meshes.Mesh, got {type(mesh).__name__}")
+        program = self.program
+        buffers: dict[str, moderngl.Buffer] = {}
+        if mesh.triangle_count == 0:
+            return MeshBuffers(mesh, buffers, None, None)
+        content = []
+        for attribute, field in _ATTRIBUTES:
+            buffers[attribute] = self.ctx.buffer(np.ascontiguousarray(getattr(mesh, field)).tobytes())
+            if attribute in program:  # an attribute the compiler dropped cannot be bound
+                content.append((buffers[attribute], "3f", attribute))
+        index_buffer = self.ctx.buffer(np.ascontiguousarray(mesh.indices).tobytes())
+        vertex_array = self.ctx.vertex_array(program, content, index_buffer=index_buffer, index_element_size=4)
+        return MeshBuffers(mesh, buffers, index_buffer, vertex_array)
+
+    def _set_uniforms(self, camera: Camera, light: Light, width: int, height: int, exposure: float,
+                      ior: float | None) -> None:
+        if not isinstance(camera, Camera):
+            raise GratNetError(f"expected a viewer.camera.Camera, got {type(camera).__name__}")
+        if not isinstance(light, Light):
+            raise GratNetError(f"expected a viewer.camera.Light, got {type(light).__name__}")
+        if not math.isfinite(exposure) or exposure < 0.0:
+            raise GratNetError(f"exposure must be a finite number ≥ 0, got {exposure!r}")
+        program = self.program
+        _set(program, "u_view_projection", np.ascontiguousarray(camera.view_projection(width / height)))
+        _set(program, "u_eye", tuple(float(c) for c in camera.eye()))
+        _set(program, "u_light_kind", _LIGHT_KINDS[light.kind])
+        _set(program, "u_light", tuple(float(c) for c in light.vector))
+        _set(program, "u_light_intensity", float(light.intensity))
+        _set(program, "u_exposure", float(exposure))
+        _set(program, "u_ior", _ior_uniform(ior))
+
+    def render_layers(self, mesh: Mesh | MeshBuffers, camera: Camera, light: Light,
+                      size: tuple[int, int] = (256, 256), exposure: float = 1.0,
+                      ior: float | None = 1.5) -> tuple[np.ndarray, np.ndarray]:
+        """:meth:`render_rgba` and, per pixel, the key vector and the A-term behind it.
+
+        Returns:
+            ``(rgba, key_a)``, both ``float32`` ``(H, W, 4)`` with row 0 at the top: ``rgba`` as
+            :meth:`render_rgba`; ``key_a[..., :3]`` = ``−(ωi + ωo)`` in the tangent frame (float32, as the
+            network saw it) and ``key_a[..., 3]`` = A(ωi, ωo); 0 for back faces and uncovered pixels.
+        """
+        rgba, key_a = self._render(mesh, camera, light, size, exposure, ior, layers=2)
+        return rgba, key_a
+
+    def render_rgba(self, mesh: Mesh | MeshBuffers, camera: Camera, light: Light, size: tuple[int, int] = (256, 256),
+                    exposure: float = 1.0, ior: float | None = 1.5) -> np.ndarray:
+        """Exposed CIE XYZ and coverage, ``float32`` ``(H, W, 4)``, row 0 at the top.
+
+        Channels 0–2: ``exposure · irradiance · A(ωi, ωo) · XYZ(−(ωi + ωo))`` (physics.md eq. 5–7) with
+        ωi, ωo in the tangent frame at the pixel's surface point; 0 for back faces, directions below the
+        surface's horizon, and uncovered pixels. Channel 3: 1 where the mesh covers the pixel centre.
+        ``ior`` is the Fresnel refractive index (``None`` or 0: no Fresnel).
+        """
+        return self._render(mesh, camera, light, size, exposure, ior, layers=1)[0]
+
+    def _render(self, mesh: Mesh | MeshBuffers, camera: Camera, light: Light, size: tuple[int, int],
+                exposure: float, ior: float | None, layers: int) -> list[np.ndarray]:
+        width, height = check_size(size)
+        self._set_uniforms(camera, light, width, height, float(exposure), ior)
+        uploaded = mesh if isinstance(mesh, MeshBuffers) else self.upload(mesh)
+        targets = [self.ctx.texture((width, height), 4, dtype="f4") for _ in range(layers)]
+        depth = self.ctx.depth_renderbuffer((width, height))
+        framebuffer = self.ctx.framebuffer(color_attachments=targets, depth_attachment=depth)
+        # The scope restores the caller's framebuffer and enable flags (a window may share this context).
+        scope = self.ctx.scope(framebuffer, enable_only=moderngl.DEPTH_TEST)
+        try:
+            with scope:
+                framebuffer.use()  # the scope binds the framebuffer but leaves the viewport as it was
+                framebuffer.clear(0.0, 0.0, 0.0, 0.0, depth=1.0)
+                if uploaded.vertex_array is not None:
+                    self.network.use_weights(0)
+                    uploaded.vertex_array.render(moderngl.TRIANGLES)
+                data = [framebuffer.read(components=4, dtype="f4", attachment=k) for k in range(layers)]
+        finally:
+            scope.release()
+            framebuffer.release()
+            depth.release()
+            for target in targets:
+                target.release()
+            if uploaded is not mesh:
+                uploaded.release()
+        # GL rows start at the bottom; ours at the top.
+        return [np.frombuffer(layer, dtype=np.float32).reshape(height, width, 4)[::-1].copy() for layer in data]
+
+    def render(self, mesh: Mesh | MeshBuffers, camera: Camera, light: Light, size: tuple[int, int] = (256, 256),
+               exposure: float = 1.0, ior: float | None = 1.5) -> np.ndarray:
+        """Exposed CIE XYZ, ``float32`` ``(H, W, 3)``, row 0 at the top (see :meth:`render_rgba`)."""
+        return np.ascontiguousarray(self.render_rgba(mesh, camera, light, size, exposure, ior)[..., :3])
+
+    def render_brdf_slice(self, theta_deg: float, phi_deg: float, size: int, exposure: float = 1.0,
+                          ior: float | None = 1.5) -> np.ndarray:
+        """The network's BRDF slice (``NetworkRenderer.render_brdf_slice``): exposed XYZ ``(size, size, 3)``."""
+        return self.network.render_brdf_slice(theta_deg, phi_deg, size, exposure, ior)
+
+    # ---------------------------------------------------------------------------------------------
+    # Display (gratnet.display: the same numbers as every other PNG GratNet writes)
+
+    @staticmethod
+    def display_srgb8(xyz: np.ndarray) -> np.ndarray:
+        """8-bit display sRGB ``(H, W, 3)`` of an exposed XYZ image (exposure already applied):
+        linear sRGB, clipped to [0, 1], sRGB transfer function, rounded (``gratnet.display``)."""
+        return xyz_to_display_srgb8(np.asarray(xyz, dtype=np.float64), 1.0)
+
+    @staticmethod
+    def linear_srgb(xyz: np.ndarray) -> np.ndarray:
+        """Linear sRGB ``float32`` ``(H, W, 3)`` of an exposed XYZ image, unclipped (for EXR files)."""
+        return xyz_to_linear_srgb(np.asarray(xyz, dtype=np.float64)).astype(np.float32)
+
+    def __enter__(self) -> SceneRenderer:
+        return self
+
+    def __exit__(self, *exc_info: object) -> None:
+        self.release()
+
+    def release(self) -> None:
+        """Free the GL objects (the context belongs to the caller)."""
+        self.network.release()
