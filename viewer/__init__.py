@@ -5,5 +5,6 @@
 - ``viewer.renderer``: ``NetworkRenderer``, the funnel MLP per pixel from a model file's packed texture.
 - ``viewer.meshes``, ``viewer.camera``: CD disc (tangent along the tracks), sphere, plane, OBJ;
   orbit camera, lights.
-- ``viewer.scene``: ``SceneRenderer``, a mesh rendered with the surface program; ``viewer.render_cli``: ``gratnet render``.
+- ``viewer.scene``: ``SceneRenderer``, a mesh rendered with the surface program.
+- ``viewer.render_cli``: ``gratnet render``.
 """
