@@ -23,6 +23,7 @@ SUBCOMMAND_MODULES: dict[str, str] = {
     "train": "trainer.train_cli",
     "evaluate": "trainer.train_cli",
     "render": "viewer.render_cli",
+    "view": "viewer.view_cli",
 }
 
 

@@ -6,7 +6,7 @@
 set -euo pipefail
 cd "$(dirname "$0")/.."
 
-debian_packages=(libegl1 libegl-mesa0 libgbm1 libgl1 libgl1-mesa-dri)
+debian_packages=(libegl1 libegl-mesa0 libgbm1 libgl1 libgl1-mesa-dri xvfb)
 if command -v apt-get >/dev/null 2>&1 && [ "$(id -u)" = 0 ]; then
     missing=()
     for package in "${debian_packages[@]}"; do

@@ -17,3 +17,10 @@ def coarse_spectrum() -> SpectralWeights:
     """Nine wavelengths, 380…780 nm every 50 nm, D65 × CIE 1931 2° weights."""
     return spectral_weights(380.0, 780.0, 50.0)
 
+
+
+def pytest_addoption(parser: pytest.Parser) -> None:
+    parser.addoption(
+        "--regenerate-golden", action="store_true", default=False,
+        help="rewrite the golden reference images (tests/golden/*.png) from the current renderer",
+    )

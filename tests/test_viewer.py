@@ -1,0 +1,468 @@
+"""The interactive viewer (viewer.app, ``gratnet view``).
+
+- App logic on a headless EGL context (no display needed): the resolution policy (reduced while the state
+  moves, full resolution once it settles), "nothing changed → nothing rendered", banded refinement equal
+  to one full render, screenshots.
+- The real window under Xvfb (a virtual X server started on a free display number for this module, always
+  stopped): glfw + OpenGL 4.3 core + imgui; the window is read back with glReadPixels, a slider is moved,
+  the mouse is synthesised through imgui's glfw backend, and the OpenGL error flag is checked every frame.
+  Skips with the reason when Xvfb is not installed (apt-get install xvfb; scripts/setup.sh installs it).
+
+Renders are tiny (≤ 160×120, plane or sphere) with the shipped blazed model: the CPU rasterizer is slow.
+"""
+
+from __future__ import annotations
+
+import ctypes
+import json
+import shutil
+import subprocess
+import sys
+import time
+from collections.abc import Iterator
+from pathlib import Path
+
+import numpy as np
+import pytest
+from PIL import Image
+
+from gratnet.cli import main
+from gratnet.errors import GratNetError
+from viewer.app import (
+    SLIDERS,
+    ResolutionPolicy,
+    ViewerApp,
+    ViewerState,
+    drive_slider,
+)
+from viewer.meshes import plane
+
+BLAZED = Path(__file__).resolve().parents[1] / "assets" / "blazed" / "model.npz"
+EXPOSURE = 5000.0
+#: A view of the plane that shows the blazed grating's diffraction streak.
+PLANE = ViewerState(mesh="plane", camera_distance=0.15, camera_elevation=50.0, light_theta=30.0, light_phi=90.0,
+                    exposure=EXPOSURE)
+
+
+class FakeClock:
+    """A clock the test advances by hand."""
+
+    def __init__(self) -> None:
+        self.now = 1000.0
+
+    def __call__(self) -> float:
+        return self.now
+
+    def advance(self, seconds: float) -> None:
+        self.now += seconds
+
+
+def run_until_complete(target: object, limit: int = 200) -> int:
+    """Call ``target.frame()`` until the app's picture is complete and current; return the frame count."""
+    app = target.app if hasattr(target, "app") else target
+    for count in range(1, limit + 1):
+        target.frame()
+        if app.next_work_in() is None:
+            return count
+    raise AssertionError(f"the picture was not complete after {limit} frames")
+
+
+# --------------------------------------------------------------------------------------------------
+# App logic (headless)
+
+
+@pytest.fixture(scope="module")
+def ctx() -> Iterator[object]:
+    from viewer.context import create_headless_context
+
+    try:
+        context = create_headless_context()
+    except GratNetError as error:
+        pytest.skip(f"no headless OpenGL 4.3 context: {error}")
+    yield context
+    context.release()
+
+
+@pytest.fixture
+def app(ctx) -> Iterator[ViewerApp]:
+    clock = FakeClock()
+    viewer = ViewerApp(ctx, PLANE, size=(64, 48), clock=clock)
+    viewer.clock_control = clock  # type: ignore[attr-defined]
+    yield viewer
+    viewer.release()
+
+
+def test_resolution_policy_chooses_the_reduction_and_the_band_height():
+    policy = ResolutionPolicy(interactive_budget_s=0.05, refine_budget_s=0.1, factors=(2, 4, 8), default_factor=4)
+    assert policy.reduced_factor(None) == 4
+    assert policy.reduced_factor(0.1) == 2  # 0.1 s / 4 ≤ 0.05
+    assert policy.reduced_factor(0.5) == 4  # 0.5 / 16 ≤ 0.05
+    assert policy.reduced_factor(3.0) == 8  # 3 / 64 ≤ 0.05
+    assert policy.reduced_factor(100.0) == 8  # over budget even at 1/8: the largest reduction
+    assert policy.band_rows(np.full(100, 0.01)) == 8  # 10 fit: a multiple of 4
+    assert policy.band_rows(np.full(100, 0.5)) == 4  # over budget: still 4 rows
+    assert policy.band_rows(np.array([0.5, 0.01])) == 2  # … or what is left
+    assert policy.band_rows(np.full(5, 0.001)) == 5
+
+
+def test_reduced_while_moving_full_when_idle_and_nothing_rerendered(app):
+    clock = app.clock_control
+    assert app.frame() is True  # the first frame: a reduced preview
+    image = app.image
+    assert image.rendered_size[0] < 64 and image.rendered_size[1] < 48 and not image.complete
+    assert app.stats.renders == app.stats.preview_renders == 1
+    assert app.frame() is False and app.stats.renders == 1  # still "moving": nothing new to render
+
+    # A slider dragged: one reduced render per new value, no refinement while it moves.
+    for step, theta in enumerate((32.0, 34.0, 36.0)):
+        clock.advance(0.05)
+        assert drive_slider(app, "light_theta", [theta]) == 1
+        assert app.moving and app.stats.preview_renders == 2 + step and app.stats.refine_renders == 0
+        assert app.image.rendered_size[0] < 64 and not app.image.complete
+    assert app.next_work_in() == pytest.approx(app.policy.idle_seconds)
+
+    # Input stops: after idle_seconds the picture is refined to full resolution.
+    clock.advance(app.policy.idle_seconds)
+    assert app.next_work_in() == 0.0
+    frames = run_until_complete(app)
+    assert app.image.complete and app.image.full_size == (64, 48) and app.image.pixels.shape == (48, 64, 3)
+    assert app.image.rendered_size == (64, 48) and app.stats.refine_renders == frames
+    assert app.image.key == app.render_key()
+
+    # Nothing changed: nothing is rendered, however many frames.
+    renders, version = app.stats.renders, app.image.version
+    for _ in range(5):
+        clock.advance(1.0)
+        assert app.frame() is False
+    assert app.stats.renders == renders and app.image.version == version
+    assert app.set(light_theta=36.0) is False  # the same value is no change
+    assert app.frame() is False and app.stats.renders == renders
+
+    # A change after that: a reduced preview again.
+    assert app.set(exposure=2 * EXPOSURE) is True
+    assert app.frame() is True and app.stats.renders == renders + 1 and not app.image.complete
+
+
+def test_a_resize_is_a_change(app):
+    app.frame()
+    app.clock_control.advance(1.0)
+    run_until_complete(app)
+    renders = app.stats.renders
+    assert app.set_size((40, 30)) is True
+    assert app.frame() is True and app.stats.renders == renders + 1 and app.image.full_size == (40, 30)
+
+
+def test_banded_refinement_equals_one_full_render(ctx):
+    policy = ResolutionPolicy(refine_budget_s=1e-9, band_multiple=1)  # one row per band: the most bands
+    clock = FakeClock()
+    with_bands = ViewerApp(ctx, dataclass_replace(PLANE, mesh="sphere", camera_distance=0.2, camera_elevation=30.0,
+                                                  light_theta=50.0, light_phi=-60.0, exposure=2000.0),
+                           size=(48, 40), policy=policy, clock=clock)
+    try:
+        with_bands.frame()
+        clock.advance(1.0)
+        frames = run_until_complete(with_bands)
+        assert frames == 40  # one band per row
+        banded = with_bands.image.pixels
+        with_bands.image = None  # forget the cache: render_full renders the whole picture in one call
+        single = with_bands.render_full()
+    finally:
+        with_bands.release()
+    assert np.count_nonzero(single) > 20  # the comparison is not between two black pictures
+    levels = np.abs(banded.astype(int) - single.astype(int)).max(axis=2)
+    assert np.mean(levels > 1) <= 0.002, f"{np.count_nonzero(levels > 1)} pixels differ"
+
+
+def dataclass_replace(state: ViewerState, **changes: object) -> ViewerState:
+    import dataclasses
+
+    return dataclasses.replace(state, **changes)
+
+
+def test_slice_mode_refines_by_doubling_the_resolution(ctx):
+    clock = FakeClock()
+    viewer = ViewerApp(ctx, dataclass_replace(PLANE, slice_mode=True), size=(64, 48), clock=clock,
+                       policy=ResolutionPolicy(factors=(4,), default_factor=4))
+    try:
+        viewer.frame()
+        assert viewer.full_size() == (48, 48) and viewer.image.rendered_size == (12, 12)
+        clock.advance(1.0)
+        sizes = []
+        while viewer.next_work_in() is not None:
+            viewer.frame()
+            sizes.append(viewer.image.rendered_size)
+        assert sizes == [(24, 24), (48, 48)] and viewer.image.complete
+        assert np.count_nonzero(viewer.image.pixels.max(axis=2) > 16) > 5
+    finally:
+        viewer.release()
+
+
+def test_state_changes_are_checked_and_clamped(app):
+    assert app.set(light_theta=500.0) and app.state.light_theta == SLIDERS["light_theta"].maximum
+    assert app.set(material="no-such-material") is False
+    assert "unknown material" in app.message and app.state.material == "blazed"
+    assert app.set(mesh="missing.obj") is False and "does not exist" in app.message
+    with pytest.raises(GratNetError, match="unknown viewer setting"):
+        app.set(colour="red")
+    with pytest.raises(GratNetError, match="finite"):
+        app.set(exposure=float("nan"))
+    with pytest.raises(GratNetError, match="unknown slider"):
+        drive_slider(app, "brightness", [1.0])
+    azimuth, distance = app.state.camera_azimuth, app.state.camera_distance
+    assert app.orbit(10.0, 0.0) and app.state.camera_azimuth == pytest.approx(azimuth - 4.0)
+    assert app.zoom(1.0) and app.state.camera_distance == pytest.approx(distance * 0.9)
+    assert app.set(slice_mode=True) and app.orbit(0.0, 10.0)  # in slice mode a drag moves the light
+    assert app.state.light_theta == pytest.approx(SLIDERS["light_theta"].maximum - 4.0)
+
+
+def test_screenshot_is_full_resolution_png_with_its_render_config(app, tmp_path):
+    app.frame()  # only a preview so far: the screenshot renders the full picture itself
+    path = app.save_screenshot(app.next_screenshot_path(tmp_path))
+    assert path == tmp_path / "gratnet-view-001.png"
+    assert app.next_screenshot_path(tmp_path).name == "gratnet-view-002.png"
+    image = np.asarray(Image.open(path))
+    assert image.shape == (48, 64, 3) and np.count_nonzero(image.max(axis=2) > 16) > 5
+    np.testing.assert_array_equal(image, app.image.pixels)
+    config = json.loads((tmp_path / "gratnet-view-001.config.json").read_text())
+    assert config["render"]["mesh"] == "plane" and config["render"]["width"] == 64
+    assert config["render"]["exposure"] == EXPOSURE and config["model_file"].endswith("model.npz")
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["gratnet-view-001.config.json", "gratnet-view-001.png"]
+    with pytest.raises(GratNetError, match=".png"):
+        app.save_screenshot(tmp_path / "x.jpg")
+
+
+# --------------------------------------------------------------------------------------------------
+# The real window under Xvfb
+
+
+def _free_display_numbers() -> Iterator[int]:
+    for number in range(90, 400):
+        if not (Path(f"/tmp/.X{number}-lock").exists() or Path(f"/tmp/.X11-unix/X{number}").exists()):
+            yield number
+
+
+def _connect(libx11: ctypes.CDLL, display: str, process: subprocess.Popen, timeout: float) -> int | None:
+    """An X connection to ``display`` once the server accepts one (None if it exited or timed out)."""
+    deadline = time.monotonic() + timeout
+    while time.monotonic() < deadline and process.poll() is None:
+        connection = libx11.XOpenDisplay(display.encode())
+        if connection:
+            return connection
+        time.sleep(0.05)
+    return None
+
+
+@pytest.fixture(scope="module")
+def xvfb(tmp_path_factory) -> Iterator[str]:
+    """``:N`` of a virtual X server started for this module on a free display number, and always stopped.
+
+    Xvfb runs with ``-terminate`` (it exits when its last client disconnects) and this fixture holds one
+    connection open: should the test process die without running this teardown (Xlib exits the process
+    on some X errors), its connection closes and Xvfb still goes away.
+    """
+    executable = shutil.which("Xvfb")
+    if executable is None:
+        pytest.skip("Xvfb is not installed (apt-get install xvfb; scripts/setup.sh installs it)")
+    try:
+        libx11 = ctypes.CDLL("libX11.so.6")
+    except OSError as error:
+        pytest.skip(f"libX11 is not installed: {error}")
+    libx11.XOpenDisplay.restype = ctypes.c_void_p
+    libx11.XOpenDisplay.argtypes = [ctypes.c_char_p]
+    libx11.XCloseDisplay.argtypes = [ctypes.c_void_p]
+    log = tmp_path_factory.mktemp("xvfb") / "xvfb.log"
+    process = connection = None
+    for attempt, number in enumerate(_free_display_numbers()):
+        if attempt == 5:
+            break
+        with open(log, "wb") as output:
+            process = subprocess.Popen(
+                [executable, f":{number}", "-screen", "0", "1024x768x24", "-nolisten", "tcp", "-terminate"],
+                stdout=output, stderr=subprocess.STDOUT)
+        connection = _connect(libx11, f":{number}", process, timeout=10.0)
+        if connection:
+            break
+        process.kill()  # the number was taken meanwhile, or Xvfb failed: try the next one
+        process.wait()
+        process = None
+    if process is None:
+        pytest.fail(f"Xvfb did not start: {log.read_text(errors='replace')[-500:]}")
+    try:
+        yield f":{number}"
+    finally:
+        libx11.XCloseDisplay(connection)
+        process.terminate()
+        try:
+            process.wait(timeout=10)
+        except subprocess.TimeoutExpired:
+            process.kill()
+            process.wait()
+
+
+@pytest.fixture
+def display(xvfb, monkeypatch) -> str:
+    monkeypatch.setenv("DISPLAY", xvfb)
+    monkeypatch.delenv("WAYLAND_DISPLAY", raising=False)
+    return xvfb
+
+
+@pytest.fixture
+def window(display, tmp_path) -> Iterator[object]:
+    from viewer.app import ViewerWindow
+
+    clock = FakeClock()
+    with ViewerWindow(PLANE, size=(160, 120), clock=clock, idle_wait_s=0.0, screenshot_dir=tmp_path) as viewer:
+        viewer.clock_control = clock  # type: ignore[attr-defined]
+        yield viewer
+
+
+def picture(window, capture: np.ndarray) -> np.ndarray:
+    x, y, width, height = window.render_area()
+    return capture[y:y + height, x:x + width]
+
+
+def test_window_shows_panel_and_picture_and_a_slider_changes_the_picture(window):
+    assert window.ctx.version_code >= 430
+    window.frame()
+    window.clock_control.advance(1.0)
+    run_until_complete(window)
+    window.frame(capture=True)
+    before = window.last_capture
+    assert before.shape == (120, window.PANEL_WIDTH + 160, 3)
+    assert window.render_area() == (window.PANEL_WIDTH, 0, 160, 120)
+    region = picture(window, before)
+    lit = np.count_nonzero(region.max(axis=2) > 40)
+    assert lit >= 20, "the picture is blank"
+    np.testing.assert_array_equal(region, window.app.image.pixels)  # shown 1:1 at full resolution
+    panel = before[:, :window.PANEL_WIDTH]
+    assert len(np.unique(panel.reshape(-1, 3), axis=0)) > 10  # imgui drew its widgets
+
+    renders = window.app.stats.renders
+    drive_slider(window, "light_theta", [32.0, 36.0, 40.0])  # as a dragged slider: a frame per value
+    assert window.app.stats.preview_renders >= 4 and window.app.stats.renders == renders + 3
+    window.frame(capture=True)
+    moving = picture(window, window.last_capture)
+    assert not np.array_equal(moving, region)
+    window.clock_control.advance(1.0)
+    run_until_complete(window)
+    window.frame(capture=True)
+    after = picture(window, window.last_capture)
+    assert np.mean(np.any(after != region, axis=2)) > 0.002, "moving the light did not change the picture"
+    assert np.count_nonzero(after.max(axis=2) > 40) >= 20
+    np.testing.assert_array_equal(after, window.app.image.pixels)
+    assert window.gl_errors == []
+
+
+def test_window_frames_without_changes_render_nothing(window):
+    window.frame()
+    window.clock_control.advance(1.0)
+    run_until_complete(window)
+    renders = window.app.stats.renders
+    for _ in range(5):
+        window.clock_control.advance(0.5)
+        window.frame()
+    assert window.app.stats.renders == renders
+    assert window.gl_errors == []
+
+
+def test_window_mouse_drag_orbits_and_wheel_zooms(window):
+    """Mouse input synthesised through imgui's glfw backend callbacks (the path real events take)."""
+    from imgui_bundle import imgui
+
+    window.frame()
+    address = ctypes.cast(window.handle, ctypes.c_void_p).value
+    backends = imgui.backends
+    x, y = window.PANEL_WIDTH + 80.0, 60.0
+    backends.glfw_cursor_enter_callback(address, 1)
+    backends.glfw_cursor_pos_callback(address, x, y)
+    window.frame()
+    azimuth, elevation = window.app.state.camera_azimuth, window.app.state.camera_elevation
+    backends.glfw_mouse_button_callback(address, 0, 1, 0)  # left button pressed
+    window.frame()
+    for step in range(1, 4):
+        backends.glfw_cursor_pos_callback(address, x + 10.0 * step, y + 5.0 * step)
+        window.frame()
+    backends.glfw_mouse_button_callback(address, 0, 0, 0)  # released
+    window.frame()
+    assert window.app.state.camera_azimuth == pytest.approx(azimuth - 30.0 * 0.4)
+    assert window.app.state.camera_elevation == pytest.approx(elevation + 15.0 * 0.4)
+
+    distance = window.app.state.camera_distance
+    backends.glfw_scroll_callback(address, 0.0, 1.0)
+    window.frame()
+    assert window.app.state.camera_distance == pytest.approx(distance * 0.9)
+
+    # Over the panel the wheel scrolls the panel, not the camera.
+    backends.glfw_cursor_pos_callback(address, 50.0, 60.0)
+    window.frame()
+    backends.glfw_scroll_callback(address, 0.0, 1.0)
+    window.frame()
+    assert window.app.state.camera_distance == pytest.approx(distance * 0.9)
+    assert window.gl_errors == []
+
+
+def test_window_screenshot_button_writes_the_full_picture(window, tmp_path):
+    window.frame()  # a preview on show: the screenshot renders the full picture
+    path = window.screenshot()
+    assert path == tmp_path / "gratnet-view-001.png" and window.app.message == f"wrote {path}"
+    assert np.asarray(Image.open(path)).shape == (120, 160, 3)
+    assert (tmp_path / "gratnet-view-001.config.json").is_file()
+    window.screenshot_dir = tmp_path / "a-file"
+    window.screenshot_dir.write_text("")
+    assert window.screenshot() is None and "cannot write" in window.app.message  # shown, not raised
+    window.frame()
+    assert window.gl_errors == []
+
+
+def test_a_headless_context_and_a_window_in_one_process(display):
+    """A current EGL context (a headless renderer) must not stop the window's GLX context from becoming
+    current (libglvnd: one API per thread; Xlib would exit the process), and works again afterwards."""
+    from gratnet.modelfile import load_model
+    from viewer.app import ViewerWindow
+    from viewer.context import create_headless_context
+    from viewer.scene import SceneRenderer
+
+    headless = create_headless_context()
+    try:
+        with ViewerWindow(PLANE, size=(32, 24), idle_wait_s=0.0) as viewer:
+            viewer.frame()
+            assert viewer.gl_errors == []
+        with SceneRenderer(headless, load_model(BLAZED)) as scene:
+            xyz = scene.render(plane(), PLANE.camera(), PLANE.light(), (16, 16), EXPOSURE)
+        assert np.isfinite(xyz).all() and xyz.max() > 0 and headless.error == "GL_NO_ERROR"
+    finally:
+        headless.release()
+
+
+def test_gratnet_view_runs_frames_and_exits(display, tmp_path):
+    assert main(["view", "--mesh", "sphere", "--size", "64,48", "--max-frames", "3",
+                 "--screenshot-dir", str(tmp_path)]) == 0
+
+
+def test_gratnet_view_bad_input_is_one_line_before_any_window(display, capsys):
+    assert main(["view", "--material", "no-such-material"]) == 2
+    assert main(["view", "--mesh", "cube.stl"]) == 2
+    assert main(["view", "--size", "0,10"]) == 2
+    lines = capsys.readouterr().err.strip().splitlines()
+    assert len(lines) == 3 and all(line.startswith("gratnet view: error:") for line in lines)
+
+
+def test_gratnet_view_without_a_display_is_one_line_and_exit_2(monkeypatch, capsys):
+    monkeypatch.delenv("DISPLAY", raising=False)
+    monkeypatch.delenv("WAYLAND_DISPLAY", raising=False)
+    assert main(["view", "--mesh", "plane", "--size", "32,32", "--max-frames", "1"]) == 2
+    lines = capsys.readouterr().err.strip().splitlines()
+    assert len(lines) == 1 and "no display" in lines[0] and "xvfb-run" in lines[0]
+
+
+def test_setup_installs_xvfb():
+    setup = (Path(__file__).resolve().parents[1] / "scripts" / "setup.sh").read_text()
+    assert "xvfb" in setup.split("debian_packages=(")[1].split(")")[0]
+
+
+def test_rendering_modules_never_import_glfw_or_imgui():
+    code = ("import sys, viewer.app, viewer.scene, viewer.renderer, viewer.context, viewer.view_cli; "
+            "print(sorted(m for m in ('glfw', 'imgui_bundle') if m in sys.modules))")
+    result = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                            cwd=Path(__file__).resolve().parents[1], check=True)
+    assert result.stdout.strip() == "[]"

@@ -1,0 +1,108 @@
+"""``gratnet view``: the interactive viewer (a glfw window with an imgui panel; viewer.app).
+
+    gratnet view --material blazed --mesh cd --size 512,512
+
+- ``--material``: a shipped material (``assets/NAME/model.npz``) or a model-file path; the panel offers
+  every shipped material.
+- ``--mesh``: ``cd``, ``sphere``, ``plane`` or a Wavefront ``.obj`` file (metres, +z up).
+- ``--size W,H``: the render area in pixels (the window adds the panel on the left).
+- ``--light θ,φ``, ``--camera DIST,AZIMUTH,ELEVATION``, ``--exposure``, ``--ior``, ``--no-fresnel``,
+  ``--slice``: the starting view, as in ``gratnet render``.
+
+Mouse: drag over the picture to orbit (in BRDF-slice mode: to move the light), wheel to zoom. The
+Screenshot button writes ``gratnet-view-NNN.png`` (display sRGB, full resolution) and its
+``.config.json`` (the ``gratnet render`` settings) into ``--screenshot-dir``.
+
+Needs a display (X11 or Wayland) and OpenGL 4.3; without one it exits with status 2 and one line.
+"""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+
+from gratnet.errors import GratNetError
+
+__all__ = ["register", "run"]
+
+
+def register(subparsers: argparse._SubParsersAction) -> None:
+    """Add the ``view`` subcommand."""
+    parser = subparsers.add_parser(
+        "view", help="interactive viewer: a material on a mesh or its BRDF slice, in a window",
+        description="Open a window showing a trained material on a mesh (or its BRDF slice), with sliders for "
+        "the light, camera, exposure and Fresnel term. Renders at reduced resolution while you move things "
+        "and refines to full resolution when you stop. Needs a display and OpenGL 4.3.",
+    )
+    parser.add_argument("--material", default="blazed",
+                        help="shipped material name (assets/NAME/model.npz) or a model-file path (default: blazed)")
+    parser.add_argument("--mesh", default="cd",
+                        help="cd, sphere, plane, or the path of a Wavefront .obj file (metres, +z up; default: cd)")
+    parser.add_argument("--size", dest="size_text", default="512,512", metavar="W,H",
+                        help="render area in pixels (default: 512,512)")
+    parser.add_argument("--light", dest="light_text", default="20,90", metavar="θ,φ",
+                        help="directional light: polar angle from +z and azimuth from +x, degrees (default: 20,90)")
+    parser.add_argument("--camera", dest="camera_text", default="0.18,-90,50", metavar="DIST,AZIMUTH,ELEVATION",
+                        help="orbit camera around the origin: metres, degrees, degrees (default: 0.18,-90,50)")
+    parser.add_argument("--exposure", type=float, default=5000.0,
+                        help="exposure: the factor applied to XYZ before display (default: 5000)")
+    parser.add_argument("--ior", type=float, default=1.5,
+                        help="refractive index of the Fresnel factor (0: no Fresnel; default: 1.5)")
+    parser.add_argument("--fresnel", action=argparse.BooleanOptionalAction, default=True,
+                        help="apply the Fresnel factor (default: on)")
+    parser.add_argument("--slice", action="store_true", help="start in BRDF-slice mode")
+    parser.add_argument("--screenshot-dir", default=".", metavar="DIR",
+                        help="folder for the Screenshot button's PNGs (default: the working folder)")
+    parser.add_argument("--max-frames", type=int, default=0, metavar="N",
+                        help="close after N frames (0: when the window is closed; for scripted runs)")
+    parser.set_defaults(handler=run)
+
+
+def _state(arguments: argparse.Namespace) -> object:
+    """The starting :class:`~viewer.app.ViewerState`, every value checked before a window opens."""
+    import math
+
+    from viewer.app import SLIDERS, ViewerState
+    from viewer.render_cli import MESHES, _numbers, resolve_material
+    from viewer.renderer import _ior_uniform
+
+    theta, phi = _numbers(arguments.light_text, 2, "--light", "θ,φ in degrees such as 20,90")
+    distance, azimuth, elevation = _numbers(arguments.camera_text, 3, "--camera",
+                                            "DIST,AZIMUTH,ELEVATION (metres, degrees, degrees) such as 0.18,-90,50")
+    for flag, value in (("--exposure", arguments.exposure), ("--ior", arguments.ior)):
+        if not (math.isfinite(value) and value >= 0.0):
+            raise GratNetError(f"{flag} must be a finite number ≥ 0, got {value!r}")
+    if arguments.max_frames < 0:
+        raise GratNetError(f"--max-frames must be ≥ 0, got {arguments.max_frames}")
+    resolve_material(arguments.material)
+    if arguments.mesh not in MESHES:
+        path = Path(arguments.mesh).expanduser()
+        if path.suffix.lower() != ".obj":
+            raise GratNetError(f"unknown mesh {arguments.mesh!r}: choose {', '.join(MESHES)} or a Wavefront .obj file")
+        if not path.is_file():
+            raise GratNetError(f"mesh file {arguments.mesh} does not exist")
+    fresnel, ior = arguments.fresnel, arguments.ior
+    if ior == 0:  # as in gratnet render: --ior 0 means no Fresnel factor
+        fresnel, ior = False, ViewerState.ior
+    _ior_uniform(ior)  # checks it (n = 1 is refused: no Fresnel reflection at all)
+    values = {"light_theta": theta, "light_phi": phi, "camera_distance": distance, "camera_azimuth": azimuth,
+              "camera_elevation": elevation, "exposure": arguments.exposure, "ior": ior}
+    for name, value in values.items():
+        values[name] = SLIDERS[name].clamp(value)
+    return ViewerState(material=arguments.material, mesh=arguments.mesh, fresnel=fresnel,
+                       slice_mode=arguments.slice, **values)
+
+
+def run(arguments: argparse.Namespace) -> int:
+    """Open the window and run it until it is closed (or ``--max-frames``)."""
+    from viewer.app import ViewerWindow
+    from viewer.render_cli import parse_size
+
+    size = parse_size(arguments.size_text)
+    state = _state(arguments)
+    extra = [] if state.mesh in ("cd", "sphere", "plane") else [state.mesh]
+    with ViewerWindow(state, size, screenshot_dir=arguments.screenshot_dir, extra_meshes=extra) as window:
+        window.run(arguments.max_frames)
+        if window.gl_errors:
+            raise GratNetError(f"OpenGL reported errors: {'; '.join(window.gl_errors[:3])} (please report this)")
+    return 0
