@@ -455,6 +455,23 @@ def test_gratnet_view_without_a_display_is_one_line_and_exit_2(monkeypatch, caps
     assert len(lines) == 1 and "no display" in lines[0] and "xvfb-run" in lines[0]
 
 
+def test_gratnet_view_flags_make_the_starting_state():
+    from gratnet.cli import build_parser
+    from viewer.view_cli import _state
+
+    arguments = build_parser(only="view").parse_args(
+        ["view", "--mesh", "sphere", "--light", "35,-60", "--camera", "0.3,10,20", "--exposure", "7", "--ior", "0",
+         "--slice"])
+    state = _state(arguments)
+    assert (state.mesh, state.light_theta, state.light_phi, state.camera_distance, state.camera_azimuth,
+            state.camera_elevation, state.exposure, state.slice_mode) == ("sphere", 35, -60, 0.3, 10, 20, 7, True)
+    assert state.fresnel is False  # --ior 0: no Fresnel, as in gratnet render
+    with pytest.raises(GratNetError, match="ior"):
+        _state(build_parser(only="view").parse_args(["view", "--ior", "1"]))
+    with pytest.raises(GratNetError, match="--light"):
+        _state(build_parser(only="view").parse_args(["view", "--light", "45"]))
+
+
 def test_setup_installs_xvfb():
     setup = (Path(__file__).resolve().parents[1] / "scripts" / "setup.sh").read_text()
     assert "xvfb" in setup.split("debian_packages=(")[1].split(")")[0]
