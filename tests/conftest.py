@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+from collections.abc import Iterator
 from pathlib import Path
 
 import pytest
@@ -24,3 +25,17 @@ def pytest_addoption(parser: pytest.Parser) -> None:
         "--regenerate-golden", action="store_true", default=False,
         help="rewrite the golden reference images (tests/golden/*.png) from the current renderer",
     )
+
+
+@pytest.fixture(scope="module")
+def ctx() -> Iterator[object]:
+    """A headless GL context (EGL) for one test module; the module is skipped where none can be had."""
+    from gratnet.errors import GratNetError
+    from viewer.context import create_headless_context
+
+    try:
+        context = create_headless_context()
+    except GratNetError as error:
+        pytest.skip(f"no headless OpenGL 4.3 context: {error}")
+    yield context
+    context.release()

@@ -21,7 +21,6 @@ import numpy as np
 import pytest
 from PIL import Image
 
-from gratnet.errors import GratNetError
 from gratnet.modelfile import load_model
 from viewer.camera import Camera, Light
 from viewer.meshes import compact_disc, plane, sphere
@@ -114,18 +113,12 @@ def check_golden(name: str, actual: np.ndarray, regenerate: bool, golden: Path =
 
 
 @pytest.fixture(scope="module")
-def scene() -> Iterator[object]:
-    from viewer.context import create_headless_context
+def scene(ctx: object) -> Iterator[object]:
     from viewer.scene import SceneRenderer
 
-    try:
-        ctx = create_headless_context()
-    except GratNetError as error:
-        pytest.skip(f"no headless OpenGL 4.3 context: {error}")
     renderer = SceneRenderer(ctx, load_model(BLAZED))
     yield renderer
     renderer.release()
-    ctx.release()
 
 
 def render_case(scene, name: str) -> np.ndarray:

@@ -249,18 +249,6 @@ def test_lights():
 
 
 @pytest.fixture(scope="module")
-def ctx() -> Iterator[object]:
-    from viewer.context import create_headless_context
-
-    try:
-        context = create_headless_context()
-    except GratNetError as error:
-        pytest.skip(f"no headless OpenGL 4.3 context: {error}")
-    yield context
-    context.release()
-
-
-@pytest.fixture(scope="module")
 def model():
     return load_model(BLAZED)
 

@@ -7,7 +7,6 @@ nets small, so the whole file runs in seconds on llvmpipe.
 
 from __future__ import annotations
 
-from collections.abc import Iterator
 from pathlib import Path
 
 import numpy as np
@@ -21,18 +20,6 @@ from viewer.glsl import LINE_STRIDE, compile_program, load_program_source, map_e
 
 SPEC = EncodingSpec.for_grid(101, 5)  # 163 features, s ≈ 1.24, top frequency 50π
 RELATIVE = 1e-4
-
-
-@pytest.fixture(scope="module")
-def ctx() -> Iterator[object]:
-    from viewer.context import create_headless_context
-
-    try:
-        context = create_headless_context()
-    except GratNetError as error:
-        pytest.skip(f"no headless OpenGL 4.3 context: {error}")
-    yield context
-    context.release()
 
 
 def random_model(

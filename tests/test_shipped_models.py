@@ -7,7 +7,6 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from gratnet.errors import GratNetError
 from gratnet.modelfile import load_model
 from trainer.brdfslice import SliceConfig
 from trainer.evaluate import network_brdf_slice
@@ -15,18 +14,6 @@ from trainer.metrics import flip
 
 ASSETS = Path(__file__).resolve().parents[1] / "assets"
 MODELS = sorted(ASSETS.glob("*/model.npz"))
-
-
-@pytest.fixture(scope="module")
-def gl_context():
-    from viewer.context import create_headless_context
-
-    try:
-        context = create_headless_context()
-    except GratNetError as error:
-        pytest.skip(f"no headless GL: {error}")
-    yield context
-    context.release()
 
 
 @pytest.mark.parametrize("path", MODELS, ids=[path.parent.name for path in MODELS])
@@ -37,13 +24,13 @@ def test_shipped_model_loads_and_is_small(path):
 
 
 @pytest.mark.parametrize("path", MODELS, ids=[path.parent.name for path in MODELS])
-def test_shader_slice_matches_numpy_slice(path, gl_context):
+def test_shader_slice_matches_numpy_slice(path, ctx):
     from viewer.renderer import NetworkRenderer
 
     model = load_model(path)
     config = SliceConfig(30.0, 0.0, size=48, exposure=5000.0, ior=1.5)
     expected = network_brdf_slice(model, config)
-    with NetworkRenderer(gl_context, model) as renderer:
+    with NetworkRenderer(ctx, model) as renderer:
         rendered = renderer.render_brdf_slice(30.0, 0.0, 48, exposure=5000.0, ior=1.5).astype(np.float64)
     mean_flip, _ = flip(expected, rendered)
     assert mean_flip <= 0.005

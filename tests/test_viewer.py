@@ -71,18 +71,6 @@ def run_until_complete(target: object, limit: int = 200) -> int:
 # App logic (headless)
 
 
-@pytest.fixture(scope="module")
-def ctx() -> Iterator[object]:
-    from viewer.context import create_headless_context
-
-    try:
-        context = create_headless_context()
-    except GratNetError as error:
-        pytest.skip(f"no headless OpenGL 4.3 context: {error}")
-    yield context
-    context.release()
-
-
 @pytest.fixture
 def app(ctx) -> Iterator[ViewerApp]:
     clock = FakeClock()
