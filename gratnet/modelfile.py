@@ -45,6 +45,7 @@ import numpy as np
 from gratnet.atomic import atomic_path
 from gratnet.encoding import EncodingSpec, RangeSpec, encode, network_coordinates, range_inverse
 from gratnet.errors import GratNetError
+from gratnet.jsontext import strict_json
 
 __all__ = [
     "ACTIVATIONS",
@@ -241,30 +242,13 @@ def _range_from_dict(fields: object, where: str) -> RangeSpec:
         raise GratNetError(f"{where}: {error}") from error
 
 
-def _json_default(value: object) -> object:
-    """Let ``json.dumps`` accept numpy scalars and arrays and tuples (as Python numbers / lists)."""
-    if isinstance(value, np.generic):
-        return value.item()
-    if isinstance(value, np.ndarray):
-        return value.tolist()
-    if isinstance(value, tuple):
-        return list(value)
-    raise TypeError(f"{type(value).__name__} is not JSON-serialisable")
-
-
 def _plain_metadata(metadata: object, where: str) -> dict[str, Any]:
     """Check that ``metadata`` is a JSON-able dict; return it as plain Python values."""
     if not isinstance(metadata, dict):
         raise GratNetError(f"{where}: model metadata must be a dict, got {type(metadata).__name__}")
     if any(not isinstance(key, str) for key in metadata):
         raise GratNetError(f"{where}: model metadata keys must be strings")
-    try:
-        text = json.dumps(metadata, allow_nan=False, default=_json_default)
-    except (TypeError, ValueError) as error:
-        raise GratNetError(
-            f"{where}: model metadata must be JSON-able (dicts with string keys, lists, str, int, float, bool, "
-            f"None; no NaN or inf - use null for a missing value): {error}"
-        ) from error
+    text = strict_json(metadata, f"{where}: model metadata")
     return json.loads(text)
 
 

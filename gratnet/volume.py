@@ -44,6 +44,7 @@ import OpenEXR
 
 from gratnet.atomic import atomic_path
 from gratnet.errors import GratNetError
+from gratnet.jsontext import strict_json
 
 __all__ = [
     "FORMAT_NAME",
@@ -219,17 +220,6 @@ def _pixels_checksum(slice_xyz: np.ndarray) -> str:
     return f"{crc:08x}"
 
 
-def _json_default(value: object) -> object:
-    """Let ``json.dumps`` accept numpy scalars and arrays (converted to Python numbers / lists)."""
-    if isinstance(value, np.generic):
-        return value.item()
-    if isinstance(value, np.ndarray):
-        return value.tolist()
-    if isinstance(value, tuple):
-        return list(value)
-    raise TypeError(f"{type(value).__name__} is not JSON-serialisable")
-
-
 def _encode_metadata(metadata: object) -> tuple[str, dict[str, Any]]:
     """Validate ``metadata``; return its JSON text and the per-key ``gratnet_<key>`` attributes."""
     if not isinstance(metadata, dict):
@@ -247,13 +237,7 @@ def _encode_metadata(metadata: object) -> tuple[str, dict[str, Any]]:
                 f"volume metadata {key!r} is {metadata[key]!r} but this writer writes "
                 f"{_FORMAT_KEYS[key]!r}; leave it out or set it to that value"
             )
-    try:
-        text = json.dumps(metadata, allow_nan=False, default=_json_default)
-    except (TypeError, ValueError) as error:
-        raise GratNetError(
-            f"volume metadata must be JSON-able (str, int, float, bool, None, lists; no NaN or inf "
-            f"- use null for a missing value): {error}"
-        ) from error
+    text = strict_json(metadata, "volume metadata")
     # Round-trip so that numpy scalars etc. become plain Python values before typing attributes.
     plain = json.loads(text)
     typed = {
