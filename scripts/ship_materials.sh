@@ -18,7 +18,8 @@ for name in "${materials[@]}"; do
     # shellcheck disable=SC2086
     gratnet train "$volume" --out "$run" ${TRAIN_FLAGS:-} --cache-dir out/cache
     mkdir -p "assets/$name"
-    cp "$run"/{model.npz,model.config.json,metrics.json,report.md,history.json,brdf_slices.png,volume_slices.png} \
-        "assets/$name/"
+    cp "$run"/{model.npz,model.config.json,metrics.json,report.md,history.json,brdf_slices.png} "assets/$name/"
+    # Held-out volume slices exist only when slices were held out (not with --split all).
+    if [ -f "$run/volume_slices.png" ]; then cp "$run/volume_slices.png" "assets/$name/"; fi
     echo "shipped assets/$name"
 done
