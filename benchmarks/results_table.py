@@ -42,6 +42,11 @@ def _history(folder: Path) -> list[dict]:
     return json.loads(path.read_text()).get("epochs", []) if path.exists() else []
 
 
+def _split(folder: Path) -> str:
+    path = folder / "model.config.json"
+    return json.loads(path.read_text()).get("train", {}).get("split", "?") if path.exists() else "?"
+
+
 def main() -> None:
     """Write the results page."""
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
@@ -57,9 +62,9 @@ def main() -> None:
         "",
         "## Mean FLIP at (θi, φi) = (0°, 0°), 2000 RU, against the paper",
         "",
-        "| material | parameters | epochs | training (s, CPU) | FLIP (ours) | FLIP (paper) | target met "
+        "| material | parameters | split | epochs | training (s, CPU) | FLIP (ours) | FLIP (paper) | target met "
         "| PSNR XYZ (dB) | SSIM YCbCr |",
-        "|---|---|---|---|---|---|---|---|---|",
+        "|---|---|---|---|---|---|---|---|---|---|",
     ]
     details = []
     for folder in sorted(Path(arguments.assets).iterdir()):
@@ -74,7 +79,7 @@ def main() -> None:
         met = "—" if paper is None or flip is None else ("yes" if flip <= paper else "no")
         training = metrics.get("training", {})
         lines.append(
-            f"| {folder.name} | {metrics['model']['parameters']} | {len(_history(folder))} | "
+            f"| {folder.name} | {metrics['model']['parameters']} | {_split(folder)} | {len(_history(folder))} | "
             f"{_number(training.get('train_seconds'))} | "
             f"{_number(flip)} | {_number(paper)} | {met} | {_number(normal.get('psnr_xyz'))} | "
             f"{_number(normal.get('ssim_ycbcr'))} |"
@@ -100,8 +105,9 @@ def main() -> None:
         "    (1001² × 11, 81 λ, σs = 16.25 µm, 6σs patch);",
         "  - the `small` preset (163-108-66-40-24-3, 28,645 parameters, within the paper's 60k);",
         "  - SiLU hidden layers with a clamped output (docs/benchmarks.md, \"choice of activations\");",
-        "  - 8 epochs (blazed, sinusoidal) or 6 (the rest, to fit the session's CPU time) over the 8 training",
-        "    slices (slices 4, 7, 10 held out), batch 32,768;",
+        "  - first pass: 8 epochs (blazed, sinusoidal) or 6 (the rest, to fit the session's CPU time) over the 8",
+        "    training slices (slices 4, 7, 10 held out), batch 32,768;",
+        "  - second pass, where time allowed (the `all` rows): every slice, 20 epochs; see below;",
         "  - Adam at 3·10⁻³ with cosine decay to 6·10⁻⁵;",
         "  - the 2-core CPU of this machine kind, shared with the ground-truth jobs,",
         "    so training times are upper bounds.",
@@ -110,6 +116,12 @@ def main() -> None:
         "  - PSNR is on exposed XYZ clipped to [0, 1].",
         "  - SSIM is on display sRGB and full-range BT.601 YCbCr.",
         "  - FLIP is NVIDIA's flip-evaluator, LDR, at 67 pixels per degree.",
+        "- **Training on every slice for longer helps a lot.** The blazed grating with `--split all --epochs 20`",
+        "  (552 s) reaches FLIP 0.0047 at (0°, 0°) against 0.0174 for 8 epochs with slices held out (727 s),",
+        "  and PSNR 44.0 dB against 28.3. The other four BRDF slices go from 0.011–0.025 to 0.005–0.0075.",
+        "  The held-out protocol measures interpolation in t; the shipped models are meant to be used",
+        "  everywhere, so the `all` rows are what ships where they exist. Their report has no held-out",
+        "  volume slices; the BRDF slices are off-grid in (u, v, w) and remain an honest test.",
         "- **Where the paper's targets are missed:**",
         "  - Each network saw 38–50 M samples (6–8 epochs) in 10–14 CPU-minutes.",
         "  - In `assets/NAME/history.json` the training loss is still falling at the last epoch, while the",
