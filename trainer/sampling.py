@@ -43,20 +43,14 @@ def check_scheme(scheme: str) -> Scheme:
 
 
 def grid_to_key(grid: np.ndarray, scheme: Scheme) -> np.ndarray:
-    """Map grid coordinates u* (or v*) to key-vector components u (or v)."""
+    """Map grid coordinates u* (or v*) to key-vector components u (or v).
+
+    The inverse belongs to the network contract: :func:`gratnet.encoding.key_to_grid`.
+    """
     check_scheme(scheme)
     if scheme == "regular":
         return np.asarray(grid, dtype=np.float64)
     return 2.0 * np.sign(grid) * (np.asarray(grid, dtype=np.float64) / 2.0) ** 2
-
-
-def key_to_grid(key: np.ndarray, scheme: Scheme) -> np.ndarray:
-    """Inverse of :func:`grid_to_key`: u → u* (|u| ≤ 2)."""
-    check_scheme(scheme)
-    key = np.asarray(key, dtype=np.float64)
-    if scheme == "regular":
-        return key
-    return np.sign(key) * 2.0 * np.sqrt(np.clip(np.abs(key) / 2.0, 0.0, None))
 
 
 def max_depth(u: np.ndarray, v: np.ndarray) -> np.ndarray:
