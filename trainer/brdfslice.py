@@ -40,11 +40,24 @@ class SliceConfig:
             raise GratNetError(f"--ior must be ≥ 0 (0: Fresnel off), got {self.ior}")
 
 
+def slice_geometry(config: SliceConfig) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The slice's light direction (3,), view directions (size, size, 3) and unit-disc mask (size, size)."""
+    light = direction(config.light_theta_degrees, config.light_phi_degrees)
+    views, inside = slice_view_directions(config.size)
+    return light, views, inside
+
+
+def expose_slice(config: SliceConfig, light: np.ndarray, views: np.ndarray, inside: np.ndarray,
+                 xyz: np.ndarray) -> np.ndarray:
+    """exposure · A(ωi, ωo) · XYZ per pixel, 0 outside the disc: shared by ground-truth and network slices."""
+    attenuation = a_term(light, views, ior=config.ior or None)
+    return np.where(inside[..., None], config.exposure * attenuation[..., None] * xyz, 0.0)
+
+
 def brdf_slice_xyz(surface: PreparedSurface, config: SliceConfig, optics: OpticsConfig,
                    progress: bool = True) -> np.ndarray:
     """exposure · A · XYZ for every pixel, shape (size, size, 3); 0 outside the unit disc."""
-    light = direction(config.light_theta_degrees, config.light_phi_degrees)
-    views, inside = slice_view_directions(config.size)
+    light, views, inside = slice_geometry(config)
     x_axis, y_axis = views[0, :, 0], views[:, 0, 1]
     u_axis = -(light[0] + x_axis)
     v_axis = -(light[1] + y_axis)
@@ -54,5 +67,4 @@ def brdf_slice_xyz(surface: PreparedSurface, config: SliceConfig, optics: Optics
     xyz = FTerm(surface, spectral, optics.tolerance).xyz_grid(
         u_axis, v_axis, [w], progress="BRDF slice" if progress else False
     )[0]
-    attenuation = a_term(light, views, ior=config.ior or None)
-    return np.where(inside[..., None], config.exposure * attenuation[..., None] * xyz, 0.0)
+    return expose_slice(config, light, views, inside, xyz)

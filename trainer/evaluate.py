@@ -16,12 +16,12 @@ from typing import Any
 
 import numpy as np
 
-from gratnet.brdf import a_term, direction, slice_view_directions
+from gratnet.brdf import slice_view_directions
 from gratnet.config import config_field, config_to_dict
 from gratnet.encoding import range_forward
 from gratnet.modelfile import ModelFile, evaluate_keys
 from gratnet.volume import Volume, volume_axes
-from trainer.brdfslice import SliceConfig, brdf_slice_xyz
+from trainer.brdfslice import SliceConfig, brdf_slice_xyz, expose_slice, slice_geometry
 from trainer.fourier import OpticsConfig, prepare_surface
 from trainer.heightfield import HeightField
 from trainer.metrics import image_metrics
@@ -51,13 +51,11 @@ class EvaluateConfig:
 
 def network_brdf_slice(model: ModelFile, config: SliceConfig) -> np.ndarray:
     """exposure · A · XYZ_network for every pixel of a BRDF slice, (size, size, 3); 0 outside the disc."""
-    light = direction(config.light_theta_degrees, config.light_phi_degrees)
-    views, inside = slice_view_directions(config.size)
+    light, views, inside = slice_geometry(config)
     key = -(light + views)
     xyz = np.zeros(views.shape)
     xyz[inside] = evaluate_keys(model, key[inside][:, 0], key[inside][:, 1], key[inside][:, 2])
-    attenuation = a_term(light, views, ior=config.ior or None)
-    return np.where(inside[..., None], config.exposure * attenuation[..., None] * xyz, 0.0)
+    return expose_slice(config, light, views, inside, xyz)
 
 
 def ground_truth_brdf_slice(
