@@ -8,3 +8,19 @@ class GratNetError(Exception):
     """
 
     exit_code = 2
+
+
+def read_magic(path: object, what: str, size: int) -> bytes:
+    """The first ``size`` bytes of an existing regular file, or one GratNetError naming ``what`` (e.g. 'model file')."""
+    from pathlib import Path
+
+    source = Path(path)  # type: ignore[arg-type]
+    if not source.exists():
+        raise GratNetError(f"{what} {source} does not exist")
+    if not source.is_file():
+        raise GratNetError(f"{what} {source} is not a regular file")
+    try:
+        with source.open("rb") as handle:
+            return handle.read(size)
+    except OSError as error:
+        raise GratNetError(f"cannot read {what} {source}: {error.strerror or error}") from error

@@ -44,7 +44,7 @@ import numpy as np
 
 from gratnet.atomic import atomic_path
 from gratnet.encoding import EncodingSpec, RangeSpec, encode, network_coordinates, range_inverse
-from gratnet.errors import GratNetError
+from gratnet.errors import GratNetError, read_magic
 from gratnet.jsontext import strict_json
 
 __all__ = [
@@ -593,15 +593,7 @@ def save_model(path: str | os.PathLike[str], model: ModelFile) -> None:
 
 def _read_arrays(source: Path) -> dict[str, np.ndarray]:
     """Every array of the ``.npz`` at ``source``, read eagerly so that corruption shows up here."""
-    if not source.exists():
-        raise GratNetError(f"model file {source} does not exist")
-    if not source.is_file():
-        raise GratNetError(f"model file {source} is not a regular file")
-    try:
-        with source.open("rb") as handle:
-            magic = handle.read(6)
-    except OSError as error:
-        raise GratNetError(f"cannot read model file {source}: {error.strerror or error}") from error
+    magic = read_magic(source, "model file", 6)
     if magic.startswith(_NPY_MAGIC):
         raise GratNetError(f"{source} is a single .npy array, not a GratNet model file (.npz)")
     if not (magic.startswith(_ZIP_MAGIC) or magic.startswith(_EMPTY_ZIP_MAGIC)):

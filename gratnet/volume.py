@@ -43,7 +43,7 @@ import numpy as np
 import OpenEXR
 
 from gratnet.atomic import atomic_path
-from gratnet.errors import GratNetError
+from gratnet.errors import GratNetError, read_magic
 from gratnet.jsontext import strict_json
 
 __all__ = [
@@ -283,15 +283,7 @@ def read_volume(path: str | os.PathLike[str]) -> Volume:
             not a GratNet volume, of an unsupported format version, or structurally inconsistent.
     """
     source = Path(path)
-    if not source.exists():
-        raise GratNetError(f"volume file {source} does not exist")
-    if not source.is_file():
-        raise GratNetError(f"volume file {source} is not a regular file")
-    try:
-        with source.open("rb") as handle:
-            magic = handle.read(4)
-    except OSError as error:
-        raise GratNetError(f"cannot read volume file {source}: {error.strerror or error}") from error
+    magic = read_magic(source, "volume file", 4)
     if magic != b"\x76\x2f\x31\x01":
         raise GratNetError(f"{source} is not an OpenEXR file (wrong magic number)")
 
