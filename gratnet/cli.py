@@ -24,6 +24,7 @@ SUBCOMMAND_MODULES: dict[str, str] = {
     "evaluate": "trainer.train_cli",
     "render": "viewer.render_cli",
     "view": "viewer.view_cli",
+    "bench": "trainer.bench_cli",
 }
 
 

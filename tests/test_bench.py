@@ -1,0 +1,95 @@
+"""`gratnet bench`: the Pareto front, the error figures it reads, and a tiny end-to-end run."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from gratnet.cli import main
+from gratnet.encoding import EncodingSpec, RangeSpec
+from gratnet.modelfile import ModelFile, save_model
+from trainer.bench import BenchConfig, ModelEntry, markdown_table, pareto_front
+
+REPO = Path(__file__).resolve().parents[1]
+
+
+def test_pareto_front_keeps_exactly_the_points_nothing_beats():
+    points = [(1.0, 0.5), (2.0, 0.4), (2.5, 0.45), (3.0, 0.1), (0.5, 0.9), (4.0, 0.1)]
+    front = pareto_front(points)
+    assert front == [4, 0, 1, 3]  # by cost; (2.5, 0.45) and (4.0, 0.1) are dominated
+    for index, (cost, error) in enumerate(points):
+        dominated = any(c <= cost and e <= error and (c, e) != (cost, error) for c, e in points)
+        assert (index in front) == (not dominated)
+
+
+def test_model_entry_reads_the_error_of_the_five_evaluation_slices():
+    entry = ModelEntry.load(REPO / "assets" / "blazed" / "model.npz")
+    metrics = json.loads((REPO / "assets" / "blazed" / "metrics.json").read_text())["brdf_slices"]
+    assert entry.material == "blazed"
+    assert entry.flip_normal == pytest.approx(metrics[0]["flip"])
+    assert entry.flip_mean == pytest.approx(np.mean([row["flip"] for row in metrics]))
+    assert min(row["flip"] for row in metrics) <= entry.flip_mean <= max(row["flip"] for row in metrics)
+
+
+@pytest.mark.parametrize("field, value", [("sizes", "512,x"), ("sizes", "1"), ("weights_paths", "texture,fast")])
+def test_bad_config_is_one_clear_error(field, value):
+    from gratnet.errors import GratNetError
+
+    config = BenchConfig(**{field: value})
+    with pytest.raises(GratNetError, match=field.replace("_", "-")):
+        config.size_list()
+        config.path_list()
+
+
+def _tiny_model(path: Path) -> Path:
+    rng = np.random.default_rng(3)
+    encoding = EncodingSpec.for_grid(33, 5, frequencies=3, t_frequencies=2)
+    sizes = [encoding.features, 12, 8, 3]
+    model = ModelFile(
+        layer_sizes=sizes,
+        weights=[(rng.standard_normal((b, a)) / np.sqrt(a)).astype(np.float32)
+                 for a, b in zip(sizes[:-1], sizes[1:], strict=True)],
+        biases=[(0.1 * rng.standard_normal(b)).astype(np.float32) for b in sizes[1:]],
+        activation="silu", output_activation="clamp", encoding=encoding, range=RangeSpec(), scheme="simple-max",
+        metadata={"volume": {"source": "generator:sinusoidal(period_um=1.6667)"}},
+    )
+    save_model(path, model)
+    return path
+
+
+def test_bench_end_to_end_writes_table_plot_and_config(tmp_path, capsys):
+    pytest.importorskip("torch")
+    from gratnet.errors import GratNetError
+    from viewer.context import create_headless_context
+
+    try:
+        create_headless_context().release()
+    except GratNetError as error:
+        pytest.skip(f"no headless OpenGL: {error}")
+    model = _tiny_model(tmp_path / "tiny" / "model.npz")
+    out = tmp_path / "bench"
+    code = main(["bench", str(model), "--out", str(out), "--sizes", "16,24", "--repeats", "1", "--quiet"])
+    assert code == 0
+    results = json.loads((out / "bench.json").read_text())
+    assert {row["size"] for row in results} == {16, 24}
+    for row in results:
+        sizes = row["layer_sizes"]
+        assert row["macs_per_pixel"] == sum(a * b for a, b in zip(sizes[:-1], sizes[1:], strict=True))
+        assert row["seconds"] > 0 and row["shader_gmac_per_s"] > 0 and row["torch_cpu_gmac_per_s"] > 0
+        assert row["material"] == "sinusoidal" and row["flip_mean"] is None  # no metrics.json beside it
+    assert (out / "pareto.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    assert "| tiny |" in (out / "bench.md").read_text()
+    assert json.loads((out / "bench.config.json").read_text())["bench"]["sizes"] == "16,24"
+
+
+def test_markdown_table_has_one_row_per_result():
+    row = {"model": "m", "material": "cd", "parameters": 10, "macs_per_pixel": 9, "size": 512, "weights_path": "baked",
+           "seconds": 0.02, "shader_gmac_per_s": 1.5, "torch_cpu_gmac_per_s": 3.0, "shader_over_torch_cpu": 0.5,
+           "flip_mean": None, "flip_0_0": 0.01, "psnr_mean_db": 30.0}
+    table = markdown_table([row, {**row, "size": 1001}])
+    lines = table.strip().splitlines()
+    assert len(lines) == 4 and lines[0].count("|") == lines[1].count("|") == lines[2].count("|")
+    assert "| 1001² |" in lines[3] and "| 20 |" in lines[2] and "| — |" in lines[2]

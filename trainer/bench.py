@@ -1,0 +1,341 @@
+"""Run time against error: the shader's frame time and MLP throughput beside torch's, for trained models.
+
+For every model file the benchmark measures, on one BRDF-slice view (docs/physics.md "BRDF slice"):
+
+- the GLSL program's wall time per frame at each requested size (``NetworkRenderer.render_brdf_slice``,
+  read-back included, after one warm-up frame that pays for compilation and Mesa's JIT), for each weight
+  path (``texture``: RGBA32F mat4 blocks; ``baked``: weights as literals in the shader source) with
+  skip-work off, so that every pixel inside the unit disc runs the MLP;
+- the same encoding + MLP + inverse range transform in torch on the same key vectors (CPU, and CUDA where
+  present), as the reference throughput;
+- multiply-adds per pixel (``ModelFile.macs_per_evaluation``) and achieved GMAC/s = MACs · evaluated pixels
+  / time, for both;
+- the model's error from the ``metrics.json`` written beside it by ``gratnet train`` / ``gratnet evaluate``:
+  mean FLIP and PSNR (CIE XYZ) over the paper's five BRDF slices, and FLIP at (0°, 0°) 2000 RU.
+
+It writes ``bench.json`` (every measurement), ``bench.md`` (a table) and ``pareto.png`` (error against
+shader time per frame, the Pareto front marked) into the output folder. Timings are wall-clock on whatever
+GL device the context gets (Mesa llvmpipe on a machine without a GPU); they vary with machine load.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import math
+import statistics
+import time
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from gratnet.atomic import atomic_path, write_text_atomic
+from gratnet.config import config_field
+from gratnet.errors import GratNetError
+from gratnet.modelfile import ModelFile, load_model
+
+__all__ = ["BenchConfig", "ModelEntry", "pareto_front", "run_bench", "torch_throughput"]
+
+_EVALUATION_SLICE_COUNT = 5  # trainer.evaluate.STANDARD_SLICES
+
+
+@dataclasses.dataclass
+class BenchConfig:
+    """What ``gratnet bench`` measures."""
+
+    sizes: str = config_field("512,1001", "BRDF-slice sizes to time, pixels per side, comma-separated")
+    weights_paths: str = config_field(
+        "texture,baked", "shader weight paths to time, comma-separated: texture, baked, auto")
+    light_theta_degrees: float = config_field(30.0, "light polar angle of the timed BRDF slice, degrees")
+    light_phi_degrees: float = config_field(0.0, "light azimuth of the timed BRDF slice, degrees")
+    exposure: float = config_field(5000.0, "exposure of the timed slice (linear factor on A·XYZ)")
+    repeats: int = config_field(3, "timed frames per measurement (the median is reported)")
+    max_seconds: float = config_field(
+        60.0, "stop repeating a measurement once its frames have taken this long in total, seconds")
+    baked_max_macs: int = config_field(
+        60000, "skip the baked path for nets above this many MACs per pixel (Mesa's JIT takes minutes)")
+    torch_devices: str = config_field("auto", "torch devices for the reference: auto (cpu, plus cuda if present)")
+    torch_threads: int = config_field(0, "torch CPU threads (0: torch's default, one per core)")
+
+    def size_list(self) -> list[int]:
+        sizes = _int_list(self.sizes, "--sizes")
+        if any(not 2 <= size <= 16384 for size in sizes):
+            raise GratNetError(f"--sizes must lie in 2 … 16384, got {self.sizes!r}")
+        return sizes
+
+    def path_list(self) -> list[str]:
+        paths = [part.strip() for part in self.weights_paths.split(",") if part.strip()]
+        bad = [path for path in paths if path not in ("texture", "baked", "auto")]
+        if not paths or bad:
+            raise GratNetError(f"--weights-paths takes texture, baked, auto; got {self.weights_paths!r}")
+        return paths
+
+    def __post_init__(self) -> None:
+        if self.repeats < 1:
+            raise GratNetError(f"--repeats must be ≥ 1, got {self.repeats}")
+        if not (math.isfinite(self.exposure) and self.exposure > 0):
+            raise GratNetError(f"--exposure must be a positive number, got {self.exposure}")
+        if not 0.0 <= self.light_theta_degrees < 90.0:
+            raise GratNetError(f"--light-theta-degrees must lie in [0, 90), got {self.light_theta_degrees}")
+
+
+def _int_list(text: str, flag: str) -> list[int]:
+    try:
+        values = [int(part) for part in text.split(",") if part.strip()]
+    except ValueError:
+        values = []
+    if not values:
+        raise GratNetError(f"{flag} expects comma-separated integers, got {text!r}")
+    return values
+
+
+@dataclasses.dataclass
+class ModelEntry:
+    """One model to benchmark: its file, a label, and its error figures (from metrics.json)."""
+
+    label: str
+    path: Path
+    model: ModelFile
+    material: str
+    flip_mean: float | None
+    flip_normal: float | None  # FLIP at (0°, 0°) 2000 RU
+    psnr_mean: float | None
+
+    @classmethod
+    def load(cls, path: Path, label: str | None = None) -> ModelEntry:
+        model = load_model(path)
+        source = str(model.metadata.get("volume", {}).get("source", "unknown"))
+        material = source.split("generator:", 1)[-1].split("(", 1)[0] if source.startswith("generator:") else source
+        flip_mean = flip_normal = psnr_mean = None
+        metrics_path = path.with_name("metrics.json")
+        if metrics_path.is_file():
+            slices = json.loads(metrics_path.read_text()).get("brdf_slices", [])
+            if len(slices) == _EVALUATION_SLICE_COUNT:
+                flip_mean = statistics.fmean(float(entry["flip"]) for entry in slices)
+                psnr_mean = statistics.fmean(float(entry["psnr_xyz"]) for entry in slices)
+                normal = [entry for entry in slices if entry["theta"] == 0.0 and entry["phi"] == 0.0]
+                flip_normal = float(normal[0]["flip"]) if normal else None
+        return cls(label or path.parent.name, path, model, material, flip_mean, flip_normal, psnr_mean)
+
+
+def _slice_keys(config: BenchConfig, size: int) -> np.ndarray:
+    """Key vectors −(ωi + ωo) of the slice's pixels inside the unit disc, ``(N, 3)`` float32."""
+    from trainer.brdfslice import SliceConfig, slice_geometry
+
+    light, views, inside = slice_geometry(SliceConfig(config.light_theta_degrees, config.light_phi_degrees, size,
+                                                      config.exposure))
+    return (-(light + views[inside])).astype(np.float32)
+
+
+def torch_throughput(model: ModelFile, keys: np.ndarray, device: str, repeats: int, max_seconds: float,
+                     threads: int = 0) -> dict[str, Any]:
+    """Median wall time of encoding + MLP + inverse range transform in torch for ``keys`` on ``device``."""
+    import torch
+
+    from gratnet.encoding import encode, network_coordinates, range_inverse
+    from trainer.model import FunnelMLP
+
+    if threads:
+        torch.set_num_threads(threads)
+    network = FunnelMLP(model.layer_sizes[0], list(model.layer_sizes[1:-1]), model.activation,
+                        model.output_activation)
+    with torch.no_grad():
+        for layer, weight, bias in zip(network.linear_layers(), model.weights, model.biases, strict=True):
+            layer.weight.copy_(torch.from_numpy(weight))
+            layer.bias.copy_(torch.from_numpy(bias))
+    network = network.to(device).eval()
+    key_tensor = torch.from_numpy(keys).to(device)
+    batch = 1 << 17  # bounds the encoded batch at ~85 MB (163 float32 features)
+
+    def run() -> torch.Tensor:
+        outputs = []
+        for start in range(0, key_tensor.shape[0], batch):
+            chunk = key_tensor[start:start + batch]
+            coordinates = network_coordinates(chunk[:, 0], chunk[:, 1], chunk[:, 2], model.scheme)
+            outputs.append(range_inverse(network.predict(encode(coordinates, model.encoding)), model.range))
+        result = torch.cat(outputs)
+        if device.startswith("cuda"):
+            torch.cuda.synchronize()
+        return result
+
+    with torch.inference_mode():
+        run()  # warm-up: allocations, kernels
+        times = _timed(run, repeats, max_seconds)
+    return {"device": device, "threads": torch.get_num_threads() if device == "cpu" else None, "times_s": times,
+            "seconds": statistics.median(times)}
+
+
+def _timed(function: Any, repeats: int, max_seconds: float) -> list[float]:
+    times: list[float] = []
+    while len(times) < repeats and sum(times) < max_seconds:
+        start = time.perf_counter()
+        function()
+        times.append(time.perf_counter() - start)
+    return times
+
+
+def _shader_throughput(ctx: Any, entry: ModelEntry, path: str, config: BenchConfig, sizes: list[int],
+                       ) -> list[dict[str, Any]]:
+    """Frame times of the brdf_slice program for each size, on weight path ``path``, skip-work off."""
+    from viewer.renderer import NetworkRenderer
+
+    rows: list[dict[str, Any]] = []
+    start = time.perf_counter()
+    renderer = NetworkRenderer(ctx, entry.model, weights_path=path)
+    try:
+        view = (config.light_theta_degrees, config.light_phi_degrees)
+
+        def frame(size: int) -> None:
+            renderer.render_brdf_slice(*view, size, config.exposure, skip_threshold=0.0)
+
+        frame(8)  # compile, link and first draw (Mesa JITs on first use)
+        setup_seconds = time.perf_counter() - start
+        for size in sizes:
+            frame(size)  # warm-up at this size
+            times = _timed(lambda size=size: frame(size), config.repeats, config.max_seconds)
+            rows.append({"size": size, "weights_path": renderer.weights_path, "setup_s": setup_seconds,
+                         "times_s": times, "seconds": statistics.median(times)})
+    finally:
+        renderer.release()
+    return rows
+
+
+def pareto_front(points: list[tuple[float, float]]) -> list[int]:
+    """Indices of the points (cost, error) that no other point beats in both (lower is better), by cost."""
+    order = sorted(range(len(points)), key=lambda index: (points[index][0], points[index][1]))
+    front: list[int] = []
+    best_error = math.inf
+    for index in order:
+        if points[index][1] < best_error:
+            front.append(index)
+            best_error = points[index][1]
+    return front
+
+
+def _torch_devices(config: BenchConfig) -> list[str]:
+    import torch
+
+    if config.torch_devices == "auto":
+        return ["cpu", *(["cuda"] if torch.cuda.is_available() else [])]
+    devices = [part.strip() for part in config.torch_devices.split(",") if part.strip()]
+    if not devices:
+        raise GratNetError(f"--torch-devices expects auto or a list such as cpu,cuda; got {config.torch_devices!r}")
+    return devices
+
+
+def run_bench(ctx: Any, entries: list[ModelEntry], config: BenchConfig, progress: bool = True,
+              ) -> list[dict[str, Any]]:
+    """Measure every entry (see the module docstring); one result dict per (model, size, weight path)."""
+    from tqdm import tqdm
+
+    sizes = config.size_list()
+    paths = config.path_list()
+    devices = _torch_devices(config)
+    gl_device = str(ctx.info.get("GL_RENDERER", "unknown"))
+    results: list[dict[str, Any]] = []
+    for entry in tqdm(entries, desc="bench", unit="model", disable=not progress):
+        macs = entry.model.macs_per_evaluation
+        torch_rows = {}
+        for size in sizes:
+            keys = _slice_keys(config, size)
+            for device in devices:
+                torch_rows[size, device] = torch_throughput(entry.model, keys, device, config.repeats,
+                                                            config.max_seconds, config.torch_threads)
+        for path in paths:
+            if path == "baked" and macs > config.baked_max_macs:
+                continue
+            for row in _shader_throughput(ctx, entry, path, config, sizes):
+                size = row["size"]
+                pixels = int(_slice_keys(config, size).shape[0])
+                gmacs = macs * pixels / row["seconds"] / 1e9
+                result = {
+                    "model": entry.label, "material": entry.material, "path": str(entry.path),
+                    "parameters": entry.model.parameter_count, "macs_per_pixel": macs,
+                    "layer_sizes": list(entry.model.layer_sizes),
+                    "flip_mean": entry.flip_mean, "flip_0_0": entry.flip_normal, "psnr_mean_db": entry.psnr_mean,
+                    "gl_renderer": gl_device, "requested_weights_path": path, **row,
+                    "evaluated_pixels": pixels, "shader_gmac_per_s": gmacs,
+                }
+                for device in devices:
+                    reference = torch_rows[size, device]
+                    torch_gmacs = macs * pixels / reference["seconds"] / 1e9
+                    result[f"torch_{device}_seconds"] = reference["seconds"]
+                    result[f"torch_{device}_gmac_per_s"] = torch_gmacs
+                    result[f"shader_over_torch_{device}"] = gmacs / torch_gmacs
+                results.append(result)
+                if progress:
+                    tqdm.write(json.dumps({key: result[key] for key in (
+                        "model", "size", "weights_path", "seconds", "shader_gmac_per_s",
+                        "torch_cpu_gmac_per_s", "shader_over_torch_cpu") if key in result}))
+    return results
+
+
+def _format(value: object, digits: int = 3) -> str:
+    if value is None:
+        return "—"
+    if isinstance(value, float):
+        if value == 0 or 1e-3 <= abs(value) < 1e5:
+            return f"{value:.{digits}g}"
+        return f"{value:.2e}"
+    return str(value)
+
+
+def markdown_table(results: list[dict[str, Any]]) -> str:
+    """One row per (model, size, weight path)."""
+    header = ("| model | material | parameters | MACs/pixel | size | weights | frame (ms) | shader GMAC/s "
+              "| torch-CPU GMAC/s | shader / torch-CPU | mean FLIP (5 slices) | FLIP (0°,0°) | mean PSNR (dB) |")
+    lines = [header, "|" + "---|" * (header.count("|") - 1)]
+    for row in results:
+        lines.append("| " + " | ".join(_format(value) for value in (
+            row["model"], row["material"], row["parameters"], row["macs_per_pixel"], f"{row['size']}²",
+            row["weights_path"], row["seconds"] * 1e3, row["shader_gmac_per_s"], row.get("torch_cpu_gmac_per_s"),
+            row.get("shader_over_torch_cpu"), row["flip_mean"], row["flip_0_0"], row["psnr_mean_db"])) + " |")
+    return "\n".join(lines) + "\n"
+
+
+def plot_pareto(results: list[dict[str, Any]], output: Path) -> None:
+    """Mean FLIP against shader time per frame, one panel per size, the front of each marked; atomic PNG."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    sizes = sorted({row["size"] for row in results})
+    figure, axes = plt.subplots(1, len(sizes), figsize=(6.2 * len(sizes), 4.8), squeeze=False)
+    for axis, size in zip(axes[0], sizes, strict=True):
+        rows = [row for row in results if row["size"] == size and row["flip_mean"] is not None]
+        for path, marker in (("texture", "o"), ("baked", "s")):
+            chosen = [row for row in rows if row["weights_path"] == path]
+            axis.scatter([row["seconds"] * 1e3 for row in chosen], [row["flip_mean"] for row in chosen],
+                         marker=marker, label=f"GLSL, {path} weights", zorder=3)
+            for row in chosen:
+                axis.annotate(f"{row['model']} ({row['macs_per_pixel'] / 1e3:.1f}k MAC)",
+                              (row["seconds"] * 1e3, row["flip_mean"]), fontsize=7, xytext=(4, 3),
+                              textcoords="offset points")
+        if rows:
+            front = [rows[index] for index in pareto_front([(row["seconds"], row["flip_mean"]) for row in rows])]
+            axis.step([row["seconds"] * 1e3 for row in front], [row["flip_mean"] for row in front], where="post",
+                      color="grey", linestyle="--", label="Pareto front", zorder=2)
+        axis.set_xscale("log")
+        axis.set_yscale("log")
+        axis.set_xlabel(f"shader time per {size}² BRDF-slice frame (ms, log)")
+        axis.set_ylabel("mean FLIP over the five evaluation slices (log)")
+        axis.set_title(f"error against run time, {size}²  [{rows[0]['gl_renderer'] if rows else ''}]", fontsize=9)
+        axis.grid(True, which="both", alpha=0.3)
+        axis.legend(fontsize=7)
+    figure.tight_layout()
+    with atomic_path(output) as temporary:
+        figure.savefig(temporary, dpi=120, format="png")
+    plt.close(figure)
+
+
+def write_outputs(results: list[dict[str, Any]], out_dir: Path) -> None:
+    """bench.json, bench.md and pareto.png in ``out_dir`` (each written atomically)."""
+    out_dir.mkdir(parents=True, exist_ok=True)
+    from gratnet.jsontext import strict_json
+
+    write_text_atomic(out_dir / "bench.json", json.dumps(json.loads(strict_json(results, "bench results")), indent=1)
+                      + "\n")
+    write_text_atomic(out_dir / "bench.md", markdown_table(results))
+    plot_pareto(results, out_dir / "pareto.png")
