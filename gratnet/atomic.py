@@ -38,12 +38,25 @@ def atomic_path(target: str | os.PathLike[str]) -> Iterator[Path]:
     os.umask(umask)
     os.chmod(temporary, 0o666 & ~umask)
     try:
-        yield temporary
-        os.replace(temporary, target)
+        try:
+            yield temporary
+            os.replace(temporary, target)
+        except OSError as error:  # e.g. a folder in the target's place, or the disk is full
+            raise GratNetError(f"cannot write {target}: {error.strerror or error}") from error
     except BaseException:
         with contextlib.suppress(FileNotFoundError):
             temporary.unlink()
         raise
+
+
+def make_folder(folder: str | os.PathLike[str]) -> Path:
+    """Create ``folder`` (and its parents) if needed; one GratNetError when that is impossible."""
+    folder = Path(folder)
+    try:
+        folder.mkdir(parents=True, exist_ok=True)
+    except OSError as error:  # a file in its place or on its path, a read-only or virtual file system
+        raise GratNetError(f"cannot create the output folder {folder}: {error.strerror or error}") from error
+    return folder
 
 
 def write_bytes_atomic(target: str | os.PathLike[str], data: bytes) -> None:

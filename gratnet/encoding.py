@@ -85,8 +85,9 @@ class RangeSpec:
     def __post_init__(self) -> None:
         if self.kind not in ("power-log", "log", "log1p"):
             raise GratNetError(f"unknown range transform {self.kind!r}; choose power-log, log or log1p")
-        if not (self.bits > 0 and self.power > 0):
-            raise GratNetError(f"range transform needs B > 0 and n > 0, got B={self.bits}, n={self.power}")
+        # Finite too: B = inf maps every x > 0 to y = 1, and the model file refuses it only after training.
+        if not (0 < self.bits < math.inf and 0 < self.power < math.inf):
+            raise GratNetError(f"range transform needs finite B > 0 and n > 0, got B={self.bits}, n={self.power}")
 
 
 def key_to_grid(key: Any, scheme: Scheme) -> Any:
@@ -150,10 +151,12 @@ def range_forward(xyz: Any, spec: RangeSpec) -> Any:
 
 
 def range_inverse(y: Any, spec: RangeSpec) -> Any:
-    """Network outputs y (…, 3) → CIE XYZ, the exact inverse of :func:`range_forward` on its image; y ≤ 0 → 0."""
+    """Network outputs y (…, 3) → CIE XYZ, the exact inverse of :func:`range_forward` on its image; y ≤ 0
+    (and NaN) → 0."""
     xp = _namespace(y)
     if spec.kind == "log1p":
-        return xp.clip(xp.expm1(xp.clip(y, 0.0, None) * math.log(2.0)), 0.0, None) * _white(y, spec)
+        positive = xp.where(y > 0.0, y, xp.zeros_like(y))  # not clip: it keeps NaN (the other kinds give 0)
+        return xp.expm1(positive * math.log(2.0)) * _white(y, spec)
     clipped = xp.clip(y, 0.0, 1.0)
     root = clipped ** (1.0 / spec.power) if spec.kind == "power-log" else clipped
     x = xp.where(clipped > 0.0, 2.0 ** (spec.bits * (root - 1.0)), xp.zeros_like(clipped))

@@ -16,6 +16,7 @@ from typing import Any
 
 import numpy as np
 
+from gratnet.atomic import make_folder
 from gratnet.brdf import slice_view_directions
 from gratnet.config import config_field, config_to_dict
 from gratnet.encoding import range_forward
@@ -141,8 +142,7 @@ def evaluate_model(
     extra: dict[str, Any] | None = None,
 ) -> dict[str, Any]:
     """Evaluate and write the report folder (metrics.json, report.md, PNG figures)."""
-    out_dir = Path(out_dir)
-    out_dir.mkdir(parents=True, exist_ok=True)
+    out_dir = make_folder(out_dir)
     results: dict[str, Any] = {
         "model": {
             "layer_sizes": model.layer_sizes,

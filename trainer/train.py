@@ -12,14 +12,13 @@ import json
 import math
 import os
 import time
-from pathlib import Path
 from typing import Any
 
 import numpy as np
 import torch
 from tqdm.auto import tqdm
 
-from gratnet.atomic import atomic_path, write_text_atomic
+from gratnet.atomic import atomic_path, make_folder, write_text_atomic
 from gratnet.config import config_to_dict
 from gratnet.encoding import EncodingSpec, RangeSpec, encode, network_coordinates, range_forward
 from gratnet.errors import GratNetError
@@ -82,6 +81,10 @@ def split_samples(volume: Volume, config: TrainConfig) -> tuple[Samples, Samples
     else:
         test_mask = np.zeros(len(targets), dtype=bool)
     train = Samples(coordinates[~test_mask], targets[~test_mask])
+    if len(train) == 0:  # else 0 steps per epoch, and a model of random weights is written as if trained
+        reason = (f"the {volume.resolution}² grid has no sample with u² + v² ≤ 4" if len(targets) == 0
+                  else f"--split {config.split} holds out all {len(targets)} samples")
+        raise GratNetError(f"no training samples: {reason}; hold out fewer slices or use a larger volume")
     if config.max_train_samples and len(train) > config.max_train_samples:
         keep = rng.choice(len(train), config.max_train_samples, replace=False)
         train = Samples(train.coordinates[keep], train.targets[keep])
@@ -122,8 +125,7 @@ def train(
     volume: Volume, config: TrainConfig, out_dir: str | os.PathLike[str], resume: bool = False, progress: bool = True
 ) -> tuple[FunnelMLP, ModelFile, dict[str, Any]]:
     """Train on ``volume``; writes checkpoint.pt (every epoch), model.npz and history.json to ``out_dir``."""
-    out_dir = Path(out_dir)
-    out_dir.mkdir(parents=True, exist_ok=True)
+    out_dir = make_folder(out_dir)
     device = pick_device(config.device)
     torch.manual_seed(config.seed)
     encoding, range_spec = config.encoding_for(volume), config.range_spec()

@@ -18,15 +18,16 @@ from typing import Literal
 import numpy as np
 import pyrr
 
+from gratnet.brdf import direction
 from gratnet.errors import GratNetError
 
 __all__ = ["Camera", "Light", "world_direction"]
 
 
 def world_direction(theta_deg: float, phi_deg: float) -> np.ndarray:
-    """Unit world vector at polar angle θ from +z and azimuth φ from +x towards +y (degrees)."""
-    theta, phi = math.radians(theta_deg), math.radians(phi_deg)
-    return np.array([math.sin(theta) * math.cos(phi), math.sin(theta) * math.sin(phi), math.cos(theta)])
+    """Unit world vector at polar angle θ from +z and azimuth φ from +x towards +y (degrees); exact at
+    multiples of 90°, so that a light at θ = 90° lies on a +z-facing surface's horizon (not 6e-17 above)."""
+    return direction(theta_deg, phi_deg)
 
 
 def _finite(name: str, value: object) -> float:
@@ -163,10 +164,11 @@ class Light:
             raise GratNetError(f"light kind must be directional or point, got {self.kind!r}")
         vector = np.asarray(_vector("light vector", self.vector))
         if self.kind == "directional":
-            length = float(np.linalg.norm(vector))
-            if length == 0.0:
+            largest = float(np.max(np.abs(vector)))
+            if largest == 0.0:
                 raise GratNetError("a directional light needs a non-zero direction")
-            vector = vector / length
+            vector = vector / largest  # first: |v| of (1e308, 1e308, 0) overflows, of denormals loses digits
+            vector = vector / float(np.linalg.norm(vector))
         object.__setattr__(self, "vector", tuple(float(c) for c in vector))
         intensity = _finite("light intensity", self.intensity)
         if intensity < 0.0:
