@@ -301,6 +301,8 @@ class ViewerApp:
         policy: the resolution policy.
         clock: seconds, monotonic (tests pass a fake one).
         extra_meshes: mesh specs offered besides cd, sphere and plane (e.g. an .obj path).
+        weights_path: ``auto``, ``texture`` or ``baked``, for every material's
+            :class:`~viewer.scene.SceneRenderer` (:func:`viewer.renderer.choose_weights_path`).
 
     Raises:
         GratNetError: the initial material or mesh cannot be loaded.
@@ -308,7 +310,7 @@ class ViewerApp:
 
     def __init__(self, ctx: Any, state: ViewerState | None = None, size: tuple[int, int] = (512, 512),
                  policy: ResolutionPolicy | None = None, clock: Callable[[], float] = time.perf_counter,
-                 extra_meshes: Iterable[str] = ()) -> None:
+                 extra_meshes: Iterable[str] = (), weights_path: str = "auto") -> None:
         from viewer.scene import check_size
 
         self.ctx = ctx
@@ -320,6 +322,7 @@ class ViewerApp:
         self.image: Frame | None = None
         self.message = ""  # the last problem (a material or mesh that failed to load), shown in the panel
         self.meshes = list(MESHES) + [spec for spec in extra_meshes if spec not in MESHES]
+        self.weights_path = weights_path
         self._renderer: Any = None
         self._renderer_material: str | None = None
         self._mesh_buffers: dict[str, Any] = {}
@@ -610,7 +613,7 @@ class ViewerApp:
 
         if self._renderer is None or self._renderer_material != state.material:
             model = load_model(resolve_material(state.material))
-            renderer = SceneRenderer(self.ctx, model)
+            renderer = SceneRenderer(self.ctx, model, weights_path=self.weights_path)
             renderer.program  # noqa: B018 - compile now, not inside the first timed render
             self._release_scene()
             self._renderer, self._renderer_material = renderer, state.material
@@ -691,7 +694,7 @@ class ViewerWindow:
         screenshot_dir: where the Screenshot button writes ``gratnet-view-NNN.png``.
         idle_wait_s: how long a frame with nothing to render waits for input (``wait_events_timeout``);
             0 polls (tests).
-        extra_meshes: as :class:`ViewerApp`.
+        extra_meshes, weights_path: as :class:`ViewerApp`.
         visible: show the window (tests under Xvfb may hide it; rendering is the same).
 
     Raises:
@@ -703,6 +706,7 @@ class ViewerWindow:
     def __init__(self, state: ViewerState | None = None, size: tuple[int, int] = (512, 512),
                  policy: ResolutionPolicy | None = None, clock: Callable[[], float] = time.perf_counter,
                  screenshot_dir: str | Path = ".", idle_wait_s: float = 0.25, extra_meshes: Iterable[str] = (),
+                 weights_path: str = "auto",
                  visible: bool = True, title: str = "GratNet viewer") -> None:
         from viewer.context import context_from_current
         from viewer.scene import check_size
@@ -760,7 +764,7 @@ class ViewerWindow:
             imgui.backends.opengl3_init("#version 410 core")
             self._imgui_ready = True
             self._gl = _GLFunctions(glfw)
-            self._app = ViewerApp(self.ctx, state, self._area_pixels(), policy, clock, extra_meshes)
+            self._app = ViewerApp(self.ctx, state, self._area_pixels(), policy, clock, extra_meshes, weights_path)
         except BaseException:
             self.close()
             raise

@@ -9,13 +9,16 @@ A program is one file ``shaders/NAME.glsl`` holding both stages, selected with `
    constants that come from the model file; values are never substituted into the shader text);
 4. the program file with every ``#include "x.glsl"`` replaced by that file (resolved relative to the
    including file, recursively; a file is included once, later includes of it are skipped; an include
-   cycle or a missing file is an error naming the including file and line).
+   cycle or a missing file is an error naming the including file and line). An include whose argument is
+   a key of ``overrides`` takes that :class:`GeneratedSource` instead of the file (e.g. the MLP with the
+   weights baked in, :mod:`viewer.baked`); its text may not include further files.
 
 Every stretch of text taken from a file is preceded by ``#line L FILEID``. Mesa reports the source
 number (FILEID) only for preprocessor and syntax errors — its semantic errors always say ``0:`` (measured
 with Mesa 22/llvmpipe) — so the line number carries the file too: ``L = FILEID · LINE_STRIDE + line``.
 :func:`compile_program` decodes either form and raises :class:`~gratnet.errors.GratNetError` whose
-message names the real file and line (``path:line:column: error: …``).
+message names the real file and line (``path:line:column: error: …``); a generated source is named by
+its :attr:`GeneratedSource.name` (``<baked mlp.glsl: model.npz>:12:5: error: …``).
 """
 
 from __future__ import annotations
@@ -35,6 +38,7 @@ from shaders import SHADER_ROOT as PACKAGED_SHADER_ROOT
 __all__ = [
     "LINE_STRIDE",
     "SHADER_ROOT",
+    "GeneratedSource",
     "ProgramSource",
     "compile_program",
     "load_program_source",
@@ -61,11 +65,31 @@ Defines = Mapping[str, "int | float"]
 
 
 @dataclasses.dataclass(frozen=True)
+class GeneratedSource:
+    """GLSL text made by a program, included in place of a file.
+
+    Attributes:
+        name: what compile errors call it, e.g. ``<baked mlp.glsl: model.npz>`` (no file by that name exists).
+        text: the GLSL; no ``#version`` and no ``#include`` lines.
+    """
+
+    name: str
+    text: str
+
+
+#: Include argument (as written after ``#include``, e.g. ``"mlp.glsl"``) → the source that replaces that file.
+Overrides = Mapping[str, GeneratedSource]
+
+
+@dataclasses.dataclass(frozen=True)
 class ProgramSource:
-    """Preprocessed text of one stage and the files it came from (``files[k - 1]`` has FILEID ``k``)."""
+    """Preprocessed text of one stage and the files it came from (``files[k - 1]`` has FILEID ``k``).
+
+    A file is its :class:`~pathlib.Path`; a :class:`GeneratedSource` is its ``name`` (a ``str``).
+    """
 
     text: str
-    files: tuple[Path, ...]
+    files: tuple[Path | str, ...]
 
 
 def _program_path(name: str, shader_root: Path) -> Path:
@@ -95,15 +119,33 @@ def _define_lines(defines: Defines) -> list[str]:
 class _Preprocessor:
     """Expands includes depth-first, once per file, recording each file's FILEID."""
 
-    def __init__(self) -> None:
-        self.files: list[Path] = []
-        self.done: set[Path] = set()
+    def __init__(self, overrides: Overrides | None = None) -> None:
+        self.files: list[Path | str] = []
+        self.done: set[Path | str] = set()
         self.lines: list[str] = []
+        self.overrides: dict[str, GeneratedSource] = {}
+        for key, source in (overrides or {}).items():
+            if not isinstance(source, GeneratedSource):
+                raise GratNetError(f"override of {key!r} must be a viewer.glsl.GeneratedSource, got "
+                                   f"{type(source).__name__}")
+            self.overrides[key] = source
 
-    def _file_id(self, path: Path) -> int:
+    def _file_id(self, path: Path | str) -> int:
         if path not in self.files:
             self.files.append(path)
         return self.files.index(path) + 1
+
+    def _expand_generated(self, source: GeneratedSource) -> None:
+        source_lines = source.text.splitlines()
+        if len(source_lines) >= LINE_STRIDE:
+            raise GratNetError(f"{source.name} has {len(source_lines)} lines; at most {LINE_STRIDE - 1} are supported")
+        file_id = self._file_id(source.name)
+        self.done.add(source.name)
+        self.lines.append(f"#line {file_id * LINE_STRIDE + 1} {file_id}")
+        for number, line in enumerate(source_lines, start=1):
+            if _VERSION.match(line) or _INCLUDE.match(line):
+                raise GratNetError(f"{source.name}:{number}: a generated source may hold no #version or #include")
+            self.lines.append(line)
 
     def expand(self, path: Path, stack: tuple[Path, ...]) -> None:
         try:
@@ -126,6 +168,12 @@ class _Preprocessor:
             argument = _INCLUDE_ARGUMENT.match(include.group(1))
             if argument is None:
                 raise GratNetError(f'{path}:{number}: malformed include, expected #include "file.glsl"')
+            generated = self.overrides.get(argument.group(1))
+            if generated is not None:
+                if generated.name not in self.done:  # include-once, as for files
+                    self._expand_generated(generated)
+                self.lines.append(f"#line {file_id * LINE_STRIDE + number + 1} {file_id}")
+                continue
             target = (path.parent / argument.group(1)).resolve()
             if target in stack:
                 chain = " -> ".join(str(p) for p in (*stack, target))
@@ -141,13 +189,17 @@ class _Preprocessor:
 
 
 def preprocess(
-    name: str, stage: str, defines: Defines, shader_root: str | os.PathLike[str] | None = None
+    name: str, stage: str, defines: Defines, shader_root: str | os.PathLike[str] | None = None,
+    overrides: Overrides | None = None,
 ) -> ProgramSource:
     """Preprocess program ``name`` for ``stage`` (``"vertex"`` or ``"fragment"``); see the module docstring.
 
+    ``overrides`` maps an include argument (``"mlp.glsl"``) to the :class:`GeneratedSource` included instead.
+
     Raises:
         GratNetError: unknown stage, invalid define, missing or unreadable file, include cycle,
-            malformed include, or a ``#version`` line in a shader file.
+            malformed include, a ``#version`` line in a shader file, or a ``#version``/``#include`` line
+            in a generated source.
     """
     stage_define = _STAGES.get(str(stage).lower())
     if stage_define is None:
@@ -156,28 +208,32 @@ def preprocess(
     path = _program_path(name, root).resolve()
     if not path.is_file():
         raise GratNetError(f"shader program {name!r} not found (looked for {path})")
-    preprocessor = _Preprocessor()
+    preprocessor = _Preprocessor(overrides)
     preprocessor.lines += [GLSL_VERSION, f"#define {stage_define}", *_define_lines(defines)]
     preprocessor.expand(path, (path,))
     return ProgramSource("\n".join(preprocessor.lines) + "\n", tuple(preprocessor.files))
 
 
 def load_program_source(
-    name: str, stage: str, defines: Defines, shader_root: str | os.PathLike[str] | None = None
+    name: str, stage: str, defines: Defines, shader_root: str | os.PathLike[str] | None = None,
+    overrides: Overrides | None = None,
 ) -> str:
     """The complete GLSL text of one stage of program ``name`` (see :func:`preprocess`)."""
-    return preprocess(name, stage, defines, shader_root).text
+    return preprocess(name, stage, defines, shader_root, overrides).text
 
 
-def _display_path(path: Path) -> str:
-    """A path relative to the working directory when it lies inside it (shorter messages), else absolute."""
+def _display_path(path: Path | str) -> str:
+    """A path relative to the working directory when it lies inside it (shorter messages), else absolute;
+    a generated source's name as it is."""
+    if isinstance(path, str):
+        return path
     try:
         return str(path.relative_to(Path.cwd()))
     except ValueError:
         return str(path)
 
 
-def _locate(files: tuple[Path, ...], source: int, line: int) -> tuple[str, int]:
+def _locate(files: tuple[Path | str, ...], source: int, line: int) -> tuple[str, int]:
     """(file name, line in that file) of an encoded line number (``source`` is ignored when 0)."""
     file_id = source
     if line >= LINE_STRIDE:
@@ -189,7 +245,7 @@ def _locate(files: tuple[Path, ...], source: int, line: int) -> tuple[str, int]:
     return f"<source {file_id}>", line
 
 
-def map_error_log(log: str, files: tuple[Path, ...]) -> list[str]:
+def map_error_log(log: str, files: tuple[Path | str, ...]) -> list[str]:
     """Rewrite a driver's compile log so that each location reads ``path:line:column:`` (or ``path:line:``)."""
 
     def mesa(match: re.Match[str]) -> str:
@@ -215,15 +271,17 @@ def map_error_log(log: str, files: tuple[Path, ...]) -> list[str]:
 
 
 def compile_program(
-    ctx: moderngl.Context, name: str, defines: Defines, shader_root: str | os.PathLike[str] | None = None
+    ctx: moderngl.Context, name: str, defines: Defines, shader_root: str | os.PathLike[str] | None = None,
+    overrides: Overrides | None = None,
 ) -> moderngl.Program:
-    """Preprocess and link program ``name`` (vertex + fragment stage of ``shaders/NAME.glsl``).
+    """Preprocess and link program ``name`` (vertex + fragment stage of ``shaders/NAME.glsl``), with the
+    includes named in ``overrides`` replaced by generated sources (see :func:`preprocess`).
 
     Raises:
         GratNetError: preprocessing failed, or the driver rejected a stage or the link; the message is
             one line naming the stage and, for each error (at most five), the real file and line.
     """
-    stages = {stage: preprocess(name, stage, defines, shader_root) for stage in _STAGES}
+    stages = {stage: preprocess(name, stage, defines, shader_root, overrides) for stage in _STAGES}
     try:
         return ctx.program(vertex_shader=stages["vertex"].text, fragment_shader=stages["fragment"].text)
     except moderngl.Error as error:

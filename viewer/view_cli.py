@@ -8,6 +8,7 @@
 - ``--size W,H``: the render area in pixels (the window adds the panel on the left).
 - ``--light θ,φ``, ``--camera DIST,AZIMUTH,ELEVATION``, ``--exposure``, ``--ior``, ``--no-fresnel``,
   ``--slice``: the starting view, as in ``gratnet render``.
+- ``--weights-path auto|texture|baked``: where the shader reads the weights, as in ``gratnet render``.
 
 Mouse: drag over the picture to orbit (in BRDF-slice mode: to move the light), wheel to zoom. The
 Screenshot button writes ``gratnet-view-NNN.png`` (display sRGB, full resolution) and its
@@ -22,6 +23,7 @@ import argparse
 from pathlib import Path
 
 from gratnet.errors import GratNetError
+from viewer.render_cli import WEIGHT_PATHS
 
 __all__ = ["register", "run"]
 
@@ -51,6 +53,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     parser.add_argument("--fresnel", action=argparse.BooleanOptionalAction, default=True,
                         help="apply the Fresnel factor (default: on)")
     parser.add_argument("--slice", action="store_true", help="start in BRDF-slice mode")
+    parser.add_argument("--weights-path", choices=WEIGHT_PATHS, default="auto",
+                        help="where the shader reads the network's weights: texture, baked (literals in a generated "
+                        "shader) or auto (baked for small nets on a CPU rasterizer, else texture; default: auto)")
     parser.add_argument("--screenshot-dir", default=".", metavar="DIR",
                         help="folder for the Screenshot button's PNGs (default: the working folder)")
     parser.add_argument("--max-frames", type=int, default=0, metavar="N",
@@ -101,7 +106,8 @@ def run(arguments: argparse.Namespace) -> int:
     size = parse_size(arguments.size_text)
     state = _state(arguments)
     extra = [] if state.mesh in ("cd", "sphere", "plane") else [state.mesh]
-    with ViewerWindow(state, size, screenshot_dir=arguments.screenshot_dir, extra_meshes=extra) as window:
+    with ViewerWindow(state, size, screenshot_dir=arguments.screenshot_dir, extra_meshes=extra,
+                      weights_path=arguments.weights_path) as window:
         window.run(arguments.max_frames)
         if window.gl_errors:
             raise GratNetError(f"OpenGL reported errors: {'; '.join(window.gl_errors[:3])} (please report this)")
