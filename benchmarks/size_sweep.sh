@@ -11,6 +11,6 @@ for preset in tiny small medium funnel-176 paper; do
     if [ -f "$out/$preset/metrics.json" ]; then echo "done already: $out/$preset"; continue; fi
     # shellcheck disable=SC2086
     gratnet train "$volume" --out "$out/$preset" --preset "$preset" --split all --epochs 8 \
-        --max-train-samples 3000000 --cache-dir out/cache --quiet ${SWEEP_FLAGS:-}
+        --max-train-samples 3000000 --cache-dir out/cache --quiet --resume ${SWEEP_FLAGS:-}
     echo "trained $out/$preset"
 done

@@ -2,8 +2,9 @@
 // pixel (row i, column j) of a size x size image looks from wo = (x, y, sqrt(1 - x^2 - y^2)) with
 // x = -1 + (2j+1)/size, y = 1 - (2i+1)/size (+x right, +y up, pixel centres); outside the unit disc
 // the pixel is 0. Output 0: exposure * A(wi, wo) * XYZ(-(wi + wo)) (exposed XYZ, linear, RGBA32F);
-// output 1 (when a second attachment is bound): the network's XYZ alone.
-// Needs the defines of mlp.glsl and encoding.glsl.
+// output 1 (when a second attachment is bound): the network's XYZ alone (0 where the MLP was skipped).
+// The MLP is skipped where A = 0 and where the bound of skip.glsl says the display would show 0.
+// Needs the defines of mlp.glsl and encoding.glsl (and SKIP_COUNTER_BINDING with COUNT_EVALUATIONS).
 #include "fullscreen.glsl"
 
 #ifdef FRAGMENT_SHADER
@@ -14,6 +15,7 @@ precision highp int;
 #include "mlp.glsl"
 #include "range.glsl"
 #include "brdf.glsl"
+#include "skip.glsl"
 
 uniform int u_size;        // image width = height, pixels
 uniform vec3 u_light;      // wi: unit vector towards the light
@@ -32,13 +34,27 @@ void main() {
     if (!(radius_squared < 1.0)) {
         out_exposed = vec4(0.0);
         out_network = vec4(0.0);
+        count_event(COUNTER_BACKGROUND);
         return;
     }
+    count_event(COUNTER_FRAGMENTS);
+    out_exposed = vec4(0.0, 0.0, 0.0, 1.0);
+    out_network = vec4(0.0, 0.0, 0.0, 1.0);
     vec3 wo = vec3(p, sqrt(max(1.0 - radius_squared, 0.0)));  // clamp before sqrt
     vec3 key = -(u_light + wo);                                 // physics.md "Key vector"
+    float a = a_term(u_light, wo, u_ior);  // 0 with the light below the horizon or at |w| <= 1e-6
+    if (!(a > 0.0)) {
+        count_event(COUNTER_SKIPPED_A_ZERO);
+        return;
+    }
     encoding_set_key(key);
+    if (skip_by_bound(u_exposure * a)) {
+        count_event(COUNTER_SKIPPED_BOUND);
+        return;
+    }
+    count_event(COUNTER_EVALUATIONS);
     vec3 xyz = range_inverse(mlp_evaluate());
-    out_exposed = vec4(u_exposure * a_term(u_light, wo, u_ior) * xyz, 1.0);
+    out_exposed = vec4(u_exposure * a * xyz, 1.0);
     out_network = vec4(xyz, 1.0);
 }
 #endif

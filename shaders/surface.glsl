@@ -7,7 +7,11 @@
 // (exposed CIE XYZ, linear) with alpha = 1 (coverage; the renderer clears to 0). Back faces, wi or wo
 // at or below the tangent plane, or a degenerate frame give XYZ 0 (never NaN). Output 1 (when a second
 // attachment is bound; tests and debugging): the key vector and A, 0 for back faces.
-// Needs the defines of mlp.glsl and encoding.glsl.
+// Work skipped (issue 5): the MLP runs only where A > 0 and the bound of skip.glsl says the display could
+// show something. Depth pre-pass: the renderer draws once with u_depth_only (colour writes masked; early
+// fragment tests write the depth and the shader returns at once), then again with depth func LEQUAL, so
+// early fragment tests let only the visible surface run the shading code: one MLP per pixel, no overdraw.
+// Needs the defines of mlp.glsl and encoding.glsl (and SKIP_COUNTER_BINDING with COUNT_EVALUATIONS).
 
 #ifdef VERTEX_SHADER
 in vec3 in_position;  // metres, world space
@@ -19,6 +23,8 @@ uniform mat4 u_view_projection;  // world -> clip (viewer/camera.py)
 out vec3 v_position;
 out vec3 v_normal;
 out vec3 v_tangent;
+
+invariant gl_Position;  // both passes of the depth pre-pass must produce bit-identical depths
 
 void main() {
     v_position = in_position;
@@ -36,6 +42,11 @@ precision highp int;
 #include "mlp.glsl"
 #include "range.glsl"
 #include "brdf.glsl"
+#include "skip.glsl"
+
+// Depth (and stencil) tests before the shader runs: occluded fragments never evaluate the MLP. The
+// shader writes no depth and never discards, so this changes no pixel.
+layout(early_fragment_tests) in;
 
 const int LIGHT_DIRECTIONAL = 0;
 const int LIGHT_POINT = 1;
@@ -46,6 +57,7 @@ uniform vec3 u_light;            // directional: unit vector towards the light; 
 uniform float u_light_intensity; // directional: irradiance scale; point: at 1 m (falls off as 1/d^2)
 uniform float u_exposure;
 uniform float u_ior;             // <= 0: Fresnel off
+uniform bool u_depth_only;       // the depth pre-pass: the depth is written by the early test; do nothing
 
 in vec3 v_position;
 in vec3 v_normal;
@@ -68,10 +80,15 @@ vec3 safe_normalize(vec3 v) {
 }
 
 void main() {
+    if (u_depth_only) {
+        return;  // colour writes are masked in this pass
+    }
+    count_event(COUNTER_FRAGMENTS);
     out_exposed = vec4(0.0, 0.0, 0.0, 1.0);  // covered, no light (yet)
     out_key = vec4(0.0);
     vec3 n = safe_normalize(v_normal);
     if (!gl_FrontFacing || n == vec3(0.0)) {
+        count_event(COUNTER_SKIPPED_A_ZERO);  // back face or no frame: A = 0
         return;
     }
     vec3 t = v_tangent - dot(v_tangent, n) * n;  // Gram-Schmidt: interpolation tilts the tangent
@@ -96,9 +113,15 @@ void main() {
     float a = a_term(wi, wo, u_ior);  // 0 below either horizon, at |w| <= 1e-6, or for a zero vector
     out_key = vec4(key, a);
     if (!(a > 0.0) || !(irradiance > 0.0)) {
+        count_event(COUNTER_SKIPPED_A_ZERO);
         return;  // and skip the network: nothing to light
     }
     encoding_set_key(key);
+    if (skip_by_bound(u_exposure * irradiance * a)) {
+        count_event(COUNTER_SKIPPED_BOUND);
+        return;  // the display would show 0 whatever the network says
+    }
+    count_event(COUNTER_EVALUATIONS);
     vec3 xyz = range_inverse(mlp_evaluate());
     out_exposed = vec4(u_exposure * irradiance * a * xyz, 1.0);
 }

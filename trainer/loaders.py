@@ -163,7 +163,7 @@ def _read_npz(path: Path, options: LoadOptions) -> HeightField:
         try:
             dx = float(stored_dx.reshape(()))
         except (TypeError, ValueError):  # a string or other non-number stored as dx_um
-            raise GratNetError(f"{path}: dx_um must be a number (µm), got {stored_dx.reshape(())!r}") from None
+            raise GratNetError(f"{path}: dx_um must be a number (µm), got {stored_dx.reshape(()).item()!r}") from None
     else:
         dx = _needs_dx(path, options, " or store a dx_um entry in the archive")
     source = f"file:{path}" + (f" ({stored_source})" if stored_source else "")

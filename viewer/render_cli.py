@@ -33,6 +33,8 @@ ASSETS = Path(__file__).resolve().parents[1] / "assets"
 #: Built-in meshes for ``--mesh``.
 MESHES = ("cd", "sphere", "plane")
 _OUTPUT_SUFFIXES = (".png", ".exr")
+#: ``--weights-path`` choices: viewer.renderer.WEIGHTS_PATHS (repeated here: importing it loads moderngl).
+WEIGHT_PATHS = ("auto", "texture", "baked")
 #: sRGB / Rec. 709 primaries and D65 white (x, y pairs) for the EXR ``chromaticities`` attribute.
 _SRGB_CHROMATICITIES = (0.64, 0.33, 0.30, 0.60, 0.15, 0.06, 0.3127, 0.3290)
 
@@ -57,6 +59,14 @@ class RenderConfig:
     ior: float = config_field(1.5, "refractive index for the Fresnel factor of the A-term (0: none)")
     fresnel: bool = config_field(True, "apply the Fresnel factor (--no-fresnel: R/R0 = 1)")
     slice: bool = config_field(False, "render the network's BRDF slice for the light θ,φ instead of a mesh")
+    weights_path: str = config_field(
+        "auto", "where the shader reads the network's weights: texture (packed RGBA32F texture), baked "
+        "(literals in a generated shader: faster on a CPU rasterizer, slower first compile) or auto (baked for "
+        "small nets on Mesa llvmpipe/softpipe, else texture; viewer.renderer.choose_weights_path)",
+        choices=WEIGHT_PATHS)
+    skip_dark: bool = config_field(
+        False, "PNG only: skip the network where exposure · A · (the model's cached output bound) cannot reach the "
+        "display's smallest step (gratnet.bounds); the first use per model builds the bound (minutes on a CPU)")
 
     @property
     def effective_ior(self) -> float | None:
@@ -184,6 +194,8 @@ def run(arguments: argparse.Namespace) -> int:
     if out.suffix.lower() not in _OUTPUT_SUFFIXES:
         raise GratNetError(f"--out must end in .png (display sRGB) or .exr (linear sRGB float), got {arguments.out}")
     config = _resolve_config(arguments)
+    if config.skip_dark and out.suffix.lower() != ".png":
+        raise GratNetError("--skip-dark applies to .png output only: an EXR keeps values below the display's step")
     model_path = resolve_material(config.material)
     model = load_model(model_path)
     camera = Camera(config.camera_distance, config.camera_azimuth_degrees, config.camera_elevation_degrees,
@@ -192,18 +204,22 @@ def run(arguments: argparse.Namespace) -> int:
              else Light.directional(config.light_theta_degrees, config.light_phi_degrees))
     mesh = None if config.slice else build_mesh(config.mesh)
 
+    from gratnet.bounds import DISPLAY_SKIP_THRESHOLD
     from viewer.context import create_headless_context
     from viewer.scene import SceneRenderer
 
+    # Skipping is exact only for an 8-bit display image; EXR keeps every value the network gives.
+    skip_threshold = DISPLAY_SKIP_THRESHOLD if config.skip_dark else None
     ctx = create_headless_context()
     try:
-        with SceneRenderer(ctx, model) as renderer:
+        with SceneRenderer(ctx, model, weights_path=config.weights_path) as renderer:
             if config.slice:
-                xyz = renderer.render_brdf_slice(config.light_theta_degrees, config.light_phi_degrees,
-                                                 config.width, config.exposure, config.effective_ior)
+                xyz = renderer.network.render_brdf_slice(config.light_theta_degrees, config.light_phi_degrees,
+                                                         config.width, config.exposure, config.effective_ior,
+                                                         skip_threshold=skip_threshold)
             else:
                 xyz = renderer.render(mesh, camera, light, (config.width, config.height), config.exposure,
-                                      config.effective_ior)
+                                      config.effective_ior, skip_threshold=skip_threshold)
     finally:
         ctx.release()
     if not np.all(np.isfinite(xyz)):

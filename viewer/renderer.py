@@ -18,12 +18,33 @@ from pathlib import Path
 import moderngl
 import numpy as np
 
+from gratnet.bounds import DISPLAY_SKIP_THRESHOLD, OutputBounds, display_skip_matrix, output_bounds
 from gratnet.brdf import direction
+from gratnet.display import xyz_to_display_srgb8
 from gratnet.errors import GratNetError
 from gratnet.modelfile import LEAKY_RELU_SLOPE, ModelFile, pack_texture, texture_layout
-from viewer.glsl import compile_program
+from viewer.baked import baked_mlp_source
+from viewer.glsl import GeneratedSource, compile_program
 
-__all__ = ["NetworkRenderer", "model_defines", "xyz_to_linear_srgb_matrix"]
+__all__ = [
+    "BAKED_MAX_MACS",
+    "DISPLAY_SKIP_THRESHOLD",
+    "STATISTICS_KEYS",
+    "WEIGHTS_PATHS",
+    "NetworkRenderer",
+    "choose_weights_path",
+    "model_defines",
+    "xyz_to_linear_srgb_matrix",
+]
+
+#: Where the MLP's weights come from: ``texture`` (shaders/mlp.glsl reads the packed RGBA32F texture),
+#: ``baked`` (viewer/baked.py writes them into the shader as literals) or ``auto`` (:func:`choose_weights_path`).
+WEIGHTS_PATHS = ("auto", "texture", "baked")
+#: The largest net (multiply-adds per evaluation) that ``auto`` bakes on a software rasterizer. Measured
+#: on Mesa llvmpipe, 2 busy cores, shader cache off: first compile + JIT of brdf_slice 1.5 s at 3.9k MACs,
+#: 3.8 s at 7.3k, 6.6 s at 8.3k, 8–9 s at 14.6k, over 3 min at 28.4k (the shipped 163-108-66-40-24-3).
+BAKED_MAX_MACS = 10_000
+_SOFTWARE_RASTERIZERS = ("llvmpipe", "softpipe", "swrast")  # substrings of GL_RENDERER
 
 # Codes of the GLSL `const int`s (shaders/encoding.glsl, mlp.glsl, range.glsl, evaluate_keys.glsl).
 _SCHEMES = {"regular": 0, "simple": 1, "simple-max": 2}
@@ -34,6 +55,12 @@ _MODE_XYZ, _MODE_NETWORK, _MODE_ENCODING, _MODE_A_TERM = 0, 1, 2, 3
 _PASS_WIDTH = 1024  # pixels per row of a key-evaluation pass
 _PASS_PIXELS = 1 << 20  # keys per pass: bounds memory and the time of one draw
 _FREQUENCY_BITS = 10  # significant bits of the exact part of s^j (see shaders/encoding.glsl)
+#: The counters of shaders/skip.glsl (COUNTER_*), in order, as the keys of a render's ``statistics`` dict.
+STATISTICS_KEYS = ("fragments", "evaluations", "skipped_a_zero", "skipped_bound", "background")
+_SKIP_COUNTER_BINDING = 5  # SSBO binding of the counters (shaders/skip.glsl)
+_SKIP_COUNTER_SLOTS = 8
+_SKIP_BOUND_UNIT = 3  # texture unit of u_skip_bound (weights: 0; evaluate_keys/display inputs: 1, 2)
+_COUNTING_SUFFIX = "#count"  # program-cache key of a program compiled with COUNT_EVALUATIONS
 
 
 def model_defines(model: ModelFile) -> dict[str, int | float]:
@@ -83,6 +110,16 @@ def _ior_uniform(ior: float | None) -> float:
     return float(ior)
 
 
+def skip_threshold_value(threshold: float | None) -> float:
+    """The shaders' ``u_skip_threshold``: ``None`` or 0 turns skipping off (exact linear output)."""
+    if threshold is None:
+        return 0.0
+    value = float(threshold)
+    if not (math.isfinite(value) and value >= 0.0):
+        raise GratNetError(f"skip threshold must be a finite number ≥ 0 (0 or None: off), got {threshold!r}")
+    return value
+
+
 def _set(program: moderngl.Program, name: str, value: object) -> None:
     """Set a uniform that the program must have (a missing one means shader and renderer disagree)."""
     if name not in program:
@@ -94,6 +131,29 @@ def _set(program: moderngl.Program, name: str, value: object) -> None:
         member.value = value  # type: ignore[union-attr]
 
 
+def choose_weights_path(ctx: moderngl.Context, model: ModelFile, weights_path: str = "auto") -> str:
+    """``texture`` or ``baked``: ``weights_path`` itself unless it is ``auto``, which picks
+
+    * ``baked`` on a software rasterizer (``GL_RENDERER`` names llvmpipe, softpipe or swrast) for nets of
+      at most :data:`BAKED_MAX_MACS` multiply-adds per evaluation: there every texel fetch is a gather on
+      the CPU, and constant weights made brdf_slice frames 1.4–2× faster at 4k–8k MACs (the sinusoidal
+      encoding is a fixed cost besides), at the cost of a first compile that grows faster than the net
+      (a few seconds up to the limit; Mesa's disk shader cache makes later ones fast);
+    * ``texture`` otherwise: on a GPU texel fetches are cheap and a program per model is not worth its
+      compile time, and big nets would take llvmpipe minutes to compile.
+
+    Raises:
+        GratNetError: ``weights_path`` is not one of :data:`WEIGHTS_PATHS`.
+    """
+    if weights_path not in WEIGHTS_PATHS:
+        raise GratNetError(f"weights path must be one of {', '.join(WEIGHTS_PATHS)}, got {weights_path!r}")
+    if weights_path != "auto":
+        return weights_path
+    renderer = str(ctx.info.get("GL_RENDERER", "")).lower()
+    software = any(name in renderer for name in _SOFTWARE_RASTERIZERS)
+    return "baked" if software and model.macs_per_evaluation <= BAKED_MAX_MACS else "texture"
+
+
 class NetworkRenderer:
     """Renders a model's BRDF slices and evaluates it at key vectors on the GPU (one fragment per value).
 
@@ -101,15 +161,31 @@ class NetworkRenderer:
         ctx: an OpenGL ≥ 4.3 context (see :mod:`viewer.context`).
         model: the trained network; validated and packed here.
         shader_root: folder of the GLSL files (default: the repository's ``shaders/``).
+        weights_path: ``texture`` (shaders/mlp.glsl reads the packed weight texture), ``baked`` (the
+            weights are literals in a generated mlp.glsl, :mod:`viewer.baked`: no weight texture and no
+            ``u_weights``/``u_layers``/activation uniforms) or ``auto`` (:func:`choose_weights_path`: baked
+            for nets up to :data:`BAKED_MAX_MACS` multiply-adds on a software rasterizer, else texture).
+            Both paths compute the same sums in float32; tests/test_baked.py ties them.
+
+    Attributes:
+        weights_path: the path chosen, ``texture`` or ``baked``.
     """
 
-    def __init__(self, ctx: moderngl.Context, model: ModelFile, shader_root: str | Path | None = None) -> None:
+    def __init__(self, ctx: moderngl.Context, model: ModelFile, shader_root: str | Path | None = None,
+                 weights_path: str = "auto") -> None:
         texture, layout = pack_texture(model)  # validates the model
         self.ctx = ctx
         self.model = model
         self.layout = layout
         self.defines = model_defines(model)
         self.shader_root = shader_root
+        self.weights_path = choose_weights_path(ctx, model, weights_path)
+        self._overrides: dict[str, GeneratedSource] = {}
+        if self.weights_path == "baked":
+            label = f"{'-'.join(map(str, model.layer_sizes))} {model.activation}"
+            self._overrides["mlp.glsl"] = GeneratedSource(f"<baked mlp.glsl: {label}>",
+                                                          baked_mlp_source(model, label))
+            texture = np.zeros((1, 1, 4), dtype=np.float32)  # a placeholder: the baked programs read no texture
         height, width = texture.shape[:2]
         self._weights = ctx.texture((width, height), 4, np.ascontiguousarray(texture).tobytes(), dtype="f4")
         self._weights.filter = (moderngl.NEAREST, moderngl.NEAREST)  # texelFetch ignores it; be explicit
@@ -126,11 +202,12 @@ class NetworkRenderer:
         for k, entry in enumerate(self.layout):
             layers[k, :3] = entry["row_offset"], entry["in_blocks"], entry["out_blocks"]
         model = self.model
-        _set(program, "u_weights", 0)
-        _set(program, "u_layer_count", len(self.layout))
-        _set(program, "u_layers", layers)
-        _set(program, "u_hidden_activation", _HIDDEN[model.activation])
-        _set(program, "u_output_activation", _OUTPUT[model.output_activation])
+        if self.weights_path == "texture":  # the baked mlp.glsl has the layout and activations in its code
+            _set(program, "u_weights", 0)
+            _set(program, "u_layer_count", len(self.layout))
+            _set(program, "u_layers", layers)
+            _set(program, "u_hidden_activation", _HIDDEN[model.activation])
+            _set(program, "u_output_activation", _OUTPUT[model.output_activation])
         _set(program, "u_scheme", _SCHEMES[model.scheme])
         _set(program, "u_frequencies", model.encoding.frequencies)
         _set(program, "u_t_frequencies", model.encoding.t_frequencies)
@@ -150,7 +227,7 @@ class NetworkRenderer:
                 _set(program, "u_xyz_to_linear_srgb", np.ascontiguousarray(matrix.T, dtype=np.float32))
                 _set(program, "u_xyz", 1)
             else:
-                program = compile_program(self.ctx, name, self.defines, self.shader_root)
+                program = compile_program(self.ctx, name, self.defines, self.shader_root, self._overrides)
                 self._model_uniforms(program)
                 if name == "evaluate_keys":
                     _set(program, "u_inputs", 1)
@@ -161,8 +238,10 @@ class NetworkRenderer:
 
     def use_weights(self, location: int = 0) -> None:
         """Bind the weight texture to texture unit ``location`` (the programs' ``u_weights`` reads unit 0),
-        for callers that draw a :meth:`program` with their own geometry (viewer.scene)."""
-        self._weights.use(location=location)
+        for callers that draw a :meth:`program` with their own geometry (viewer.scene); nothing to bind
+        on the baked path."""
+        if self.weights_path == "texture":
+            self._weights.use(location=location)
 
     def _draw(self, name: str, framebuffer: moderngl.Framebuffer,
               textures: tuple[tuple[moderngl.Texture, int], ...] = ()) -> None:
@@ -173,24 +252,117 @@ class NetworkRenderer:
         try:
             with scope:
                 framebuffer.use()  # the scope binds the framebuffer but leaves the viewport as it was
-                for texture, unit in ((self._weights, 0), *textures):
+                weights = ((self._weights, 0),) if self.weights_path == "texture" else ()
+                for texture, unit in (*weights, *textures):
                     texture.use(location=unit)
                 self._vertex_arrays[name].render(moderngl.TRIANGLES, vertices=3)
         finally:
             scope.release()
 
     # ---------------------------------------------------------------------------------------------
+    # Skipping work (issue 5: gratnet/bounds.py, shaders/skip.glsl)
+
+    # Class-level defaults: set lazily by the methods below (the constructor is not theirs to extend).
+    _output_bounds: OutputBounds | None = None
+    _skip_texture: moderngl.Texture | None = None
+    _skip_counters: moderngl.Buffer | None = None
+
+    def set_output_bounds(self, bounds: OutputBounds | None) -> None:
+        """Use ``bounds`` for skipping (``None``: the cached default of ``gratnet.bounds.output_bounds``,
+        computed on first use; tens of seconds for a shipped model unless precomputed)."""
+        if bounds is not None and not isinstance(bounds, OutputBounds):
+            raise GratNetError(f"expected gratnet.bounds.OutputBounds, got {type(bounds).__name__}")
+        self._output_bounds = bounds
+        if self._skip_texture is not None:
+            self._skip_texture.release()
+            self._skip_texture = None
+
+    @property
+    def output_bounds(self) -> OutputBounds:
+        """The bound table used for skipping (computed or read from the cache on first use)."""
+        if self._output_bounds is None:
+            self._output_bounds = output_bounds(self.model)
+        return self._output_bounds
+
+    def _skip_bound_texture(self, threshold: float) -> moderngl.Texture:
+        """The bound as an RGBA32F 3D texture (Cu, Cv, Ct); a 1-texel placeholder when skipping is off."""
+        if threshold <= 0.0:
+            if self._skip_texture is None:
+                placeholder = self.ctx.texture3d((1, 1, 1), 4, np.zeros(4, dtype=np.float32).tobytes(), dtype="f4")
+                placeholder.filter = (moderngl.NEAREST, moderngl.NEAREST)
+                return placeholder  # the caller releases it (not cached: a real bound may follow)
+            return self._skip_texture
+        if self._skip_texture is None:
+            bounds = self.output_bounds
+            cells = bounds.cells
+            data = np.zeros((*bounds.xyz.shape[:3], 4), dtype=np.float32)
+            data[..., :3] = bounds.xyz  # (Ct, Cv, Cu): texel (i, j, k) = cell (c_u i, c_v j, c_t k)
+            self._skip_texture = self.ctx.texture3d(cells, 4, data.tobytes(), dtype="f4")
+            self._skip_texture.filter = (moderngl.NEAREST, moderngl.NEAREST)
+        return self._skip_texture
+
+    def _skip_uniforms(self, program: moderngl.Program, skip_threshold: float | None
+                       ) -> tuple[moderngl.Texture, int, bool]:
+        """Set skip.glsl's uniforms on ``program``; returns ``(texture, unit, owned)`` for the bound texture
+        (``owned``: a placeholder the caller must release after drawing)."""
+        threshold = skip_threshold_value(skip_threshold)
+        owned = threshold <= 0.0 and self._skip_texture is None
+        texture = self._skip_bound_texture(threshold)
+        _set(program, "u_skip_threshold", threshold)
+        _set(program, "u_skip_bound", _SKIP_BOUND_UNIT)
+        matrix = display_skip_matrix()
+        _set(program, "u_skip_matrix", np.ascontiguousarray(matrix.T, dtype=np.float32))  # GLSL: column-major
+        return texture, _SKIP_BOUND_UNIT, owned
+
+    def counting_program(self, name: str) -> tuple[str, moderngl.Program]:
+        """``(key, program)``: program ``name`` compiled with ``COUNT_EVALUATIONS`` (atomic counters in an
+        SSBO; shaders/skip.glsl), cached under ``key`` beside :meth:`program`'s. For measurements only: the
+        atomics cost time, so time renders without it."""
+        key = name + _COUNTING_SUFFIX
+        if key not in self._programs:
+            self.program(name)  # compile errors surface from the plain program first
+            defines = {**self.defines, "COUNT_EVALUATIONS": 1, "SKIP_COUNTER_BINDING": _SKIP_COUNTER_BINDING}
+            program = compile_program(self.ctx, name, defines, self.shader_root, self._overrides)
+            self._model_uniforms(program)
+            self._programs[key] = program
+            self._vertex_arrays[key] = self.ctx.vertex_array(program, [])
+        return key, self._programs[key]
+
+    def _reset_counters(self) -> None:
+        if self._skip_counters is None:
+            self._skip_counters = self.ctx.buffer(reserve=4 * _SKIP_COUNTER_SLOTS)
+        self._skip_counters.write(np.zeros(_SKIP_COUNTER_SLOTS, dtype=np.uint32).tobytes())
+        self._skip_counters.bind_to_storage_buffer(_SKIP_COUNTER_BINDING)
+
+    def _read_counters(self, statistics: dict[str, int]) -> None:
+        assert self._skip_counters is not None
+        self.ctx.finish()
+        counts = np.frombuffer(self._skip_counters.read(), dtype=np.uint32)
+        statistics.clear()
+        statistics.update({key: int(counts[k]) for k, key in enumerate(STATISTICS_KEYS)})
+
+    # ---------------------------------------------------------------------------------------------
     # BRDF slices
 
     def render_brdf_slice_layers(
-        self, theta_deg: float, phi_deg: float, size: int, exposure: float = 1.0, ior: float | None = 1.5
+        self, theta_deg: float, phi_deg: float, size: int, exposure: float = 1.0, ior: float | None = 1.5,
+        skip_threshold: float | None = None, statistics: dict[str, int] | None = None,
     ) -> tuple[np.ndarray, np.ndarray]:
         """A BRDF slice (docs/physics.md "BRDF slice") and the network's XYZ behind it.
+
+        Args:
+            skip_threshold: exposed linear sRGB below which the display shows 0 (use
+                :data:`DISPLAY_SKIP_THRESHOLD` for 8-bit display output): the MLP is skipped (and the pixel
+                is 0) where the output bound (:attr:`output_bounds`) cannot reach it. ``None`` or 0: off,
+                the exact linear image (EXR, comparisons).
+            statistics: a dict to fill with the work counters (:data:`STATISTICS_KEYS`); renders with a
+                counting variant of the program (slower: time renders without it).
 
         Returns:
             ``(exposed, network)``, both ``float32`` ``(size, size, 3)`` with row 0 at the top (as
             ``gratnet.brdf.slice_view_directions``): ``exposed = exposure · A · XYZ`` (CIE XYZ, linear)
-            and ``network`` = XYZ at each pixel's key vector; both 0 outside the unit disc.
+            and ``network`` = XYZ at each pixel's key vector; both 0 outside the unit disc, and ``network``
+            is 0 where the MLP was skipped (A = 0, or by the bound).
         """
         if isinstance(size, bool) or not isinstance(size, (int, np.integer)) or not 1 <= size <= 16384:
             raise GratNetError(f"slice size must be an integer in 1 … 16384, got {size!r}")
@@ -198,7 +370,12 @@ class NetworkRenderer:
             raise GratNetError(
                 f"light angles and exposure must be finite, got {theta_deg!r}, {phi_deg!r}, {exposure!r}"
             )
-        program = self.program("brdf_slice")
+        name = "brdf_slice"
+        program = self.program(name)
+        if statistics is not None:
+            name, program = self.counting_program(name)
+            self._reset_counters()
+        bound, unit, owned = self._skip_uniforms(program, skip_threshold)
         _set(program, "u_size", int(size))
         _set(program, "u_light", tuple(float(c) for c in direction(theta_deg, phi_deg)))
         _set(program, "u_exposure", float(exposure))
@@ -206,7 +383,9 @@ class NetworkRenderer:
         targets = [self.ctx.texture((size, size), 4, dtype="f4") for _ in range(2)]
         framebuffer = self.ctx.framebuffer(color_attachments=targets)
         try:
-            self._draw("brdf_slice", framebuffer)
+            self._draw(name, framebuffer, ((bound, unit),))
+            if statistics is not None:
+                self._read_counters(statistics)
             images = [
                 np.frombuffer(framebuffer.read(components=4, dtype="f4", attachment=k), dtype=np.float32)
                 .reshape(size, size, 4)[::-1, :, :3]  # GL rows start at the bottom; ours at the top
@@ -217,18 +396,33 @@ class NetworkRenderer:
             framebuffer.release()
             for target in targets:
                 target.release()
+            if owned:
+                bound.release()
         return images[0], images[1]
 
     def render_brdf_slice(
-        self, theta_deg: float, phi_deg: float, size: int, exposure: float = 1.0, ior: float | None = 1.5
+        self, theta_deg: float, phi_deg: float, size: int, exposure: float = 1.0, ior: float | None = 1.5,
+        skip_threshold: float | None = None, statistics: dict[str, int] | None = None,
     ) -> np.ndarray:
         """Exposed CIE XYZ of a BRDF slice, ``float32`` ``(size, size, 3)``, row 0 at the top.
 
         The light is at polar angle ``theta_deg`` and azimuth ``phi_deg``; pixel ``(i, j)`` holds
         ``exposure · A(ωi, ωo) · XYZ(−(ωi + ωo))`` (eq. 5) for its view direction, 0 outside the disc.
-        ``ior`` is the Fresnel refractive index (``None`` or 0: no Fresnel).
+        ``ior`` is the Fresnel refractive index (``None`` or 0: no Fresnel). ``skip_threshold`` and
+        ``statistics``: see :meth:`render_brdf_slice_layers` (default: no skipping, exact linear values).
         """
-        return self.render_brdf_slice_layers(theta_deg, phi_deg, size, exposure, ior)[0]
+        return self.render_brdf_slice_layers(theta_deg, phi_deg, size, exposure, ior, skip_threshold,
+                                             statistics)[0]
+
+    def render_brdf_slice_srgb8(
+        self, theta_deg: float, phi_deg: float, size: int, exposure: float = 1.0, ior: float | None = 1.5,
+        skip_threshold: float | None = None, statistics: dict[str, int] | None = None,
+    ) -> np.ndarray:
+        """8-bit display sRGB ``(size, size, 3)`` of a BRDF slice (``gratnet.display``); with
+        ``skip_threshold=gratnet.bounds.DISPLAY_SKIP_THRESHOLD`` the MLP is skipped where the display would
+        show 0 (off by default: the first use per model builds its output bound, minutes on a CPU)."""
+        xyz = self.render_brdf_slice(theta_deg, phi_deg, size, exposure, ior, skip_threshold, statistics)
+        return xyz_to_display_srgb8(np.asarray(xyz, dtype=np.float64), 1.0)
 
     # ---------------------------------------------------------------------------------------------
     # Values at arbitrary inputs (program evaluate_keys)
@@ -365,5 +559,9 @@ class NetworkRenderer:
         for program in self._programs.values():
             program.release()
         self._weights.release()
+        for resource in (self._skip_texture, self._skip_counters):
+            if resource is not None:
+                resource.release()
+        self._skip_texture = self._skip_counters = None
         self._vertex_arrays.clear()
         self._programs.clear()

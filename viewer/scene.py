@@ -8,6 +8,14 @@ The output is **exposed CIE XYZ**, linear, ``float32`` ``(H, W, 3)`` with row 0 
 mesh does not cover are 0 (``render_rgba``'s alpha is the coverage, 1 or 0). The depth test is on, face
 culling off (back faces are covered but black).
 
+Work skipped (issue 5): a depth pre-pass (on by default) draws the mesh's depth first, so that the shading
+pass runs the network once per visible pixel (no overdraw); back faces and A = 0 never run it; with a
+``skip_threshold`` (:data:`~gratnet.bounds.DISPLAY_SKIP_THRESHOLD` for 8-bit display output, as
+``gratnet render --skip-dark`` passes) pixels whose output bound (``gratnet.bounds``) cannot reach the
+display's smallest step are 0 without running it. Nothing skips by default: exact linear values for EXR
+files and comparisons, and the bound costs minutes to build on first use per model (then it is cached).
+A ``statistics`` dict receives the work counters.
+
 The network's weight texture, the model uniforms and the shader defines are those of
 :class:`~viewer.renderer.NetworkRenderer`, which this class owns; its BRDF slices are available too.
 
@@ -34,7 +42,7 @@ from gratnet.errors import GratNetError
 from gratnet.modelfile import ModelFile
 from viewer.camera import Camera, Light
 from viewer.meshes import Mesh
-from viewer.renderer import NetworkRenderer, _ior_uniform, _set
+from viewer.renderer import NetworkRenderer, _ior_uniform, _set, skip_threshold_value
 
 __all__ = ["MAX_IMAGE_SIZE", "MeshBuffers", "SceneRenderer", "check_size"]
 
@@ -55,6 +63,12 @@ def check_size(size: object) -> tuple[int, int]:
         if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or not 1 <= value <= MAX_IMAGE_SIZE:
             raise GratNetError(f"image width and height must be integers in 1 … {MAX_IMAGE_SIZE}, got {size!r}")
     return int(width), int(height)
+
+
+def _color_masks(enabled: bool, attachments: int) -> object:
+    """moderngl 5's ``Framebuffer.color_mask`` value: one RGBA tuple, or a list of them for several attachments."""
+    mask = (enabled,) * 4
+    return mask if attachments == 1 else [mask] * attachments
 
 
 @dataclasses.dataclass(eq=False)
@@ -87,11 +101,14 @@ class SceneRenderer:
         ctx: an OpenGL ≥ 4.3 context (:func:`viewer.context.create_headless_context`).
         model: the trained network.
         shader_root: folder of the GLSL files (default: the repository's ``shaders/``).
+        weights_path: ``auto``, ``texture`` or ``baked``: where the shader reads the weights
+            (:class:`~viewer.renderer.NetworkRenderer`; the choice is ``self.network.weights_path``).
     """
 
-    def __init__(self, ctx: moderngl.Context, model: ModelFile, shader_root: str | Path | None = None) -> None:
+    def __init__(self, ctx: moderngl.Context, model: ModelFile, shader_root: str | Path | None = None,
+                 weights_path: str = "auto") -> None:
         self.ctx = ctx
-        self.network = NetworkRenderer(ctx, model, shader_root)
+        self.network = NetworkRenderer(ctx, model, shader_root, weights_path)
         self.model = model
 
     @property
@@ -117,14 +134,14 @@ class SceneRenderer:
         return MeshBuffers(mesh, buffers, index_buffer, vertex_array)
 
     def _set_uniforms(self, camera: Camera, light: Light, width: int, height: int, exposure: float,
-                      ior: float | None) -> None:
+                      ior: float | None, program: moderngl.Program | None = None) -> None:
         if not isinstance(camera, Camera):
             raise GratNetError(f"expected a viewer.camera.Camera, got {type(camera).__name__}")
         if not isinstance(light, Light):
             raise GratNetError(f"expected a viewer.camera.Light, got {type(light).__name__}")
         if not math.isfinite(exposure) or exposure < 0.0:
             raise GratNetError(f"exposure must be a finite number ≥ 0, got {exposure!r}")
-        program = self.program
+        program = self.program if program is None else program
         _set(program, "u_view_projection", np.ascontiguousarray(camera.view_projection(width / height)))
         _set(program, "u_eye", tuple(float(c) for c in camera.eye()))
         _set(program, "u_light_kind", _LIGHT_KINDS[light.kind])
@@ -135,7 +152,8 @@ class SceneRenderer:
 
     def render_layers(self, mesh: Mesh | MeshBuffers, camera: Camera, light: Light,
                       size: tuple[int, int] = (256, 256), exposure: float = 1.0,
-                      ior: float | None = 1.5) -> tuple[np.ndarray, np.ndarray]:
+                      ior: float | None = 1.5, *, skip_threshold: float | None = None, depth_prepass: bool = True,
+                      statistics: dict[str, int] | None = None) -> tuple[np.ndarray, np.ndarray]:
         """:meth:`render_rgba` and, per pixel, the key vector and the A-term behind it.
 
         Returns:
@@ -143,25 +161,47 @@ class SceneRenderer:
             :meth:`render_rgba`; ``key_a[..., :3]`` = ``−(ωi + ωo)`` in the tangent frame (float32, as the
             network saw it) and ``key_a[..., 3]`` = A(ωi, ωo); 0 for back faces and uncovered pixels.
         """
-        rgba, key_a = self._render(mesh, camera, light, size, exposure, ior, layers=2)
+        rgba, key_a = self._render(mesh, camera, light, size, exposure, ior, 2, skip_threshold, depth_prepass,
+                                   statistics)
         return rgba, key_a
 
     def render_rgba(self, mesh: Mesh | MeshBuffers, camera: Camera, light: Light, size: tuple[int, int] = (256, 256),
-                    exposure: float = 1.0, ior: float | None = 1.5) -> np.ndarray:
+                    exposure: float = 1.0, ior: float | None = 1.5, *, skip_threshold: float | None = None,
+                    depth_prepass: bool = True, statistics: dict[str, int] | None = None) -> np.ndarray:
         """Exposed CIE XYZ and coverage, ``float32`` ``(H, W, 4)``, row 0 at the top.
 
         Channels 0–2: ``exposure · irradiance · A(ωi, ωo) · XYZ(−(ωi + ωo))`` (physics.md eq. 5–7) with
         ωi, ωo in the tangent frame at the pixel's surface point; 0 for back faces, directions below the
         surface's horizon, and uncovered pixels. Channel 3: 1 where the mesh covers the pixel centre.
         ``ior`` is the Fresnel refractive index (``None`` or 0: no Fresnel).
+
+        ``skip_threshold``: exposed linear sRGB below which the display shows 0 (``DISPLAY_SKIP_THRESHOLD``
+        for 8-bit display output): the network is skipped (pixel 0) where its bound cannot reach it;
+        ``None``/0: off (exact). ``depth_prepass``: draw the depth first so each visible pixel runs the
+        network once (False: one shading pass, occluded fragments drawn earlier still run it).
+        ``statistics``: a dict to fill with the work counters (``viewer.renderer.STATISTICS_KEYS``), from a
+        counting variant of the program (slower: time renders without it).
         """
-        return self._render(mesh, camera, light, size, exposure, ior, layers=1)[0]
+        return self._render(mesh, camera, light, size, exposure, ior, 1, skip_threshold, depth_prepass,
+                            statistics)[0]
 
     def _render(self, mesh: Mesh | MeshBuffers, camera: Camera, light: Light, size: tuple[int, int],
-                exposure: float, ior: float | None, layers: int) -> list[np.ndarray]:
+                exposure: float, ior: float | None, layers: int, skip_threshold: float | None = None,
+                depth_prepass: bool = True, statistics: dict[str, int] | None = None) -> list[np.ndarray]:
         width, height = check_size(size)
-        self._set_uniforms(camera, light, width, height, float(exposure), ior)
+        skip_threshold_value(skip_threshold)  # check before any GL work
+        program = self.program
+        if statistics is not None:
+            _, program = self.network.counting_program(_PROGRAM)
+        self._set_uniforms(camera, light, width, height, float(exposure), ior, program)
+        bound, unit, owned = self.network._skip_uniforms(program, skip_threshold)
         uploaded = mesh if isinstance(mesh, MeshBuffers) else self.upload(mesh)
+        vertex_array = uploaded.vertex_array
+        if vertex_array is not None and program is not self.program:  # the counting variant: its own binding
+            content = [(uploaded.buffers[attribute], "3f", attribute) for attribute, _ in _ATTRIBUTES
+                       if attribute in program]
+            vertex_array = self.ctx.vertex_array(program, content, index_buffer=uploaded.index_buffer,
+                                                 index_element_size=4)
         targets = [self.ctx.texture((width, height), 4, dtype="f4") for _ in range(layers)]
         depth = self.ctx.depth_renderbuffer((width, height))
         framebuffer = self.ctx.framebuffer(color_attachments=targets, depth_attachment=depth)
@@ -171,9 +211,27 @@ class SceneRenderer:
             with scope:
                 framebuffer.use()  # the scope binds the framebuffer but leaves the viewport as it was
                 framebuffer.clear(0.0, 0.0, 0.0, 0.0, depth=1.0)
-                if uploaded.vertex_array is not None:
+                if statistics is not None:
+                    self.network._reset_counters()
+                if vertex_array is not None:
                     self.network.use_weights(0)
-                    uploaded.vertex_array.render(moderngl.TRIANGLES)
+                    bound.use(location=unit)
+                    if depth_prepass:
+                        # Pass 1: depth only (the shader returns at once; colour writes masked). Pass 2: the
+                        # same program and vertices give bit-identical depths, so LEQUAL passes exactly the
+                        # visible surface and early fragment tests stop every other fragment before the MLP.
+                        _set(program, "u_depth_only", True)
+                        framebuffer.color_mask = _color_masks(False, layers)
+                        vertex_array.render(moderngl.TRIANGLES)
+                        framebuffer.color_mask = _color_masks(True, layers)
+                        self.ctx.depth_func = "<="
+                    _set(program, "u_depth_only", False)
+                    try:
+                        vertex_array.render(moderngl.TRIANGLES)
+                    finally:
+                        self.ctx.depth_func = "<"  # moderngl's default
+                if statistics is not None:
+                    self.network._read_counters(statistics)
                 data = [framebuffer.read(components=4, dtype="f4", attachment=k) for k in range(layers)]
         finally:
             scope.release()
@@ -181,20 +239,39 @@ class SceneRenderer:
             depth.release()
             for target in targets:
                 target.release()
+            if owned:
+                bound.release()
+            if vertex_array is not None and vertex_array is not uploaded.vertex_array:
+                vertex_array.release()
             if uploaded is not mesh:
                 uploaded.release()
         # GL rows start at the bottom; ours at the top.
         return [np.frombuffer(layer, dtype=np.float32).reshape(height, width, 4)[::-1].copy() for layer in data]
 
     def render(self, mesh: Mesh | MeshBuffers, camera: Camera, light: Light, size: tuple[int, int] = (256, 256),
-               exposure: float = 1.0, ior: float | None = 1.5) -> np.ndarray:
+               exposure: float = 1.0, ior: float | None = 1.5, *, skip_threshold: float | None = None,
+               depth_prepass: bool = True, statistics: dict[str, int] | None = None) -> np.ndarray:
         """Exposed CIE XYZ, ``float32`` ``(H, W, 3)``, row 0 at the top (see :meth:`render_rgba`)."""
-        return np.ascontiguousarray(self.render_rgba(mesh, camera, light, size, exposure, ior)[..., :3])
+        rgba = self.render_rgba(mesh, camera, light, size, exposure, ior, skip_threshold=skip_threshold,
+                                depth_prepass=depth_prepass, statistics=statistics)
+        return np.ascontiguousarray(rgba[..., :3])
+
+    def render_srgb8(self, mesh: Mesh | MeshBuffers, camera: Camera, light: Light,
+                     size: tuple[int, int] = (256, 256), exposure: float = 1.0, ior: float | None = 1.5, *,
+                     skip_threshold: float | None = None, depth_prepass: bool = True,
+                     statistics: dict[str, int] | None = None) -> np.ndarray:
+        """8-bit display sRGB ``(H, W, 3)`` (``gratnet.display``) of :meth:`render`; with
+        ``skip_threshold=gratnet.bounds.DISPLAY_SKIP_THRESHOLD`` the network is skipped where the display
+        would show 0 (off by default: the first use per model builds its output bound, minutes on a CPU)."""
+        xyz = self.render(mesh, camera, light, size, exposure, ior, skip_threshold=skip_threshold,
+                          depth_prepass=depth_prepass, statistics=statistics)
+        return self.display_srgb8(xyz)
 
     def render_brdf_slice(self, theta_deg: float, phi_deg: float, size: int, exposure: float = 1.0,
-                          ior: float | None = 1.5) -> np.ndarray:
+                          ior: float | None = 1.5, skip_threshold: float | None = None,
+                          statistics: dict[str, int] | None = None) -> np.ndarray:
         """The network's BRDF slice (``NetworkRenderer.render_brdf_slice``): exposed XYZ ``(size, size, 3)``."""
-        return self.network.render_brdf_slice(theta_deg, phi_deg, size, exposure, ior)
+        return self.network.render_brdf_slice(theta_deg, phi_deg, size, exposure, ior, skip_threshold, statistics)
 
     # ---------------------------------------------------------------------------------------------
     # Display (gratnet.display: the same numbers as every other PNG GratNet writes)
