@@ -20,6 +20,8 @@ for name in "${materials[@]}"; do
     mkdir -p "assets/$name"
     cp "$run"/{model.npz,model.config.json,metrics.json,report.md,history.json,brdf_slices.png} "assets/$name/"
     # Held-out volume slices exist only when slices were held out (not with --split all).
-    if [ -f "$run/volume_slices.png" ]; then cp "$run/volume_slices.png" "assets/$name/"; fi
+    # A stale figure from an earlier held-out run must not stay beside a model that had none.
+    if [ -f "$run/volume_slices.png" ]; then cp "$run/volume_slices.png" "assets/$name/"
+    else rm -f "assets/$name/volume_slices.png"; fi
     echo "shipped assets/$name"
 done
