@@ -93,3 +93,19 @@ def test_markdown_table_has_one_row_per_result():
     lines = table.strip().splitlines()
     assert len(lines) == 4 and lines[0].count("|") == lines[1].count("|") == lines[2].count("|")
     assert "| 1001² |" in lines[3] and "| 20 |" in lines[2] and "| — |" in lines[2]
+
+
+def test_paper_size_comparison_names_the_cheapest_model_at_or_below_the_paper_sizes_error():
+    from trainer.bench import paper_size_comparison
+
+    def row(model, hidden, macs, flip, material="blazed"):
+        return {"model": model, "layer_sizes": [163, *hidden, 3], "macs_per_pixel": macs, "flip_mean": flip,
+                "material": material}
+
+    paper = (464, 288, 176)
+    results = [row("paper", paper, 290000, 0.010), row("tiny", (21,), 4000, 0.030), row("funnel", (176,), 60000, 0.009),
+               row("medium", (280,), 79000, 0.008), row("other", paper, 290000, 0.02, material="cd")]
+    lines = paper_size_comparison(results, paper)
+    assert len(lines) == 2
+    assert "cheapest model at or below that error is funnel (60,000 MACs/pixel, 20.7% of it" in lines[0]
+    assert lines[1].startswith("- cd:") and "is other" in lines[1]  # only itself matches on the cd

@@ -316,6 +316,24 @@ def markdown_table(results: list[dict[str, Any]]) -> str:
     return "\n".join(lines) + "\n"
 
 
+def paper_size_comparison(results: list[dict[str, Any]], paper_hidden: tuple[int, ...]) -> list[str]:
+    """Per material with a paper-default-size model: the cheapest model whose mean FLIP is at most the paper
+    size's, and its multiply-adds as a fraction of the paper size's (the issue's target: ≤ 1/4)."""
+    lines = []
+    models = {row["model"]: row for row in results if row["flip_mean"] is not None}
+    for paper in [row for row in models.values() if tuple(row["layer_sizes"][1:-1]) == paper_hidden]:
+        same = [row for row in models.values() if row["material"] == paper["material"]]
+        matching = sorted((row for row in same if row["flip_mean"] <= paper["flip_mean"]),
+                          key=lambda row: row["macs_per_pixel"])
+        best = matching[0]
+        lines.append(
+            f"- {paper['material']}: the paper-default size ({paper['model']}, {paper['macs_per_pixel']:,} MACs/pixel) "
+            f"has mean FLIP {paper['flip_mean']:.4f}; the cheapest model at or below that error is {best['model']} "
+            f"({best['macs_per_pixel']:,} MACs/pixel, {best['macs_per_pixel'] / paper['macs_per_pixel']:.1%} of it, "
+            f"mean FLIP {best['flip_mean']:.4f}).")
+    return lines
+
+
 def plot_pareto(results: list[dict[str, Any]], output: Path) -> None:
     """Mean FLIP against shader time per frame, one panel per size, the front of each marked; atomic PNG."""
     import matplotlib
@@ -364,5 +382,9 @@ def write_outputs(results: list[dict[str, Any]], out_dir: Path) -> None:
 
     write_text_atomic(out_dir / "bench.json", json.dumps(json.loads(strict_json(results, "bench results")), indent=1)
                       + "\n")
-    write_text_atomic(out_dir / "bench.md", markdown_table(results))
+    from trainer.model import funnel_sizes
+
+    summary = paper_size_comparison(results, tuple(funnel_sizes(464)))
+    write_text_atomic(out_dir / "bench.md", markdown_table(results) + ("\n" + "\n".join(summary) + "\n" if summary
+                                                                      else ""))
     plot_pareto(results, out_dir / "pareto.png")
