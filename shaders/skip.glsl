@@ -1,8 +1,8 @@
 // Skipping the MLP where it cannot change the displayed pixel, and counting the work done (issue 5).
 //
 // Bound: u_skip_bound holds, per coarse cell of network coordinates (c_u, c_v, c_t) (docs/physics.md
-// eq. 6), an upper bound of the network's CIE XYZ (gratnet/bounds.py: sampled on a grid at least as fine
-// as the training grid, dilated by a cell, with a safety margin; validated by measurement, not a proof).
+// eq. 6), an upper bound of the network's CIE XYZ (gratnet/bounds.py: sampled on a grid twice as fine
+// as the training grid, dilated by a cell, with safety margins; validated by measurement, not a proof).
 // A pixel whose exposed linear sRGB scale * (M+ . bound) is below u_skip_threshold in every channel
 // (M+: the positive part of the CIE XYZ -> linear sRGB matrix, so M . xyz <= M+ . bound for 0 <= xyz <=
 // bound) shows display sRGB 0 whatever the network says, so the MLP is skipped and the pixel is 0.
