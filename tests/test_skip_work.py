@@ -53,7 +53,7 @@ def cd_model() -> ModelFile:
 @pytest.fixture(scope="module")
 def cd_bounds(cd_model: ModelFile) -> OutputBounds:
     # The training grid itself (not the default 2×): a quarter of the time, and the CD passes it too.
-    return output_bounds(cd_model, BoundParameters(resolution=1001, cells_uv=128), progress=False)
+    return compute_output_bounds(cd_model, BoundParameters(resolution=1001, cells_uv=128), progress=False)
 
 
 def _texture_path(factory: type) -> dict[str, str]:
