@@ -353,10 +353,14 @@ def plot_pareto(results: list[dict[str, Any]], output: Path) -> None:
                 axis.annotate(f"{row['model']} ({row['macs_per_pixel'] / 1e3:.1f}k MAC)",
                               (row["seconds"] * 1e3, row["flip_mean"]), fontsize=7, xytext=(4, 3),
                               textcoords="offset points")
-        if rows:
-            front = [rows[index] for index in pareto_front([(row["seconds"], row["flip_mean"]) for row in rows])]
+        # Errors of different materials are not comparable: one front per material with several models.
+        for material in sorted({row["material"] for row in rows}):
+            same = [row for row in rows if row["material"] == material]
+            if len(same) < 2:
+                continue
+            front = [same[index] for index in pareto_front([(row["seconds"], row["flip_mean"]) for row in same])]
             axis.step([row["seconds"] * 1e3 for row in front], [row["flip_mean"] for row in front], where="post",
-                      color="grey", linestyle="--", label="Pareto front", zorder=2)
+                      linestyle="--", label=f"Pareto front, {material}", zorder=2)
         if rows:
             axis.set_xscale("log")
             axis.set_yscale("log")
