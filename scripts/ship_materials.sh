@@ -15,6 +15,7 @@ for name in "${materials[@]}"; do
             --preview-slice 5
     fi
     run="out/runs/$name"
+    rm -f "$run/volume_slices.png"  # the evaluation writes it again only when slices are held out
     # shellcheck disable=SC2086
     gratnet train "$volume" --out "$run" ${TRAIN_FLAGS:-} --cache-dir out/cache
     mkdir -p "assets/$name"
