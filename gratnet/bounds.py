@@ -92,7 +92,7 @@ class BoundParameters:
             range transform: covers the dark cells, where a multiplicative margin on a bound of ~0 is ~0.
     """
 
-    cells_uv: int = 256
+    cells_uv: int = 512
     t_cells: int | None = None
     resolution: int | None = None
     uv_oversample: int = 2
