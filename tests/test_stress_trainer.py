@@ -46,7 +46,8 @@ from trainer.train_config import TrainConfig
 KINDS = ("power-log", "log", "log1p")
 SCHEMES = ("regular", "simple", "simple-max")
 FLOOR = 2.0**-48  # eq. 7: x ≤ 2^-48 maps to y = 0
-PROPERTY = settings(max_examples=60, deadline=None)
+# Derandomized: CI runs the same 60 examples each time (reproducible); set derandomize=False to explore more.
+PROPERTY = settings(max_examples=60, deadline=None, derandomize=True)
 
 ratios = st.one_of(
     st.floats(min_value=0.0, max_value=4.0, allow_nan=False),
@@ -198,7 +199,11 @@ def test_encoding_is_finite_and_numpy_equals_torch(coordinates, scheme, frequenc
     numpy_result = encode(network_coordinates(u, v, w, scheme), spec)
     torch_result = encode(network_coordinates(*(torch.tensor(a) for a in (u, v, w)), scheme), spec).numpy()
     assert numpy_result.shape == (1, spec.features) and np.all(np.isfinite(numpy_result))
-    np.testing.assert_allclose(torch_result, numpy_result, rtol=1e-12, atol=1e-12)
+    # sin/cos of a phase φ agree between two libms to about 1e-16·|φ|; the phases here reach ~1e7 rad for
+    # keys far outside the physical range (|u|, |v| ≤ 2), so the tolerance scales with the largest phase.
+    largest_coordinate = 2.0 * float(np.max(np.abs(network_coordinates(u, v, w, scheme))))  # c_u + c_v doubles it
+    largest_phase = largest_coordinate * np.pi * spec.scale ** (frequencies - 1)
+    np.testing.assert_allclose(torch_result, numpy_result, rtol=1e-12, atol=1e-12 + 1e-15 * largest_phase)
     assert np.all(np.abs(numpy_result[0, 3:]) <= 1.0)
 
 
