@@ -192,6 +192,13 @@ class NetworkRenderer:
         self._weights.repeat_x = self._weights.repeat_y = False
         self._programs: dict[str, moderngl.Program] = {}
         self._vertex_arrays: dict[str, moderngl.VertexArray] = {}
+        # Skipping work (gratnet/bounds.py, shaders/skip.glsl): the bound table and the counters are made on
+        # first use; the 1-texel placeholder is bound when skipping is off (the sampler must read something).
+        self._output_bounds: OutputBounds | None = None
+        self._skip_texture: moderngl.Texture | None = None
+        self._skip_counters: moderngl.Buffer | None = None
+        self._skip_placeholder = ctx.texture3d((1, 1, 1), 4, np.zeros(4, dtype=np.float32).tobytes(), dtype="f4")
+        self._skip_placeholder.filter = (moderngl.NEAREST, moderngl.NEAREST)
 
     # ---------------------------------------------------------------------------------------------
     # Programs
@@ -262,11 +269,6 @@ class NetworkRenderer:
     # ---------------------------------------------------------------------------------------------
     # Skipping work (issue 5: gratnet/bounds.py, shaders/skip.glsl)
 
-    # Class-level defaults: set lazily by the methods below (the constructor is not theirs to extend).
-    _output_bounds: OutputBounds | None = None
-    _skip_texture: moderngl.Texture | None = None
-    _skip_counters: moderngl.Buffer | None = None
-
     def set_output_bounds(self, bounds: OutputBounds | None) -> None:
         """Use ``bounds`` for skipping (``None``: the cached default of ``gratnet.bounds.output_bounds``,
         computed on first use; tens of seconds for a shipped model unless precomputed)."""
@@ -287,11 +289,7 @@ class NetworkRenderer:
     def _skip_bound_texture(self, threshold: float) -> moderngl.Texture:
         """The bound as an RGBA32F 3D texture (Cu, Cv, Ct); a 1-texel placeholder when skipping is off."""
         if threshold <= 0.0:
-            if self._skip_texture is None:
-                placeholder = self.ctx.texture3d((1, 1, 1), 4, np.zeros(4, dtype=np.float32).tobytes(), dtype="f4")
-                placeholder.filter = (moderngl.NEAREST, moderngl.NEAREST)
-                return placeholder  # the caller releases it (not cached: a real bound may follow)
-            return self._skip_texture
+            return self._skip_placeholder
         if self._skip_texture is None:
             bounds = self.output_bounds
             cells = bounds.cells
@@ -302,17 +300,15 @@ class NetworkRenderer:
         return self._skip_texture
 
     def _skip_uniforms(self, program: moderngl.Program, skip_threshold: float | None
-                       ) -> tuple[moderngl.Texture, int, bool]:
-        """Set skip.glsl's uniforms on ``program``; returns ``(texture, unit, owned)`` for the bound texture
-        (``owned``: a placeholder the caller must release after drawing)."""
+                       ) -> tuple[moderngl.Texture, int]:
+        """Set skip.glsl's uniforms on ``program``; returns ``(texture, unit)`` of the bound to bind."""
         threshold = skip_threshold_value(skip_threshold)
-        owned = threshold <= 0.0 and self._skip_texture is None
         texture = self._skip_bound_texture(threshold)
         _set(program, "u_skip_threshold", threshold)
         _set(program, "u_skip_bound", _SKIP_BOUND_UNIT)
         matrix = display_skip_matrix()
         _set(program, "u_skip_matrix", np.ascontiguousarray(matrix.T, dtype=np.float32))  # GLSL: column-major
-        return texture, _SKIP_BOUND_UNIT, owned
+        return texture, _SKIP_BOUND_UNIT
 
     def counting_program(self, name: str) -> tuple[str, moderngl.Program]:
         """``(key, program)``: program ``name`` compiled with ``COUNT_EVALUATIONS`` (atomic counters in an
@@ -375,7 +371,7 @@ class NetworkRenderer:
         if statistics is not None:
             name, program = self.counting_program(name)
             self._reset_counters()
-        bound, unit, owned = self._skip_uniforms(program, skip_threshold)
+        bound, unit = self._skip_uniforms(program, skip_threshold)
         _set(program, "u_size", int(size))
         _set(program, "u_light", tuple(float(c) for c in direction(theta_deg, phi_deg)))
         _set(program, "u_exposure", float(exposure))
@@ -396,8 +392,6 @@ class NetworkRenderer:
             framebuffer.release()
             for target in targets:
                 target.release()
-            if owned:
-                bound.release()
         return images[0], images[1]
 
     def render_brdf_slice(
@@ -559,6 +553,7 @@ class NetworkRenderer:
         for program in self._programs.values():
             program.release()
         self._weights.release()
+        self._skip_placeholder.release()
         for resource in (self._skip_texture, self._skip_counters):
             if resource is not None:
                 resource.release()

@@ -194,7 +194,7 @@ class SceneRenderer:
         if statistics is not None:
             _, program = self.network.counting_program(_PROGRAM)
         self._set_uniforms(camera, light, width, height, float(exposure), ior, program)
-        bound, unit, owned = self.network._skip_uniforms(program, skip_threshold)
+        bound, unit = self.network._skip_uniforms(program, skip_threshold)
         uploaded = mesh if isinstance(mesh, MeshBuffers) else self.upload(mesh)
         vertex_array = uploaded.vertex_array
         if vertex_array is not None and program is not self.program:  # the counting variant: its own binding
@@ -239,8 +239,6 @@ class SceneRenderer:
             depth.release()
             for target in targets:
                 target.release()
-            if owned:
-                bound.release()
             if vertex_array is not None and vertex_array is not uploaded.vertex_array:
                 vertex_array.release()
             if uploaded is not mesh:
