@@ -52,7 +52,7 @@ import numpy as np
 from gratnet.atomic import atomic_path
 from gratnet.encoding import encode, range_inverse
 from gratnet.errors import GratNetError
-from gratnet.modelfile import LEAKY_RELU_SLOPE, ModelFile, load_model, mlp_forward
+from gratnet.modelfile import ModelFile, _hidden_activation, _output_activation, load_model, mlp_forward
 
 __all__ = [
     "DISPLAY_SKIP_THRESHOLD",
@@ -176,23 +176,6 @@ def display_skip_matrix() -> np.ndarray:
 # Computing
 
 
-def _activation(x: np.ndarray, name: str) -> np.ndarray:
-    if name == "relu":
-        return np.maximum(x, 0.0)
-    if name == "leaky_relu":
-        return np.where(x > 0.0, x, x * np.float32(LEAKY_RELU_SLOPE))
-    # silu x·σ(x) = x / (1 + e^−x); clip the exponent so float32 never overflows
-    return x / (1.0 + np.exp(-np.clip(x, -80.0, 80.0)))
-
-
-def _output(x: np.ndarray, name: str) -> np.ndarray:
-    if name == "clamp":
-        return np.clip(x, 0.0, 1.0)
-    if name == "sigmoid":
-        return 1.0 / (1.0 + np.exp(-np.clip(x, -80.0, 80.0)))
-    return x
-
-
 def _first_layer_tables(model: ModelFile, grid: np.ndarray, t_grid: np.ndarray) -> dict[str, np.ndarray]:
     """The first layer, split by coordinate: eq. 6's features of c_u, c_v, c_u + c_v, c_u − c_v and c_t each
     depend on one grid index (i, j, i + j, i − j, k), so W0 · features = U[i] + V[j] + S[i+j] + D[i−j] + T[k]."""
@@ -268,11 +251,12 @@ def compute_output_bounds(model: ModelFile, parameters: BoundParameters | None =
         i = np.arange(start, min(start + rows_per_batch, resolution))
         x = (tables["u"][i][:, None, :] + tables["v"][None, :, :] + tables["sum"][i[:, None] + j[None, :]]
              + tables["difference"][i[:, None] - j[None, :] + resolution - 1] + tables["t"][k][None, None, :])
-        x = _activation(x.reshape(-1, x.shape[-1]), model.activation)
+        x = _hidden_activation(x.reshape(-1, x.shape[-1]), model.activation)
         last = len(weights) - 1
         for layer, (weight, bias) in enumerate(zip(weights, biases, strict=True)):
             x = x @ weight + bias
-            x = _output(x, model.output_activation) if layer == last else _activation(x, model.activation)
+            x = (_output_activation(x, model.output_activation) if layer == last
+                 else _hidden_activation(x, model.activation))
         y = x.reshape(i.size, resolution, 3)
         row_max[k, i] = np.maximum.reduceat(y, v_starts, axis=1)
     cell_max = np.maximum.reduceat(row_max, u_starts, axis=1)  # (t_samples, Cu, Cv, 3)
