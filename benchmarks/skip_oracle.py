@@ -33,16 +33,6 @@ from trainer.loaders import load_heightfield
 ASSETS = Path(__file__).resolve().parents[1] / "assets"
 
 
-def _optics(metadata: dict) -> OpticsConfig:
-    """The optics of the model's source volume (as gratnet train's evaluation uses them)."""
-    wavelengths = metadata["wavelengths_nm"]
-    sigma = float(metadata["sigma_s_um"])
-    return OpticsConfig(sigma_s_um=sigma, window_extent_sigmas=float(metadata["window_extent_um"]) / sigma,
-                        repeat=metadata.get("repeat", "periodic"), wavelength_start_nm=float(wavelengths[0]),
-                        wavelength_end_nm=float(wavelengths[-1]),
-                        wavelength_step_nm=float(wavelengths[1] - wavelengths[0]))
-
-
 def lit_fraction(xyz: np.ndarray, inside: np.ndarray) -> float:
     """Fraction of the disc's pixels whose 8-bit display sRGB is above 0 in some channel."""
     return float((xyz_to_display_srgb8(np.asarray(xyz, dtype=np.float64), 1.0).max(axis=-1) > 0)[inside].mean())
@@ -60,7 +50,7 @@ def main() -> None:
         model = load_model(model_path)
         volume = model.metadata["volume"]
         field = load_heightfield(volume["source"])
-        optics = _optics(volume)
+        optics = OpticsConfig.from_volume_metadata(volume)
         for theta, phi, exposure in STANDARD_SLICES:
             config = SliceConfig(theta, phi, size=arguments.size, exposure=exposure, ior=1.5)
             truth = ground_truth_brdf_slice(field, optics, config, arguments.cache_dir, progress=False)

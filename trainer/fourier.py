@@ -72,6 +72,22 @@ class OpticsConfig:
         """Width of the integration patch (µm)."""
         return self.sigma_s_um * self.window_extent_sigmas
 
+    @classmethod
+    def from_volume_metadata(cls, metadata: dict) -> OpticsConfig:
+        """The optics a volume (or a model's ``metadata["volume"]``) was computed with, so that ground truth
+        computed later (BRDF slices for evaluation) matches it; missing entries take the defaults."""
+        defaults = cls()
+        wavelengths = metadata.get("wavelengths_nm") or [defaults.wavelength_start_nm, defaults.wavelength_end_nm]
+        sigma = float(metadata.get("sigma_s_um") or defaults.sigma_s_um)
+        return cls(
+            sigma_s_um=sigma,
+            window_extent_sigmas=float(metadata.get("window_extent_um") or 6 * sigma) / sigma,
+            repeat=metadata.get("repeat") or "periodic",
+            wavelength_start_nm=float(wavelengths[0]),
+            wavelength_end_nm=float(wavelengths[-1]),
+            wavelength_step_nm=float(wavelengths[1] - wavelengths[0]) if len(wavelengths) > 1 else 5.0,
+        )
+
 
 @dataclasses.dataclass(frozen=True, eq=False)
 class PreparedSurface:

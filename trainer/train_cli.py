@@ -70,17 +70,7 @@ def _ground_truth_inputs(arguments: argparse.Namespace, volume_metadata: dict[st
         )
         return None, None
     field = load_heightfield(spec, from_arguments(LoadOptions, arguments))
-    wavelengths = volume_metadata.get("wavelengths_nm") or [380.0, 780.0]
-    sigma = float(volume_metadata.get("sigma_s_um") or OpticsConfig().sigma_s_um)
-    optics = OpticsConfig(
-        sigma_s_um=sigma,
-        window_extent_sigmas=float(volume_metadata.get("window_extent_um") or 6 * sigma) / sigma,
-        repeat=volume_metadata.get("repeat") or "periodic",
-        wavelength_start_nm=float(wavelengths[0]),
-        wavelength_end_nm=float(wavelengths[-1]),
-        wavelength_step_nm=float(wavelengths[1] - wavelengths[0]) if len(wavelengths) > 1 else 5.0,
-    )
-    return field, optics
+    return field, OpticsConfig.from_volume_metadata(volume_metadata)
 
 
 def _slice_list(text: str, what: str) -> list[int]:
