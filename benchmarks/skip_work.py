@@ -24,7 +24,6 @@ from __future__ import annotations
 
 import argparse
 import glob
-import inspect
 import json
 import statistics as stats
 import sys
@@ -87,12 +86,11 @@ def run_model(ctx: Any, path: str, slice_size: int, disc_size: tuple[int, int], 
     start = time.perf_counter()
     bounds = output_bounds(model, BoundParameters(cells_uv=cells))
     bound_seconds = time.perf_counter() - start
-    keywords = {"weights_path": weights_path} if "weights_path" in inspect.signature(SceneRenderer).parameters else {}
     rows = []
-    with SceneRenderer(ctx, model, **keywords) as scene:
+    with SceneRenderer(ctx, model, weights_path=weights_path) as scene:
         network = scene.network
         network.set_output_bounds(bounds)
-        chosen = getattr(network, "weights_path", "texture")
+        chosen = network.weights_path
         # The CD disc of scripts/main.sh.
         camera = Camera(*DISC_CAMERA)
         light = Light.directional(*DISC_LIGHT)

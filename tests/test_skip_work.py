@@ -8,7 +8,6 @@ about two minutes once).
 
 from __future__ import annotations
 
-import inspect
 import math
 from pathlib import Path
 
@@ -56,9 +55,8 @@ def cd_bounds(cd_model: ModelFile) -> OutputBounds:
     return compute_output_bounds(cd_model, BoundParameters(resolution=1001, cells_uv=128), progress=False)
 
 
-def _texture_path(factory: type) -> dict[str, str]:
-    """``weights_path="texture"`` where the renderer takes it: compiles in seconds, not minutes."""
-    return {"weights_path": "texture"} if "weights_path" in inspect.signature(factory).parameters else {}
+# The texture weight path: compiles in seconds, where a baked shader can take minutes.
+TEXTURE = "texture"
 
 
 def _srgb8(xyz: np.ndarray) -> np.ndarray:
@@ -126,7 +124,7 @@ def test_display_skip_matrix_bounds_every_channel():
 def test_slice_skipping_keeps_the_display_and_saves_evaluations(ctx, cd_model, cd_bounds):
     from viewer.renderer import NetworkRenderer
 
-    with NetworkRenderer(ctx, cd_model, **_texture_path(NetworkRenderer)) as renderer:
+    with NetworkRenderer(ctx, cd_model, weights_path=TEXTURE) as renderer:
         renderer.set_output_bounds(cd_bounds)
         counts_off: dict[str, int] = {}
         counts_on: dict[str, int] = {}
@@ -149,7 +147,7 @@ def test_slice_skipping_keeps_the_display_and_saves_evaluations(ctx, cd_model, c
 def test_slice_with_the_light_below_the_horizon_evaluates_nothing(ctx):
     from viewer.renderer import NetworkRenderer
 
-    with NetworkRenderer(ctx, tiny_model(), **_texture_path(NetworkRenderer)) as renderer:
+    with NetworkRenderer(ctx, tiny_model(), weights_path=TEXTURE) as renderer:
         counts: dict[str, int] = {}
         image = renderer.render_brdf_slice(100.0, 30.0, 32, 1.0, statistics=counts)
     assert np.all(image == 0.0)
@@ -160,7 +158,7 @@ def test_skip_threshold_is_checked(ctx):
     from gratnet.errors import GratNetError
     from viewer.renderer import NetworkRenderer
 
-    with NetworkRenderer(ctx, tiny_model(), **_texture_path(NetworkRenderer)) as renderer:
+    with NetworkRenderer(ctx, tiny_model(), weights_path=TEXTURE) as renderer:
         for bad in (-1.0, math.nan, math.inf):
             with pytest.raises(GratNetError, match="skip threshold"):
                 renderer.render_brdf_slice(0.0, 0.0, 8, 1.0, skip_threshold=bad)
@@ -173,7 +171,7 @@ def test_skip_threshold_is_checked(ctx):
 def _scene(ctx, model):
     from viewer.scene import SceneRenderer
 
-    return SceneRenderer(ctx, model, **_texture_path(SceneRenderer))
+    return SceneRenderer(ctx, model, weights_path=TEXTURE)
 
 
 def _two_planes():
