@@ -248,21 +248,21 @@ def run_bench(ctx: Any, entries: list[ModelEntry], config: BenchConfig, progress
     paths = config.path_list()
     devices = _torch_devices(config)
     gl_device = str(ctx.info.get("GL_RENDERER", "unknown"))
+    keys = {size: _slice_keys(config, size) for size in sizes}  # the same view for every model
     results: list[dict[str, Any]] = []
     for entry in tqdm(entries, desc="bench", unit="model", disable=not progress):
         macs = entry.model.macs_per_evaluation
         torch_rows = {}
         for size in sizes:
-            keys = _slice_keys(config, size)
             for device in devices:
-                torch_rows[size, device] = torch_throughput(entry.model, keys, device, config.repeats,
+                torch_rows[size, device] = torch_throughput(entry.model, keys[size], device, config.repeats,
                                                             config.max_seconds, config.torch_threads)
         for path in paths:
             if path == "baked" and macs > config.baked_max_macs:
                 continue
             for row in _shader_throughput(ctx, entry, path, config, sizes):
                 size = row["size"]
-                pixels = int(_slice_keys(config, size).shape[0])
+                pixels = int(keys[size].shape[0])
                 gmacs = macs * pixels / row["seconds"] / 1e9
                 result = {
                     "model": entry.label, "material": entry.material, "path": str(entry.path),
