@@ -76,7 +76,7 @@ def _compare(name: str, baseline: np.ndarray, skipped: np.ndarray, counts: tuple
 
 
 def run_model(ctx: Any, path: str, slice_size: int, disc_size: tuple[int, int], repeats: int, weights_path: str,
-              cells: int) -> list[dict[str, Any]]:
+              parameters: BoundParameters) -> list[dict[str, Any]]:
     from trainer.evaluate import STANDARD_SLICES
     from viewer.camera import Camera, Light
     from viewer.meshes import compact_disc
@@ -84,7 +84,7 @@ def run_model(ctx: Any, path: str, slice_size: int, disc_size: tuple[int, int], 
 
     model = load_model(path)
     start = time.perf_counter()
-    bounds = output_bounds(model, BoundParameters(cells_uv=cells))
+    bounds = output_bounds(model, parameters)
     bound_seconds = time.perf_counter() - start
     rows = []
     with SceneRenderer(ctx, model, weights_path=weights_path) as scene:
@@ -130,6 +130,7 @@ def run_model(ctx: Any, path: str, slice_size: int, disc_size: tuple[int, int], 
                                  inside))
     for row in rows:
         row.update({"model": path, "weights_path": chosen, "bound_cells": list(bounds.cells),
+                    "bound_dilation": parameters.dilation, "bound_margin_bits": parameters.margin_bits,
                     "bound_seconds": round(bound_seconds, 2)})
     return rows
 
@@ -166,6 +167,10 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--repeats", type=int, default=3, help="timed renders per configuration (median)")
     parser.add_argument("--weights-path", default="auto", choices=("auto", "texture", "baked"))
     parser.add_argument("--cells", type=int, default=BoundParameters.cells_uv, help="bound cells per u*/v* axis")
+    parser.add_argument("--dilation", type=int, default=BoundParameters.dilation,
+                        help="bound: neighbouring cells merged into each cell's maximum")
+    parser.add_argument("--margin-bits", type=float, default=BoundParameters.margin_bits,
+                        help="bound: safety factor 2^bits on the CIE XYZ bound")
     parser.add_argument("--plot", type=Path, default=None, help="write a bar chart PNG here")
     arguments = parser.parse_args(argv)
     models = arguments.models or sorted(glob.glob(str(Path(__file__).resolve().parent.parent / "assets/*/model.npz")))
@@ -178,7 +183,9 @@ def main(argv: list[str] | None = None) -> int:
     try:
         for path in models:
             for row in run_model(ctx, path, arguments.slice_size, (width, height), arguments.repeats,
-                                 arguments.weights_path, arguments.cells):
+                                 arguments.weights_path,
+                                 BoundParameters(cells_uv=arguments.cells, dilation=arguments.dilation,
+                                                 margin_bits=arguments.margin_bits)):
                 print(json.dumps(row), flush=True)
                 rows.append(row)
     finally:

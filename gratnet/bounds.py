@@ -387,14 +387,20 @@ def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(prog="python -m gratnet.bounds", description=__doc__.split("\n\n")[0])
     parser.add_argument("models", nargs="+", help="model files (.npz)")
     parser.add_argument("--cells", type=int, default=BoundParameters.cells_uv, help="cells per u*/v* axis")
+    parser.add_argument("--dilation", type=int, default=BoundParameters.dilation,
+                        help="neighbouring cells merged into each cell's maximum")
+    parser.add_argument("--margin-bits", type=float, default=BoundParameters.margin_bits,
+                        help="safety factor 2^bits on the CIE XYZ bound")
     parser.add_argument("--validate", type=int, default=0, metavar="N", help="check N random keys per model")
     arguments = parser.parse_args(argv)
     for name in arguments.models:
         model = load_model(name)
-        params = BoundParameters(cells_uv=arguments.cells)
+        params = BoundParameters(cells_uv=arguments.cells, dilation=arguments.dilation,
+                                 margin_bits=arguments.margin_bits)
         bounds = output_bounds(model, params)
         line: dict[str, object] = {"model": name, "cache": str(bounds_cache_path(model, params)),
-                                   "cells": bounds.cells}
+                                   "cells": bounds.cells, "dilation": params.dilation,
+                                   "margin_bits": params.margin_bits}
         if arguments.validate:
             line.update(validate_output_bounds(model, bounds, arguments.validate))
         print(json.dumps(line))

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import argparse
 import importlib
+import logging
 import sys
 from collections.abc import Sequence
 
@@ -53,6 +54,14 @@ def main(argv: Sequence[str] | None = None) -> int:
     if not getattr(arguments, "handler", None):
         parser.print_help()
         return 0 if not argv else 2
+    # Library modules report slow one-off steps (e.g. a baked shader's first compile) on the "gratnet"
+    # logger; the command shows them on stderr, one line each.
+    logger = logging.getLogger("gratnet")
+    if not logger.handlers:
+        handler = logging.StreamHandler(sys.stderr)
+        handler.setFormatter(logging.Formatter(f"gratnet {arguments.command}: %(message)s"))
+        logger.addHandler(handler)
+        logger.setLevel(logging.INFO)
     try:
         return int(arguments.handler(arguments) or 0)
     except GratNetError as error:

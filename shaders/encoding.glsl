@@ -119,6 +119,32 @@ float reduced_half_turns(vec2 frequency, float grid, float rest, float c_hi) {
     return x;
 }
 
+// The same for four phases at once (the baked MLP's encoding, viewer/baked.py): lane k is
+// reduced_half_turns(vec2(a[k], b[k]), grid[k], rest[k], c_hi[k]).
+vec4 reduced_half_turns4(vec4 a, vec4 b, vec4 grid, vec4 rest, vec4 c_hi) {
+    precise vec4 product = a * grid;
+    precise vec4 r = product - 2.0 * floor(0.5 * product + 0.5);
+    precise vec4 x = r + (a * rest + b * c_hi);
+    return x;
+}
+
+// Frequency j of the four spatial groups (c_u, c_v, c_u + c_v, c_u - c_v) at once: lane g of `sines` is
+// feature 3 + 2Lg + j of eq. 6, lane g of `cosines` feature 3 + 2Lg + L + j.
+void encoded_spatial_frequency(int j, out vec4 sines, out vec4 cosines) {
+    vec4 half_turns = reduced_half_turns4(vec4(u_frequency[j].x), vec4(u_frequency[j].y), g_group_grid,
+                                          g_group_rest, g_group);
+    sines = sin(PI * half_turns);
+    cosines = cos(PI * half_turns);
+}
+
+// Four t frequencies at once, (a, b) = s_t^j split per lane (zero lanes give sin 0, cos 1): lane k of
+// `sines` is feature 3 + 8L + j_k, of `cosines` feature 3 + 8L + L_t + j_k.
+void encoded_t_frequencies(vec4 a, vec4 b, out vec4 sines, out vec4 cosines) {
+    vec4 half_turns = reduced_half_turns4(a, b, vec4(g_t.y), vec4(g_t.z), vec4(g_t.x));
+    sines = sin(PI * half_turns);
+    cosines = cos(PI * half_turns);
+}
+
 float sinusoid(bool cosine, float half_turns) {
     return cosine ? cos(PI * half_turns) : sin(PI * half_turns);
 }

@@ -25,7 +25,7 @@ from test_shader_parity import (
 from gratnet.encoding import EncodingSpec
 from gratnet.errors import GratNetError
 from gratnet.modelfile import evaluate_keys
-from viewer.baked import baked_mlp_source, float_literal
+from viewer.baked import baked_encoded_inputs, baked_mlp_source, float_literal
 from viewer.glsl import GeneratedSource, compile_program, load_program_source, preprocess
 from viewer.renderer import BAKED_MAX_MACS, WEIGHTS_PATHS, NetworkRenderer, choose_weights_path
 
@@ -39,6 +39,10 @@ SMALL = EncodingSpec(3, 1, 2.0, 1.5)  # 3 + 8·3 + 2·1 = 29 features: 8 input b
         ([29, 12, 8, 3], "relu", "sigmoid", "simple", "log", SMALL),
         ([29, 13, 6, 5, 3], "leaky_relu", "none", "simple-max", "log1p", SMALL),
         ([163, 9, 3], "silu", "clamp", "simple-max", "power-log", SPEC),
+        # No t frequencies; five (a full and a partial vec4 of t sines/cosines); one spatial frequency.
+        ([19, 7, 3], "silu", "sigmoid", "simple-max", "power-log", EncodingSpec(2, 0, 1.7, 1.0)),
+        ([29, 10, 3], "relu", "clamp", "regular", "log", EncodingSpec(2, 5, 1.7, 1.3)),
+        ([13, 6, 3], "silu", "clamp", "simple", "power-log", EncodingSpec(1, 1, 1.0, 1.0)),
     ],
 )
 def test_baked_evaluate_keys_matches_numpy_and_the_texture_path(ctx, sizes, activation, output_activation, scheme,
@@ -95,13 +99,15 @@ def test_baked_programs_have_no_weight_uniforms_and_the_scene_passes_the_path_th
 
 def test_the_auto_rule():
     small = random_model([29, 12, 8, 3], spec=SMALL)
-    big = random_model([163, 108, 66, 40, 24, 3])
-    assert small.macs_per_evaluation <= BAKED_MAX_MACS < big.macs_per_evaluation
+    shipped = random_model([163, 108, 66, 40, 24, 3])  # the shipped size (28.4k MACs) is baked on llvmpipe
+    big = random_model([163, 200, 100, 3])
+    assert small.macs_per_evaluation <= shipped.macs_per_evaluation <= BAKED_MAX_MACS < big.macs_per_evaluation
     llvmpipe = SimpleNamespace(info={"GL_RENDERER": "llvmpipe (LLVM 15.0.6, 256 bits)"})
     softpipe = SimpleNamespace(info={"GL_RENDERER": "softpipe"})
     gpu = SimpleNamespace(info={"GL_RENDERER": "NVIDIA GeForce RTX 4090/PCIe/SSE2"})
     assert choose_weights_path(llvmpipe, small) == "baked"  # type: ignore[arg-type]
     assert choose_weights_path(softpipe, small, "auto") == "baked"  # type: ignore[arg-type]
+    assert choose_weights_path(llvmpipe, shipped) == "baked"  # type: ignore[arg-type]
     assert choose_weights_path(llvmpipe, big) == "texture"  # type: ignore[arg-type]
     assert choose_weights_path(gpu, small) == "texture"  # type: ignore[arg-type]
     for path in ("texture", "baked"):
@@ -133,6 +139,16 @@ def test_float_literals_round_trip_to_the_float32_weights():
         assert "." in text or "e" in text  # a float literal, not an int
     with pytest.raises(GratNetError, match="non-finite"):
         float_literal(np.inf)
+
+
+@pytest.mark.parametrize("spec", [SMALL, SPEC, EncodingSpec(1, 0, 1.0, 1.0), EncodingSpec(2, 5, 1.7, 1.3),
+                                  EncodingSpec(3, 8, 1.5, 1.2)])
+def test_baked_inputs_hold_every_encoded_feature_once(spec):
+    model = random_model([spec.features, 5, 3], spec=spec)
+    lanes = [feature for _, _, features in baked_encoded_inputs(model) for feature in features]
+    assert len(lanes) % 4 == 0
+    assert sorted(feature for feature in lanes if feature >= 0) == list(range(spec.features))
+    assert lanes.count(-1) == len(lanes) - spec.features  # the rest is padding
 
 
 def test_generated_source_skips_zero_blocks_and_has_no_uniforms():

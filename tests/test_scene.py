@@ -257,7 +257,9 @@ def model():
 def scene(ctx, model) -> Iterator[object]:
     from viewer.scene import SceneRenderer
 
-    renderer = SceneRenderer(ctx, model)
+    # The texture path: these tests are about the scene, and the baked path's first compile (~25 s per
+    # program at this size on llvmpipe) is covered once by tests/test_golden.py and test_shipped_models.py.
+    renderer = SceneRenderer(ctx, model, weights_path="texture")
     yield renderer
     renderer.release()
 

@@ -91,7 +91,9 @@ def test_directional_light_of_extreme_magnitude_is_normalised(vector):
 def scene(ctx) -> Iterator[object]:
     from viewer.scene import SceneRenderer
 
-    renderer = SceneRenderer(ctx, load_model(BLAZED))
+    # The texture path (the stress is in the key vectors and the A-term, not in the MLP; the baked path's
+    # ~25 s first compile per program is covered by tests/test_golden.py).
+    renderer = SceneRenderer(ctx, load_model(BLAZED), weights_path="texture")
     yield renderer
     renderer.release()
 

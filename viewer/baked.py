@@ -1,15 +1,17 @@
 """The funnel MLP as GLSL with the model's weights baked in as literals: a faster stand-in for mlp.glsl.
 
 :func:`baked_mlp_source` writes ``vec3 mlp_evaluate()`` with the same signature and meaning as
-``shaders/mlp.glsl`` — inputs from ``encoded_block(i)`` (encoding.glsl), the hidden activation after
+``shaders/mlp.glsl`` — inputs: the encoding (eq. 6) of the key set by ``encoding_set_key``, the hidden activation after
 every layer but the last, the output activation after the last, returns the range-transformed XYZ
 (eq. 7 domain) — but declares no uniforms and reads no texture: every 4×4 weight block is a ``mat4``
-literal (the only uniforms it reads are encoding.glsl's frequency counts, as a loop bound).
+literal. It computes the encoding itself, from encoding.glsl's per-frequency functions (the only uniforms
+it reads are encoding.glsl's frequency table ``u_frequency``, at constant indices).
 
 Shape (measured on Mesa llvmpipe; see :func:`viewer.renderer.choose_weights_path` for when it is used):
-layer 1 (the widest) in a loop over the encoded input blocks with its weights in one ``const mat4[]``;
-the later layers straight-line, one ``vec4`` variable per block, ``a = bias; a += mat4(…) * x_i; …``,
-leaving out blocks that are all zero (padding, or pruned weights). Only ``vec4``/``mat4`` forms: llvmpipe
+straight-line code, no loops and no arrays, one ``vec4`` variable per block, ``a = bias; a += mat4(…) * x_i;
+…``, output block by output block, leaving out blocks that are all zero (padding, or pruned weights).
+Straight-line literals let LLVM keep each weight as an immediate operand; the JIT time grows with the net
+(≈25 s for 28k MACs, once: Mesa's disk shader cache keeps it). Only ``vec4``/``mat4`` forms: llvmpipe
 miscompiles scalar ``float[]`` scratch arrays written at a variable index
 (shared/notes/opengl-on-this-machine.md). Literals are the shortest decimal strings that round-trip to
 the float32 weights, so the shader multiplies exactly the weights that numpy does.
@@ -22,7 +24,7 @@ import numpy as np
 from gratnet.errors import GratNetError
 from gratnet.modelfile import LEAKY_RELU_SLOPE, ModelFile, texture_layout
 
-__all__ = ["baked_mlp_source", "float_literal"]
+__all__ = ["baked_encoded_inputs", "baked_mlp_source", "float_literal"]
 
 _HIDDEN = {
     "relu": "max(x, 0.0)",
@@ -53,6 +55,26 @@ def _vec4(values: np.ndarray) -> str:
 def _mat4(block: np.ndarray) -> str:
     """``block[r, j]`` = W[4o + r, 4i + j]; GLSL's mat4 takes columns, so column j is block[:, j]."""
     return "mat4(" + ", ".join(float_literal(v) for v in block.T.reshape(-1)) + ")"
+
+
+def baked_encoded_inputs(model: ModelFile) -> list[tuple[str, str, list[int]]]:
+    """The baked layer 1's input vec4s: ``(GLSL declaration, variable, eq. 6 feature index per lane)``,
+    a lane -1 holding no feature. Together they hold every feature of ``model.encoding`` once."""
+    spatial, temporal = model.encoding.frequencies, model.encoding.t_frequencies
+    inputs = [("vec4 coordinates = vec4(g_coordinates, 0.0);", "coordinates", [0, 1, 2, -1])]
+    for j in range(spatial):
+        inputs.append((f"vec4 sin_{j}, cos_{j}; encoded_spatial_frequency({j}, sin_{j}, cos_{j});", f"sin_{j}",
+                       [3 + 2 * spatial * g + j for g in range(4)]))
+        inputs.append(("", f"cos_{j}", [3 + 2 * spatial * g + spatial + j for g in range(4)]))
+    first_t = 3 + 8 * spatial
+    for j0 in range(0, temporal, 4):
+        lanes = list(range(j0, min(j0 + 4, temporal)))
+        a = ", ".join([f"u_frequency[{j}].z" for j in lanes] + ["0.0"] * (4 - len(lanes)))
+        b = ", ".join([f"u_frequency[{j}].w" for j in lanes] + ["0.0"] * (4 - len(lanes)))
+        inputs.append((f"vec4 t_sin_{j0}, t_cos_{j0}; encoded_t_frequencies(vec4({a}), vec4({b}), t_sin_{j0}, "
+                       f"t_cos_{j0});", f"t_sin_{j0}", [first_t + j for j in lanes] + [-1] * (4 - len(lanes))))
+        inputs.append(("", f"t_cos_{j0}", [first_t + temporal + j for j in lanes] + [-1] * (4 - len(lanes))))
+    return inputs
 
 
 def baked_mlp_source(model: ModelFile, name: str = "model") -> str:
@@ -98,26 +120,24 @@ def baked_mlp_source(model: ModelFile, name: str = "model") -> str:
     def activation(k: int) -> str:
         return "output_activation" if k == last else "hidden_activation"
 
-    # Layer 1 (the widest: encoded inputs -> first hidden layer) runs in a loop over the input blocks,
-    # bounded by uniforms (encoding.glsl's L and L_t give ceil(features / 4)): encoded_block(i) at a
-    # constant i is inlined and specialised once per block (~50 s to compile a 163-21-21-3 net), and a
-    # vec4 array of all inputs costs ~3 s of JIT. Its weights are one constant array, block (o, i) at
-    # index ob·i + o; the later layers are straight-line code with literal mat4s on named vec4s.
-    in_blocks, ob = layout[0]["in_blocks"], out_blocks(0)
-    prelude = [f"const mat4 W1[{in_blocks * ob}] = mat4[](  // layer 1, block (o, i) at {ob} * i + o"]
-    prelude += [f"    {_mat4(block(0, o, i))}," for i in range(in_blocks) for o in range(ob)]
-    prelude[-1] = prelude[-1][:-1] + ");"
+    # Layer 1 (the widest: encoded inputs -> first hidden layer), straight-line like the later layers. Its
+    # inputs are not eq. 6's blocks but what is cheap to compute (encoding.glsl): the sines (and cosines) of
+    # one frequency for all four spatial groups, four t frequencies at once; the weight columns are
+    # permuted to match, so each sum is eq. 6's. All inputs first, then one output block at a time over
+    # them (output-major): on llvmpipe at 28k MACs this ran 2x faster than input-major with SiLU. No loop
+    # and no array: a const mat4[] indexed in a loop over encoded_block(i) took minutes of JIT at 28k MACs.
+    ob = out_blocks(0)
+    encoded = baked_encoded_inputs(model)
     lines.append(f"    // layer 1: {model.weights[0].shape[1]} -> {model.weights[0].shape[0]}")
-    lines += [f"    vec4 a1_{o} = {_vec4(padded[0][1][4 * o:4 * o + 4])};" for o in range(ob)]
-    lines += [
-        "    int input_blocks = (6 + 8 * u_frequencies + 2 * u_t_frequencies) / 4;  // ceil(features / 4)",
-        "    for (int i = 0; i < input_blocks; ++i) {",
-        "        vec4 x = encoded_block(i);",
-        f"        int base = {ob} * i;",
-        *[f"        a1_{o} += W1[base + {o}] * x;" for o in range(ob)],
-        "    }",
-        *[f"    a1_{o} = {activation(0)}(a1_{o});" for o in range(ob)],
-    ]
+    lines += [f"    {declaration}" for declaration, _, _ in encoded if declaration]
+    for o in range(ob):
+        lines.append(f"    vec4 a1_{o} = {_vec4(padded[0][1][4 * o:4 * o + 4])};")
+        for _, name, features in encoded:
+            weights = padded[0][0][4 * o:4 * o + 4, [max(f, 0) for f in features]]
+            weights[:, [f < 0 for f in features]] = 0.0  # lanes that hold no feature (padding) weigh nothing
+            if np.any(weights != 0):
+                lines.append(f"    a1_{o} += {_mat4(weights)} * {name};")
+    lines += [f"    a1_{o} = {activation(0)}(a1_{o});" for o in range(ob)]
     for k in range(1, last + 1):
         outputs, inputs = model.weights[k].shape
         lines.append(f"    // layer {k + 1}: {inputs} -> {outputs}")
@@ -128,6 +148,4 @@ def baked_mlp_source(model: ModelFile, name: str = "model") -> str:
                     lines.append(f"    a{k + 1}_{o} += {_mat4(block(k, o, i))} * a{k}_{i};")
             lines.append(f"    a{k + 1}_{o} = {activation(k)}(a{k + 1}_{o});")
     lines += [f"    return a{last + 1}_0.xyz;", "}", ""]
-    i = lines.index("vec3 mlp_evaluate() {")
-    lines[i:i] = prelude
     return "\n".join(lines)

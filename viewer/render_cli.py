@@ -62,7 +62,8 @@ class RenderConfig:
     weights_path: str = config_field(
         "auto", "where the shader reads the network's weights: texture (packed RGBA32F texture), baked "
         "(literals in a generated shader: faster on a CPU rasterizer, slower first compile) or auto (baked for "
-        "small nets on Mesa llvmpipe/softpipe, else texture; viewer.renderer.choose_weights_path)",
+        "nets up to 32k multiply-adds (the shipped size) on Mesa llvmpipe/softpipe, else texture; "
+        "viewer.renderer.choose_weights_path)",
         choices=WEIGHT_PATHS)
     skip_dark: bool = config_field(
         False, "PNG only: skip the network where exposure · A · (the model's cached output bound) cannot reach the "

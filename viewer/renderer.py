@@ -12,6 +12,7 @@ Rendering only: no glfw, no imgui, no torch. Programs are compiled on first use.
 
 from __future__ import annotations
 
+import logging
 import math
 from pathlib import Path
 
@@ -40,11 +41,13 @@ __all__ = [
 #: Where the MLP's weights come from: ``texture`` (shaders/mlp.glsl reads the packed RGBA32F texture),
 #: ``baked`` (viewer/baked.py writes them into the shader as literals) or ``auto`` (:func:`choose_weights_path`).
 WEIGHTS_PATHS = ("auto", "texture", "baked")
-#: The largest net (multiply-adds per evaluation) that ``auto`` bakes on a software rasterizer. Measured
-#: on Mesa llvmpipe, 2 busy cores, shader cache off: first compile + JIT of brdf_slice 1.5 s at 3.9k MACs,
-#: 3.8 s at 7.3k, 6.6 s at 8.3k, 8–9 s at 14.6k, over 3 min at 28.4k (the shipped 163-108-66-40-24-3).
-BAKED_MAX_MACS = 10_000
+#: The largest net (multiply-adds per evaluation) that ``auto`` bakes on a software rasterizer: the first
+#: compile grows faster than the net. Measured on Mesa llvmpipe (2 cores, shader cache off), brdf_slice
+#: compile + first draw: 2.8 s at 3.9k MACs, 23–29 s at 28.4k (the shipped 163-108-66-40-24-3), 131 s at
+#: 59k (funnel-176); the 28.4k net then ran 2–3.5x the texture path's throughput (docs/benchmarks.md).
+BAKED_MAX_MACS = 32_000
 _SOFTWARE_RASTERIZERS = ("llvmpipe", "softpipe", "swrast")  # substrings of GL_RENDERER
+_LOG = logging.getLogger("gratnet.renderer")  # the gratnet command shows its INFO lines (gratnet/cli.py)
 
 # Codes of the GLSL `const int`s (shaders/encoding.glsl, mlp.glsl, range.glsl, evaluate_keys.glsl).
 _SCHEMES = {"regular": 0, "simple": 1, "simple-max": 2}
@@ -136,9 +139,9 @@ def choose_weights_path(ctx: moderngl.Context, model: ModelFile, weights_path: s
 
     * ``baked`` on a software rasterizer (``GL_RENDERER`` names llvmpipe, softpipe or swrast) for nets of
       at most :data:`BAKED_MAX_MACS` multiply-adds per evaluation: there every texel fetch is a gather on
-      the CPU, and constant weights made brdf_slice frames 1.4–2× faster at 4k–8k MACs (the sinusoidal
-      encoding is a fixed cost besides), at the cost of a first compile that grows faster than the net
-      (a few seconds up to the limit; Mesa's disk shader cache makes later ones fast);
+      the CPU, and straight-line literal weights ran the shipped 28k-MAC nets at 15–19 GMAC/s against
+      ~3 on the texture path, at the cost of a first compile that grows faster than the net (~25 s at
+      28k MACs; Mesa's disk shader cache makes later ones take ~1 s);
     * ``texture`` otherwise: on a GPU texel fetches are cheap and a program per model is not worth its
       compile time, and big nets would take llvmpipe minutes to compile.
 
@@ -216,8 +219,11 @@ class NetworkRenderer:
             _set(program, "u_hidden_activation", _HIDDEN[model.activation])
             _set(program, "u_output_activation", _OUTPUT[model.output_activation])
         _set(program, "u_scheme", _SCHEMES[model.scheme])
-        _set(program, "u_frequencies", model.encoding.frequencies)
-        _set(program, "u_t_frequencies", model.encoding.t_frequencies)
+        # encoded_feature (encoding.glsl) reads the counts; the baked MLP has them in its code, so baked
+        # programs that do not call encoded_feature (all but encode_keys) lack these uniforms.
+        if self.weights_path == "texture" or "u_frequencies" in program:
+            _set(program, "u_frequencies", model.encoding.frequencies)
+            _set(program, "u_t_frequencies", model.encoding.t_frequencies)
         _set(program, "u_frequency", _frequency_table(model, int(self.defines["MAX_FREQUENCIES"])))
         _set(program, "u_range_kind", _RANGES[model.range.kind])
         _set(program, "u_range_bits", float(model.range.bits))
@@ -234,6 +240,10 @@ class NetworkRenderer:
                 _set(program, "u_xyz_to_linear_srgb", np.ascontiguousarray(matrix.T, dtype=np.float32))
                 _set(program, "u_xyz", 1)
             else:
+                if self.weights_path == "baked":
+                    _LOG.info("program %r with baked weights (%d MACs per pixel): the first draw JIT-compiles "
+                              "it, which can take ~25 s at 28k MACs on llvmpipe; Mesa's shader cache keeps it",
+                              name, self.model.macs_per_evaluation)
                 program = compile_program(self.ctx, name, self.defines, self.shader_root, self._overrides)
                 self._model_uniforms(program)
                 if name == "evaluate_keys":

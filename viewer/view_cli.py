@@ -55,7 +55,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     parser.add_argument("--slice", action="store_true", help="start in BRDF-slice mode")
     parser.add_argument("--weights-path", choices=WEIGHT_PATHS, default="auto",
                         help="where the shader reads the network's weights: texture, baked (literals in a generated "
-                        "shader) or auto (baked for small nets on a CPU rasterizer, else texture; default: auto)")
+                        "shader) or auto (baked for nets up to 32k multiply-adds on a CPU rasterizer, else texture; "
+                        "default: auto)")
     parser.add_argument("--screenshot-dir", default=".", metavar="DIR",
                         help="folder for the Screenshot button's PNGs (default: the working folder)")
     parser.add_argument("--max-frames", type=int, default=0, metavar="N",
