@@ -51,8 +51,11 @@ def cd_model() -> ModelFile:
 
 @pytest.fixture(scope="module")
 def cd_bounds(cd_model: ModelFile) -> OutputBounds:
-    # The training grid itself (not the default 2×): a quarter of the time, and the CD passes it too.
-    return compute_output_bounds(cd_model, BoundParameters(resolution=1001, cells_uv=128), progress=False)
+    # The training grid itself (not the default 2×), for a quarter of the time. Sampled that coarsely the
+    # network beats the cell maxima by up to 12 %, so this needs 2 bits of margin, not the default 1 (that
+    # default, at 2×, is validated by `python -m gratnet.bounds --validate`: docs/benchmarks.md).
+    return compute_output_bounds(cd_model, BoundParameters(resolution=1001, cells_uv=128, margin_bits=2.0),
+                                 progress=False)
 
 
 # The texture weight path: compiles in seconds, where a baked shader can take minutes.
@@ -243,4 +246,5 @@ def test_compute_is_deterministic_and_dilated():
     parameters = BoundParameters(cells_uv=8, dilation=0, margin_bits=0.0)
     tight = compute_output_bounds(model, parameters, progress=False)
     loose = compute_output_bounds(model, BoundParameters(cells_uv=8), progress=False)
-    assert np.all(loose.xyz >= 4.0 * tight.xyz * (1 - 1e-6))  # dilation only raises; the margin is 2 bits
+    margin = 2.0 ** BoundParameters().margin_bits
+    assert np.all(loose.xyz >= margin * tight.xyz * (1 - 1e-6))  # dilation only raises; then the margin
