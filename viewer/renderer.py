@@ -44,7 +44,7 @@ WEIGHTS_PATHS = ("auto", "texture", "baked")
 #: The largest net (multiply-adds per evaluation) that ``auto`` bakes on a software rasterizer: the first
 #: compile grows faster than the net. Measured on Mesa llvmpipe (2 cores, shader cache off), brdf_slice
 #: compile + first draw: 2.8 s at 3.9k MACs, 23–29 s at 28.4k (the shipped 163-108-66-40-24-3), 131 s at
-#: 59k (funnel-176); the 28.4k net then ran 2–3.5x the texture path's throughput (docs/benchmarks.md).
+#: 59k (funnel-176); the 28.4k net then ran 4–7x faster than on the texture path (docs/benchmarks.md).
 BAKED_MAX_MACS = 32_000
 _SOFTWARE_RASTERIZERS = ("llvmpipe", "softpipe", "swrast")  # substrings of GL_RENDERER
 _LOG = logging.getLogger("gratnet.renderer")  # the gratnet command shows its INFO lines (gratnet/cli.py)
@@ -139,7 +139,7 @@ def choose_weights_path(ctx: moderngl.Context, model: ModelFile, weights_path: s
 
     * ``baked`` on a software rasterizer (``GL_RENDERER`` names llvmpipe, softpipe or swrast) for nets of
       at most :data:`BAKED_MAX_MACS` multiply-adds per evaluation: there every texel fetch is a gather on
-      the CPU, and straight-line literal weights ran the shipped 28k-MAC nets at 15–19 GMAC/s against
+      the CPU, and straight-line literal weights ran the shipped 28k-MAC nets at 12–20 GMAC/s against
       ~3 on the texture path, at the cost of a first compile that grows faster than the net (~25 s at
       28k MACs; Mesa's disk shader cache makes later ones take ~1 s);
     * ``texture`` otherwise: on a GPU texel fetches are cheap and a program per model is not worth its
