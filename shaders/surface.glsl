@@ -8,9 +8,11 @@
 // at or below the tangent plane, or a degenerate frame give XYZ 0 (never NaN). Output 1 (when a second
 // attachment is bound; tests and debugging): the key vector and A, 0 for back faces.
 // Work skipped (issue 5): the MLP runs only where A > 0 and the bound of skip.glsl says the display could
-// show something. Depth pre-pass: the renderer draws once with u_depth_only (colour writes masked; early
-// fragment tests write the depth and the shader returns at once), then again with depth func LEQUAL, so
-// early fragment tests let only the visible surface run the shading code: one MLP per pixel, no overdraw.
+// show something. Depth pre-pass: the renderer draws once with this program compiled with DEPTH_ONLY (an
+// empty fragment stage, no MLP; colour writes masked), then again with depth func LEQUAL, so early fragment
+// tests let only the visible surface run the shading code: one MLP per pixel, no overdraw. A separate
+// program, not a uniform and an early return: llvmpipe runs straight-line code such as the baked MLP even
+// for fragments that have returned, so a uniform-selected depth pass cost a full shading pass.
 // Needs the defines of mlp.glsl and encoding.glsl (and SKIP_COUNTER_BINDING with COUNT_EVALUATIONS).
 
 #ifdef VERTEX_SHADER
@@ -34,7 +36,12 @@ void main() {
 }
 #endif
 
-#ifdef FRAGMENT_SHADER
+#if defined(FRAGMENT_SHADER) && defined(DEPTH_ONLY)
+// The depth pre-pass: the vertex stage above writes gl_Position (invariant), the fixed-function depth test
+// writes the depth; nothing to shade.
+void main() {
+}
+#elif defined(FRAGMENT_SHADER)
 precision highp float;
 precision highp int;
 
@@ -57,7 +64,6 @@ uniform vec3 u_light;            // directional: unit vector towards the light; 
 uniform float u_light_intensity; // directional: irradiance scale; point: at 1 m (falls off as 1/d^2)
 uniform float u_exposure;
 uniform float u_ior;             // <= 0: Fresnel off
-uniform bool u_depth_only;       // the depth pre-pass: the depth is written by the early test; do nothing
 
 in vec3 v_position;
 in vec3 v_normal;
@@ -80,9 +86,6 @@ vec3 safe_normalize(vec3 v) {
 }
 
 void main() {
-    if (u_depth_only) {
-        return;  // colour writes are masked in this pass
-    }
     count_event(COUNTER_FRAGMENTS);
     out_exposed = vec4(0.0, 0.0, 0.0, 1.0);  // covered, no light (yet)
     out_key = vec4(0.0);

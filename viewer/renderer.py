@@ -64,6 +64,7 @@ _SKIP_COUNTER_BINDING = 5  # SSBO binding of the counters (shaders/skip.glsl)
 _SKIP_COUNTER_SLOTS = 8
 _SKIP_BOUND_UNIT = 3  # texture unit of u_skip_bound (weights: 0; evaluate_keys/display inputs: 1, 2)
 _COUNTING_SUFFIX = "#count"  # program-cache key of a program compiled with COUNT_EVALUATIONS
+_DEPTH_ONLY_SUFFIX = "#depth"  # ... and of one compiled with DEPTH_ONLY (the depth pre-pass)
 
 
 def model_defines(model: ModelFile) -> dict[str, int | float]:
@@ -333,6 +334,15 @@ class NetworkRenderer:
             self._programs[key] = program
             self._vertex_arrays[key] = self.ctx.vertex_array(program, [])
         return key, self._programs[key]
+
+    def depth_only_program(self, name: str) -> moderngl.Program:
+        """Program ``name`` compiled with ``DEPTH_ONLY`` (shaders/surface.glsl: the same vertex stage, an
+        empty fragment stage, no MLP) for a depth pre-pass; it reads only the vertex stage's uniforms."""
+        key = name + _DEPTH_ONLY_SUFFIX
+        if key not in self._programs:
+            self._programs[key] = compile_program(self.ctx, name, {**self.defines, "DEPTH_ONLY": 1},
+                                                  self.shader_root, self._overrides)
+        return self._programs[key]
 
     def _reset_counters(self) -> None:
         if self._skip_counters is None:

@@ -217,15 +217,24 @@ class SceneRenderer:
                     self.network.use_weights(0)
                     bound.use(location=unit)
                     if depth_prepass:
-                        # Pass 1: depth only (the shader returns at once; colour writes masked). Pass 2: the
-                        # same program and vertices give bit-identical depths, so LEQUAL passes exactly the
-                        # visible surface and early fragment tests stop every other fragment before the MLP.
-                        _set(program, "u_depth_only", True)
-                        framebuffer.color_mask = _color_masks(False, layers)
-                        vertex_array.render(moderngl.TRIANGLES)
-                        framebuffer.color_mask = _color_masks(True, layers)
+                        # Pass 1: depth only (the DEPTH_ONLY program: same vertex stage, no MLP; colour writes
+                        # masked). Pass 2: the invariant vertex stage gives bit-identical depths, so LEQUAL
+                        # passes exactly the visible surface and early fragment tests stop every other
+                        # fragment before the MLP.
+                        depth_program = self.network.depth_only_program(_PROGRAM)
+                        _set(depth_program, "u_view_projection",
+                             np.ascontiguousarray(camera.view_projection(width / height)))
+                        depth_array = self.ctx.vertex_array(
+                            depth_program, [(uploaded.buffers[attribute], "3f", attribute)
+                                            for attribute, _ in _ATTRIBUTES if attribute in depth_program],
+                            index_buffer=uploaded.index_buffer, index_element_size=4)
+                        try:
+                            framebuffer.color_mask = _color_masks(False, layers)
+                            depth_array.render(moderngl.TRIANGLES)
+                        finally:
+                            depth_array.release()
+                            framebuffer.color_mask = _color_masks(True, layers)
                         self.ctx.depth_func = "<="
-                    _set(program, "u_depth_only", False)
                     try:
                         vertex_array.render(moderngl.TRIANGLES)
                     finally:
