@@ -82,16 +82,19 @@ class MeshBuffers:
     buffers: dict[str, moderngl.Buffer]
     index_buffer: moderngl.Buffer | None
     vertex_array: moderngl.VertexArray | None
+    #: The same buffers bound to the depth pre-pass's program (made on the first pre-pass).
+    depth_vertex_array: moderngl.VertexArray | None = None
 
     def release(self) -> None:
-        if self.vertex_array is not None:
-            self.vertex_array.release()
+        for vertex_array in (self.vertex_array, self.depth_vertex_array):
+            if vertex_array is not None:
+                vertex_array.release()
         for buffer in self.buffers.values():
             buffer.release()
         if self.index_buffer is not None:
             self.index_buffer.release()
         self.buffers.clear()
-        self.vertex_array = self.index_buffer = None
+        self.vertex_array = self.depth_vertex_array = self.index_buffer = None
 
 
 class SceneRenderer:
@@ -124,14 +127,16 @@ class SceneRenderer:
         buffers: dict[str, moderngl.Buffer] = {}
         if mesh.triangle_count == 0:
             return MeshBuffers(mesh, buffers, None, None)
-        content = []
         for attribute, field in _ATTRIBUTES:
             buffers[attribute] = self.ctx.buffer(np.ascontiguousarray(getattr(mesh, field)).tobytes())
-            if attribute in program:  # an attribute the compiler dropped cannot be bound
-                content.append((buffers[attribute], "3f", attribute))
         index_buffer = self.ctx.buffer(np.ascontiguousarray(mesh.indices).tobytes())
-        vertex_array = self.ctx.vertex_array(program, content, index_buffer=index_buffer, index_element_size=4)
-        return MeshBuffers(mesh, buffers, index_buffer, vertex_array)
+        return MeshBuffers(mesh, buffers, index_buffer, self._vertex_array(program, buffers, index_buffer))
+
+    def _vertex_array(self, program: moderngl.Program, buffers: dict[str, moderngl.Buffer],
+                      index_buffer: moderngl.Buffer | None) -> moderngl.VertexArray:
+        """``buffers`` bound to ``program``'s attributes (one the compiler dropped cannot be bound)."""
+        content = [(buffers[attribute], "3f", attribute) for attribute, _ in _ATTRIBUTES if attribute in program]
+        return self.ctx.vertex_array(program, content, index_buffer=index_buffer, index_element_size=4)
 
     def _set_uniforms(self, camera: Camera, light: Light, width: int, height: int, exposure: float,
                       ior: float | None, program: moderngl.Program | None = None) -> None:
@@ -198,10 +203,7 @@ class SceneRenderer:
         uploaded = mesh if isinstance(mesh, MeshBuffers) else self.upload(mesh)
         vertex_array = uploaded.vertex_array
         if vertex_array is not None and program is not self.program:  # the counting variant: its own binding
-            content = [(uploaded.buffers[attribute], "3f", attribute) for attribute, _ in _ATTRIBUTES
-                       if attribute in program]
-            vertex_array = self.ctx.vertex_array(program, content, index_buffer=uploaded.index_buffer,
-                                                 index_element_size=4)
+            vertex_array = self._vertex_array(program, uploaded.buffers, uploaded.index_buffer)
         targets = [self.ctx.texture((width, height), 4, dtype="f4") for _ in range(layers)]
         depth = self.ctx.depth_renderbuffer((width, height))
         framebuffer = self.ctx.framebuffer(color_attachments=targets, depth_attachment=depth)
@@ -224,15 +226,13 @@ class SceneRenderer:
                         depth_program = self.network.depth_only_program(_PROGRAM)
                         _set(depth_program, "u_view_projection",
                              np.ascontiguousarray(camera.view_projection(width / height)))
-                        depth_array = self.ctx.vertex_array(
-                            depth_program, [(uploaded.buffers[attribute], "3f", attribute)
-                                            for attribute, _ in _ATTRIBUTES if attribute in depth_program],
-                            index_buffer=uploaded.index_buffer, index_element_size=4)
+                        if uploaded.depth_vertex_array is None:
+                            uploaded.depth_vertex_array = self._vertex_array(depth_program, uploaded.buffers,
+                                                                             uploaded.index_buffer)
+                        framebuffer.color_mask = _color_masks(False, layers)
                         try:
-                            framebuffer.color_mask = _color_masks(False, layers)
-                            depth_array.render(moderngl.TRIANGLES)
+                            uploaded.depth_vertex_array.render(moderngl.TRIANGLES)
                         finally:
-                            depth_array.release()
                             framebuffer.color_mask = _color_masks(True, layers)
                         self.ctx.depth_func = "<="
                     try:
