@@ -37,7 +37,7 @@ from gratnet.errors import GratNetError
 from gratnet.modelfile import ModelFile, load_model
 from viewer.renderer import BAKED_MAX_MACS
 
-__all__ = ["BenchConfig", "ModelEntry", "pareto_front", "run_bench", "torch_throughput"]
+__all__ = ["BenchConfig", "ModelEntry", "pareto_front", "run_bench", "shader_frame_times", "torch_throughput"]
 
 _EVALUATION_SLICE_COUNT = 5  # trainer.evaluate.STANDARD_SLICES
 
@@ -190,7 +190,7 @@ def _timed(function: Any, repeats: int, max_seconds: float) -> list[float]:
     return times
 
 
-def _shader_throughput(ctx: Any, entry: ModelEntry, path: str, config: BenchConfig, sizes: list[int],
+def shader_frame_times(ctx: Any, entry: ModelEntry, path: str, config: BenchConfig, sizes: list[int],
                        ) -> list[dict[str, Any]]:
     """Frame times of the brdf_slice program for each size, on weight path ``path``, skip-work off."""
     from viewer.renderer import NetworkRenderer
@@ -260,7 +260,7 @@ def run_bench(ctx: Any, entries: list[ModelEntry], config: BenchConfig, progress
         for path in paths:
             if path == "baked" and macs > config.baked_max_macs:
                 continue
-            for row in _shader_throughput(ctx, entry, path, config, sizes):
+            for row in shader_frame_times(ctx, entry, path, config, sizes):
                 size = row["size"]
                 pixels = int(keys[size].shape[0])
                 gmacs = macs * pixels / row["seconds"] / 1e9
