@@ -5,7 +5,8 @@
 set -euo pipefail
 cd "$(dirname "$0")/.."
 bash scripts/setup.sh
+venv="${GRATNET_VENV:-.venv}"
 out="${1:-out}"
-gratnet render --material cd --mesh cd --light 35,200 --camera 0.16,0,55 --exposure 250 --size 640,480 \
+"$venv/bin/gratnet" render --material cd --mesh cd --light 35,200 --camera 0.16,0,55 --exposure 250 --size 640,480 \
     --out "$out/cd_render.png"
-gratnet render --material cd --slice --light 30,0 --exposure 5000 --size 256,256 --out "$out/cd_brdf_slice.png"
+"$venv/bin/gratnet" render --material cd --slice --light 30,0 --exposure 5000 --size 256,256 --out "$out/cd_brdf_slice.png"

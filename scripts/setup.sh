@@ -1,8 +1,11 @@
 #!/usr/bin/env bash
 # Install GratNet and everything it needs on a fresh Debian machine (idempotent).
-# - Debian packages: Mesa's EGL/GL (headless rendering) when running as root with apt-get.
-# - Python packages: GratNet in editable mode with the trainer and dev extras; constraints.txt pins
-#   torch to the CPU build this machine kind finds locally (a newer torch pulls GBs of CUDA).
+# - Debian packages: Mesa's EGL/GL (headless rendering) and Xvfb when running as root with apt-get.
+# - Python packages: a virtual environment (default .venv, or $GRATNET_VENV) holding GratNet in editable
+#   mode with the trainer and dev extras; nothing is installed into the system's Python. constraints.txt
+#   pins torch to the CPU build this machine kind finds locally (a newer torch pulls GBs of CUDA).
+# - GRATNET_FRESH_VENV=1 deletes the environment first, so that a missing install step cannot hide behind
+#   a package left over from an earlier run (.ci/run sets it).
 set -euo pipefail
 cd "$(dirname "$0")/.."
 
@@ -19,5 +22,15 @@ if command -v apt-get >/dev/null 2>&1 && [ "$(id -u)" = 0 ]; then
     fi
 fi
 
-echo "setup: installing Python packages (pip, constraints.txt)"
-python3 -m pip install -q --disable-pip-version-check -c constraints.txt -e ".[trainer,dev]"
+venv="${GRATNET_VENV:-.venv}"
+if [ "${GRATNET_FRESH_VENV:-0}" = 1 ] && [ -e "$venv" ]; then
+    echo "setup: removing $venv (fresh environment requested)"
+    rm -rf "$venv"
+fi
+if [ ! -x "$venv/bin/python" ]; then
+    echo "setup: creating the virtual environment $venv"
+    python3 -m venv "$venv"
+fi
+echo "setup: installing Python packages into $venv (pip, constraints.txt)"
+"$venv/bin/python" -m pip install -q --disable-pip-version-check -c constraints.txt -e ".[trainer,dev]"
+echo "setup: done; activate with: source $venv/bin/activate"

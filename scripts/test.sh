@@ -1,9 +1,11 @@
 #!/usr/bin/env bash
-# Set up (idempotent) and run the test suite: lint, then pytest on 2 workers.
+# Set up (idempotent) and run the test suite inside the project's virtual environment: lint, then
+# pytest on 2 workers. Extra arguments go to pytest.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 bash scripts/setup.sh
+venv="${GRATNET_VENV:-.venv}"
 echo "test: ruff"
-python3 -m ruff check .
+"$venv/bin/python" -m ruff check .
 echo "test: pytest"
-python3 -m pytest -n 2 -q "$@"
+"$venv/bin/python" -m pytest -n 2 -q "$@"
