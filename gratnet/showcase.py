@@ -46,6 +46,7 @@ __all__ = [
     "brightness",
     "material_display",
     "suggest_exposure",
+    "with_display",
 ]
 
 #: Where the analysis lives in a model file's free-form metadata (``metadata["display"]``).
@@ -196,7 +197,7 @@ def analyse_model(model: ModelFile) -> MaterialDisplay:
     if not best > NO_DIFFRACTION * max(specular, 1e-30):
         # No diffraction worth showing: show the specular reflection, at white.
         exposure = 1.0 / specular if specular > 0 else 1.0
-        return MaterialDisplay(exposure, ((0.0, 0.0),), (specular,), specular, radius)
+        return _as_stored(MaterialDisplay(exposure, ((0.0, 0.0),), (specular,), specular, radius))
     peaks = _local_maxima(values, PEAK_NEIGHBOURHOOD) & (values >= CANDIDATE_FRACTION * best)
     order = np.argsort(-values[peaks], kind="stable")[: 2 * MAX_CANDIDATES]
     coarse = np.stack([u[peaks], v[peaks]], axis=-1)[order]
@@ -214,13 +215,22 @@ def analyse_model(model: ModelFile) -> MaterialDisplay:
     )
     top = found[0][0]
     kept = [entry for entry in found if entry[0] >= CANDIDATE_FRACTION * top][:MAX_CANDIDATES]
-    return MaterialDisplay(
+    return _as_stored(MaterialDisplay(
         exposure=1.0 / top,
         peak_keys_uv=tuple((round(u_, 4), round(v_, 4)) for _, u_, v_ in kept),
         peak_brightness=tuple(b for b, _, _ in kept),
         specular_brightness=specular,
         specular_radius=radius,
-    )
+    ))
+
+
+def _as_stored(result: MaterialDisplay) -> MaterialDisplay:
+    """``result`` rounded exactly as the model file stores it, so that a computed analysis and a stored one
+    give the same defaults (``stored`` stays False)."""
+    rounded = MaterialDisplay.from_json(result.to_json())
+    if rounded is None:  # not reachable for finite results; keep the unrounded one rather than fail
+        return result
+    return dataclasses.replace(rounded, stored=False)
 
 
 def material_display(model: ModelFile) -> MaterialDisplay:
@@ -228,6 +238,13 @@ def material_display(model: ModelFile) -> MaterialDisplay:
     written by the trainer), else :func:`analyse_model` (older files; about a second)."""
     stored = MaterialDisplay.from_json(model.metadata.get(DISPLAY_KEY)) if isinstance(model.metadata, dict) else None
     return stored if stored is not None else analyse_model(model)
+
+
+def with_display(model: ModelFile) -> ModelFile:
+    """``model`` with its analysis stored in ``metadata["display"]`` (what the trainer saves; weights untouched)."""
+    metadata = dict(model.metadata) if isinstance(model.metadata, dict) else {}
+    metadata[DISPLAY_KEY] = analyse_model(model).to_json()
+    return dataclasses.replace(model, metadata=metadata)
 
 
 # --------------------------------------------------------------------------------------------------
