@@ -44,7 +44,8 @@ def store(path: Path) -> str:
             shutil.copy2(backup, path)
             raise SystemExit(f"{path}: the rewritten arrays differ from the original; restored the original")
     display = updated.metadata[DISPLAY_KEY]
-    return f"{path}: stored exposure {display['exposure']:g}, peaks {display['peak_keys_uv'][:2]} (weights bit-identical)"
+    return (f"{path}: stored exposure {display['exposure']:g}, peaks {display['peak_keys_uv'][:2]} "
+            "(weights bit-identical)")
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -88,7 +88,7 @@ EXPOSURE_PERCENTILE = 99.5
 MAX_EXPOSURE_RATIO = 4.0
 #: The exposure is raised, if needed, until this percentage of the predicted picture reaches ``VISIBLE_MARGIN``
 #: × the display's smallest step (a picture that is 99 % black draws ``gratnet render``'s warning) …
-VISIBLE_PERCENT = 3.0
+VISIBLE_PERCENT = 5.0
 VISIBLE_MARGIN = 8.0
 #: … but to at most this multiple of the material's suggested exposure (beyond it lies the network's noise floor).
 MAX_VISIBLE_RATIO = 300.0
