@@ -92,6 +92,19 @@ VISIBLE_PERCENT = 5.0
 VISIBLE_MARGIN = 8.0
 #: … but to at most this multiple of the material's suggested exposure (beyond it lies the network's noise floor).
 MAX_VISIBLE_RATIO = 300.0
+#: Candidates are scored on this many of the samples (the final exposure uses all of them).
+SCORE_SAMPLES = 1024
+#: Candidates: the brightest peaks aimed at, …
+AIMED_PEAKS = 4
+#: … each at these fractions of its key vector (1: the peak itself at the aimed point; less: between the
+#: specular direction and the peak, so that a mesh whose key vectors vary enough shows both).
+AIM_FRACTIONS = (1.0, 0.6)
+#: Scoring a candidate: display sRGB chroma (max − min channel) that counts as coloured …
+COLOURFUL_CHROMA = 32.0 / 255.0
+#: … and the weight of the merely visible fraction against the coloured one.
+SHOWN_WEIGHT = 0.2
+#: A later candidate must beat the best so far by this much (earlier ones: brighter peaks, 45° elevation).
+SCORE_TIE = 0.005
 #: The BRDF slice's default light: this far from the normal (degrees).
 SLICE_LIGHT_DEGREES = 30.0
 
@@ -143,14 +156,15 @@ def surface_samples(mesh: Mesh, count: int = SAMPLES, seed: int = 0) -> dict[str
 
     Returns:
         ``{"positions", "normals", "tangents", "bitangents"}``, ``float64`` ``(count, 3)`` (frames unit and
-        orthogonal; metres for positions); empty arrays for a mesh without triangles.
+        orthogonal; metres for positions), and ``"area"``, ``(count,)``: the surface area each point stands
+        for (m², the mesh's area / count); empty arrays for a mesh without triangles.
     """
     import numpy as np
 
     triangles = mesh.indices.astype(np.int64)
     if triangles.shape[0] == 0:
         empty = np.zeros((0, 3))
-        return {"positions": empty, "normals": empty, "tangents": empty, "bitangents": empty}
+        return {"positions": empty, "normals": empty, "tangents": empty, "bitangents": empty, "area": np.zeros(0)}
     corners = mesh.positions.astype(np.float64)[triangles]  # (M, 3 corners, 3)
     areas = 0.5 * np.linalg.norm(np.cross(corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0]), axis=1)
     if not areas.sum() > 0:
@@ -170,7 +184,7 @@ def surface_samples(mesh: Mesh, count: int = SAMPLES, seed: int = 0) -> dict[str
     tangents -= np.sum(tangents * normals, axis=1, keepdims=True) * normals
     tangents /= np.maximum(np.linalg.norm(tangents, axis=1, keepdims=True), 1e-30)
     return {"positions": interpolate(mesh.positions), "normals": normals, "tangents": tangents,
-            "bitangents": np.cross(normals, tangents)}
+            "bitangents": np.cross(normals, tangents), "area": np.full(count, float(areas.sum()) / count)}
 
 
 def _framing_distance(mesh: Mesh, fov_degrees: float) -> float:
@@ -233,15 +247,15 @@ def _light_angles(world: np.ndarray) -> tuple[float, float]:
     return round(theta, 1), round(phi, 1)
 
 
-def _predicted_brightness(model: ModelFile, samples: dict[str, np.ndarray], visible: np.ndarray,
-                          camera: Camera, light_world: np.ndarray, ior: float | None) -> tuple[np.ndarray, np.ndarray]:
-    """Unexposed brightness (largest linear sRGB channel of A·XYZ) of the visible samples and their pixel
-    weights (projected area per unit surface area, cos θo / d²)."""
+def _predicted_colour(model: ModelFile, samples: dict[str, np.ndarray], visible: np.ndarray,
+                      camera: Camera, light_world: np.ndarray, ior: float | None) -> tuple[np.ndarray, np.ndarray]:
+    """Unexposed linear sRGB of A·XYZ at the visible samples (0 where the light is below the surface), and
+    their pixel weights: the solid angle each covers, cos θo · area / d² (steradians)."""
     import numpy as np
 
     from gratnet.brdf import a_term
+    from gratnet.display import xyz_to_linear_srgb
     from gratnet.modelfile import evaluate_keys
-    from gratnet.showcase import brightness
 
     index = np.flatnonzero(visible)
     to_eye = camera.eye()[None, :] - samples["positions"][index]
@@ -250,11 +264,27 @@ def _predicted_brightness(model: ModelFile, samples: dict[str, np.ndarray], visi
     light = _local(np.broadcast_to(light_world, view.shape), samples, index)
     key = -(light + view)
     lit = light[:, 2] > 0.0
-    values = np.zeros(len(index))
+    colour = np.zeros((len(index), 3))
     if np.any(lit):
         xyz = evaluate_keys(model, key[lit, 0], key[lit, 1], key[lit, 2])
-        values[lit] = brightness(xyz) * a_term(light[lit], view[lit], ior)
-    return values, view[:, 2] / np.square(distance)
+        colour[lit] = xyz_to_linear_srgb(xyz) * a_term(light[lit], view[lit], ior)[:, None]
+    return colour, view[:, 2] * samples["area"][index] / np.square(distance)
+
+
+def _score(colour: np.ndarray, weights: np.ndarray, exposure: float, field_sr: float) -> float:
+    """How well a predicted picture shows diffraction: the fraction of the picture (``field_sr``: its solid
+    angle, steradians; ``weights``: each sample's) that the display shows coloured (chroma ≥
+    ``COLOURFUL_CHROMA`` in display sRGB, not white), plus ``SHOWN_WEIGHT`` × the fraction it shows at all
+    (≥ ``VISIBLE_MARGIN`` display steps)."""
+    import numpy as np
+
+    from gratnet.bounds import DISPLAY_SKIP_THRESHOLD
+
+    linear = np.clip(colour * exposure, 0.0, 1.0)
+    encoded = np.where(linear <= 0.0031308, 12.92 * linear, 1.055 * np.power(linear, 1.0 / 2.4) - 0.055)
+    shown = linear.max(axis=1) >= VISIBLE_MARGIN * DISPLAY_SKIP_THRESHOLD
+    coloured = shown & (encoded.max(axis=1) - encoded.min(axis=1) >= COLOURFUL_CHROMA) & (linear.min(axis=1) < 0.98)
+    return float(np.sum(weights[coloured]) + SHOWN_WEIGHT * np.sum(weights[shown])) / field_sr
 
 
 def _weighted_percentile(values: np.ndarray, weights: np.ndarray, percentile: float) -> float:
@@ -299,6 +329,8 @@ def scene_defaults(model: ModelFile, mesh: Mesh, fov_degrees: float = FOV_DEGREE
     display = material_display(model) if display is None else display
     samples = surface_samples(mesh)
     distance = round(_framing_distance(mesh, fov_degrees), 3)
+    field_sr = (2.0 * math.tan(math.radians(fov_degrees) / 2.0)) ** 2  # a square picture, small-angle
+    best: tuple[float, tuple[Any, ...]] | None = None
     for elevation in CAMERA_ELEVATIONS_DEGREES:
         camera = Camera(distance, CAMERA_AZIMUTH_DEGREES, elevation, fov_deg=fov_degrees)
         visible, ndc = _visible(samples, camera)
@@ -307,22 +339,26 @@ def scene_defaults(model: ModelFile, mesh: Mesh, fov_degrees: float = FOV_DEGREE
         index = int(np.flatnonzero(visible)[np.argmin(np.sum(np.square(ndc[visible]), axis=1))])
         to_eye = camera.eye() - samples["positions"][index]
         view_local = _local(to_eye / np.linalg.norm(to_eye), samples, index)
-        feasible = []
-        for key in display.peak_keys_uv:
-            light = _aim_light(key, view_local, samples, index)
-            if light is not None:
-                off_normal = math.degrees(math.acos(min(1.0, float(np.dot(light, samples["normals"][index])))))
-                feasible.append((off_normal, key, light))
-        if not feasible:
-            continue
-        comfortable = [entry for entry in feasible if entry[0] <= COMFORTABLE_LIGHT_DEGREES]
-        _, key, light = comfortable[0] if comfortable else min(feasible, key=lambda entry: entry[0])
-        values, weights = _predicted_brightness(model, samples, visible, camera, light, ior)
-        exposure = _exposure(values, weights, display)
-        theta, phi = _light_angles(light)
-        return SceneDefaults(theta, phi, distance, CAMERA_AZIMUTH_DEGREES, elevation, _significant(exposure),
-                             (float(key[0]), float(key[1])))
-    return dataclasses.replace(FALLBACK, camera_distance=distance, exposure=_significant(display.exposure))
+        scoring = visible & (np.arange(len(visible)) < SCORE_SAMPLES)  # the samples are iid: a random subset
+        for key in display.peak_keys_uv[:AIMED_PEAKS]:
+            for fraction in AIM_FRACTIONS:
+                aim = (fraction * key[0], fraction * key[1])
+                light = _aim_light(aim, view_local, samples, index)
+                if light is None:
+                    continue
+                colour, weights = _predicted_colour(model, samples, scoring, camera, light, ior)
+                exposure = _exposure(np.max(colour, axis=1).clip(0.0), weights, display)
+                score = _score(colour, weights * (len(visible) / SCORE_SAMPLES), exposure, field_sr)
+                if best is None or score > best[0] + SCORE_TIE:
+                    best = (score, (elevation, camera, visible, light, aim))
+    if best is None:
+        return dataclasses.replace(FALLBACK, camera_distance=distance, exposure=_significant(display.exposure))
+    elevation, camera, visible, light, aim = best[1]
+    colour, weights = _predicted_colour(model, samples, visible, camera, light, ior)  # every sample, for the exposure
+    exposure = _significant(_exposure(np.max(colour, axis=1).clip(0.0), weights, display))
+    theta, phi = _light_angles(light)
+    return SceneDefaults(theta, phi, distance, CAMERA_AZIMUTH_DEGREES, elevation, exposure,
+                         (round(aim[0], 4), round(aim[1], 4)))
 
 
 def slice_defaults(model: ModelFile, display: MaterialDisplay | None = None) -> SceneDefaults:
