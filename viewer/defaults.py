@@ -3,28 +3,34 @@ material and the mesh, so that the first picture shows the material's diffractio
 
 The material's analysis (:func:`gratnet.showcase.material_display`: its brightest off-specular peaks as
 key vectors ``(u, v)`` in the surface's tangent frame, and the exposure that puts the brightest at display
-white) is turned into a scene in three steps, for any mesh (built-in or ``.obj``):
+white) is turned into a scene for any mesh (built-in or ``.obj``):
 
-1. **Camera.** An orbit camera at azimuth ``CAMERA_AZIMUTH_DEGREES`` and elevation
-   ``CAMERA_ELEVATIONS_DEGREES[0]``, at the distance that fits the mesh's extent around the origin into the
-   vertical field of view.
-2. **Light.** A directional light that puts one of the peaks at the surface point seen nearest the image
-   centre. With ``ωo`` that point's direction to the eye and ``K = (u, v)`` the peak, both in the point's
-   tangent frame, ``K = −(ωi + ωo)`` (physics.md) fixes ``ωi``'s tangential part, ``−K − ωo,xy``; its
-   normal part follows from ``|ωi| = 1``. Peaks are tried brightest first; the first whose light is at most
-   ``COMFORTABLE_LIGHT_DEGREES`` from that point's normal (and above the world horizon) is taken, else the
-   feasible one closest to the normal; if none is feasible the next camera elevation is tried.
-   Why it works on every built-in mesh: on the plane the key vector varies only ±0.2 across the picture,
-   so it must be aimed; on the disc the tangent frame turns with the azimuth, so the aimed peak appears
-   along a radius (the familiar rainbow streak); on the sphere the normals spread the key vectors widely
-   around the aimed one.
-3. **Exposure.** The picture is predicted without rendering: ``SAMPLES`` points spread over the mesh by
-   area, those facing the camera inside its view weighted by their projected area (cos θo / d²), each
+1. **Camera.** An orbit camera at azimuth ``CAMERA_AZIMUTH_DEGREES``, at the distance that fits the
+   mesh's extent around the origin into the vertical field of view; its elevation is one of
+   ``CAMERA_ELEVATIONS_DEGREES`` (step 4).
+2. **Light.** A directional light that puts a chosen key vector ``K`` at the surface point seen nearest
+   the image centre. With ``ωo`` that point's direction to the eye, both in the point's tangent frame,
+   ``K = −(ωi + ωo)`` (physics.md) fixes ``ωi``'s tangential part, ``−K − ωo,xy``; its normal part follows
+   from ``|ωi| = 1``. A light more than ``MAX_LIGHT_DEGREES`` from that normal or from +z is not used.
+   Candidates for ``K``: each of the ``AIMED_PEAKS`` brightest peaks, and ``AIM_FRACTIONS`` of it (between
+   the specular direction and the peak, so that a mesh whose key vectors vary enough shows the specular
+   highlight and the orders together). Why aiming works on every built-in mesh: on the plane the key
+   vector varies only about ±0.2 across the picture, so it must be aimed; on the disc the tangent frame
+   turns with the azimuth, so the aimed peak appears along a radius (the familiar rainbow streak); on the
+   sphere the normals spread the key vectors widely around the aimed one.
+3. **Exposure**, predicted without rendering: ``SAMPLES`` points spread over the mesh by area, those
+   facing the camera inside its view weighted by the solid angle they cover (cos θo · area / d²), each
    shaded by the network (numpy, ``gratnet.modelfile.evaluate_keys``) with the A-term. The exposure maps
    the ``EXPOSURE_PERCENTILE``-th percentile of that predicted brightness (largest linear sRGB channel) to
-   display white, so at most about 0.5 % of the picture saturates (no saturated blob), and it is at most
-   ``MAX_EXPOSURE_RATIO`` × the material's own suggested exposure (so that a picture whose diffraction
-   covers less than 0.5 % is not pushed into noise).
+   display white, so that only about 0.5 % of the picture saturates (no saturated blob), at most
+   ``MAX_EXPOSURE_RATIO`` × the material's suggested exposure; where that leaves less than
+   ``VISIBLE_PERCENT`` % of the picture ``VISIBLE_MARGIN`` display steps above black (a grating's thin
+   order line on a curved mesh), it is raised until it does, up to ``MAX_VISIBLE_RATIO`` × the suggestion
+   (beyond lies the network's noise floor).
+4. **Choice.** Every (elevation, ``K``) candidate is scored on ``SCORE_SAMPLES`` of the samples: the
+   fraction of the picture the display would show coloured (chroma ≥ ``COLOURFUL_CHROMA``, not white),
+   plus ``SHOWN_WEIGHT`` × the fraction it would show at all. The best wins (a later one must beat it by
+   ``SCORE_TIE``); its exposure is then computed from every sample. About 1 s per material and mesh.
 
 A BRDF slice (``--slice``) takes a light 30° from the normal on the side opposite the brightest peak, so
 that the peak lands near the slice's centre, and the material's suggested exposure.
@@ -59,12 +65,14 @@ __all__ = [
     "FALLBACK",
     "FOV_DEGREES",
     "SceneDefaults",
+    "black_picture_hint",
     "fill_scene_defaults",
     "resolve_defaults",
     "scene_defaults",
     "slice_defaults",
     "state_defaults",
     "surface_samples",
+    "switch_changes",
 ]
 
 #: The orbit camera's azimuth (degrees from +x): the eye on the −y side, looking towards +y.
@@ -75,8 +83,6 @@ CAMERA_ELEVATIONS_DEGREES = (45.0, 60.0, 30.0, 75.0)
 FOV_DEGREES = 40.0
 #: The mesh's extent (largest distance of a vertex from the origin) fills this fraction of the half field of view.
 FRAMING = 0.95
-#: A light at most this far from the aimed point's normal is taken at once (degrees).
-COMFORTABLE_LIGHT_DEGREES = 60.0
 #: No default light is farther than this from the aimed point's normal or from the world's +z (degrees;
 #: the viewer's light slider ends at 89°).
 MAX_LIGHT_DEGREES = 80.0
@@ -450,3 +456,54 @@ def state_defaults(material: str, mesh: str, slice_mode: bool = False, fov_degre
     return {"light_theta": defaults.light_theta_degrees, "light_phi": defaults.light_phi_degrees,
             "camera_distance": defaults.camera_distance, "camera_azimuth": defaults.camera_azimuth_degrees,
             "camera_elevation": defaults.camera_elevation_degrees, "exposure": defaults.exposure}
+
+
+# --------------------------------------------------------------------------------------------------
+# For the viewer: small calls for viewer/app.py (no GL, no imgui)
+
+
+def switch_changes(state: Any, material: str | None = None, mesh: str | None = None) -> dict[str, Any]:
+    """The ``ViewerApp.set(**changes)`` that switches a viewer ``state`` to another material and/or mesh
+    together with that pair's defaults (light, camera, exposure: the values ``gratnet view`` starts with),
+    so that the new material shows its diffraction at once.
+
+    Args:
+        state: the current ``viewer.app.ViewerState`` (its ``material``, ``mesh``, ``slice_mode``, ``fov``,
+            ``effective_ior`` are used).
+        material, mesh: the new ones (``None``: unchanged).
+
+    Returns:
+        ``{"material": …, "mesh": …, "light_theta": …, …, "exposure": …}``; only the new material and mesh
+        when their defaults cannot be computed (the viewer then reports the load error itself).
+    """
+    changes: dict[str, Any] = {"material": material or state.material, "mesh": mesh or state.mesh}
+    try:
+        changes.update(state_defaults(changes["material"], changes["mesh"], state.slice_mode, state.fov,
+                                      state.effective_ior))
+    except GratNetError:
+        pass
+    return changes
+
+
+def black_picture_hint(xyz_exposed: Any, exposure: float) -> tuple[str, float | None] | None:
+    """For the viewer's status line: ``(message, suggested exposure)`` when a finished picture is at least
+    99 % black on the display (``gratnet.showcase.black_fraction``), else ``None``.
+
+    Args:
+        xyz_exposed: the rendered CIE XYZ with ``exposure`` applied, ``(H, W, 3)`` (``SceneRenderer.render``).
+        exposure: the exposure it was rendered at.
+
+    Returns:
+        the message ("… % of the picture is black at exposure E: try exposure S") and ``S`` (``None`` when no
+        pixel is lit: the light or the camera must move instead).
+    """
+    from gratnet.showcase import BLACK_FRACTION_WARNING, black_fraction, suggest_exposure
+
+    fraction = black_fraction(xyz_exposed)
+    if fraction < BLACK_FRACTION_WARNING:
+        return None
+    suggestion = suggest_exposure(xyz_exposed, exposure)
+    where = f"{100.0 * fraction:.1f} % of the picture is black at exposure {exposure:g}"
+    if suggestion is None:
+        return f"{where}, and no pixel is lit: move the light or the camera", None
+    return f"{where}: try exposure {suggestion:g}", suggestion
