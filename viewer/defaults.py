@@ -33,7 +33,8 @@ white) is turned into a scene for any mesh (built-in or ``.obj``):
    ``SCORE_TIE``); its exposure is then computed from every sample. About 1 s per material and mesh.
 
 A BRDF slice (``--slice``) takes a light 30° from the normal on the side opposite the brightest peak, so
-that the peak lands near the slice's centre, and the material's suggested exposure.
+that the peak lands near the slice's centre, and the exposure of step 3 predicted on the slice's own
+view directions.
 
 Explicit flags always override: :func:`fill_scene_defaults` fills only the flags left unset. Results are
 rounded (0.1°, 1 mm, 3 significant digits) so that they read well in a config file and on a slider.
@@ -113,6 +114,8 @@ SHOWN_WEIGHT = 0.2
 SCORE_TIE = 0.005
 #: The BRDF slice's default light: this far from the normal (degrees).
 SLICE_LIGHT_DEGREES = 30.0
+#: The slice's exposure is predicted on this many view directions per side.
+SLICE_GRID = 96
 
 
 @dataclasses.dataclass(frozen=True)
@@ -250,7 +253,7 @@ def _aim_light(key_uv: tuple[float, float], view_local: np.ndarray, samples: dic
 def _light_angles(world: np.ndarray) -> tuple[float, float]:
     theta = math.degrees(math.acos(max(-1.0, min(1.0, float(world[2])))))
     phi = math.degrees(math.atan2(float(world[1]), float(world[0]))) if math.hypot(world[0], world[1]) > 1e-12 else 0.0
-    return round(theta, 1), round(phi, 1)
+    return round(theta, 1) + 0.0, round(phi, 1) + 0.0  # + 0.0: no "-0" in a config file
 
 
 def _predicted_colour(model: ModelFile, samples: dict[str, np.ndarray], visible: np.ndarray,
@@ -367,17 +370,30 @@ def scene_defaults(model: ModelFile, mesh: Mesh, fov_degrees: float = FOV_DEGREE
                          (round(aim[0], 4), round(aim[1], 4)))
 
 
-def slice_defaults(model: ModelFile, display: MaterialDisplay | None = None) -> SceneDefaults:
-    """The BRDF slice's default light (``SLICE_LIGHT_DEGREES`` from the normal, opposite the brightest
-    peak, so that the peak lands near the slice's centre) and exposure (the material's suggestion); the
-    camera fields are :data:`FALLBACK`'s (a slice has no camera)."""
+def slice_defaults(model: ModelFile, display: MaterialDisplay | None = None, ior: float | None = 1.5) -> SceneDefaults:
+    """The BRDF slice's defaults: a light ``SLICE_LIGHT_DEGREES`` from the normal on the side opposite the
+    brightest peak (so that the peak lands near the slice's centre), and the exposure of step 3 (module
+    docstring) predicted on a ``SLICE_GRID``² grid of the slice's view directions (physics.md "BRDF slice");
+    the camera fields are :data:`FALLBACK`'s (a slice has no camera)."""
+    import numpy as np
+
+    from gratnet.brdf import a_term, direction, slice_view_directions
+    from gratnet.display import xyz_to_linear_srgb
+    from gratnet.modelfile import evaluate_keys
     from gratnet.showcase import material_display
 
     display = material_display(model) if display is None else display
     u, v = display.peak_keys_uv[0]
-    phi = round(math.degrees(math.atan2(-v, -u)), 1) if math.hypot(u, v) > 1e-9 else FALLBACK.light_phi_degrees
+    phi = round(math.degrees(math.atan2(-v, -u)), 1) + 0.0 if math.hypot(u, v) > 1e-9 else FALLBACK.light_phi_degrees
+    views, inside = slice_view_directions(SLICE_GRID)
+    views = views[inside]
+    light = direction(SLICE_LIGHT_DEGREES, phi)
+    key = -(light[None, :] + views)
+    colour = xyz_to_linear_srgb(evaluate_keys(model, key[:, 0], key[:, 1], key[:, 2]))
+    colour *= a_term(light[None, :], views, ior)[:, None]
+    exposure = _exposure(np.max(colour, axis=1).clip(0.0), np.ones(len(views)), display)
     return dataclasses.replace(FALLBACK, light_theta_degrees=SLICE_LIGHT_DEGREES, light_phi_degrees=phi,
-                               exposure=_significant(display.exposure), aimed_key_uv=(u, v))
+                               exposure=_significant(exposure), aimed_key_uv=(u, v))
 
 
 @functools.lru_cache(maxsize=64)
@@ -387,7 +403,7 @@ def _resolve_cached(model_path: str, stamp: tuple[int, int], mesh_spec: str, sli
 
     model = load_model(model_path)
     if slice_mode:
-        return slice_defaults(model)
+        return slice_defaults(model, ior=ior)
     from viewer.render_cli import build_mesh
 
     return scene_defaults(model, build_mesh(mesh_spec), fov_degrees, ior)  # type: ignore[arg-type]
