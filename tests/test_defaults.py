@@ -172,6 +172,47 @@ def test_stored_analysis_matches_a_fresh_one(name):
     assert fresh.exposure == pytest.approx(stored.exposure, rel=1e-4)
 
 
+def _network(bias: float | None = None, seed: int = 0) -> object:
+    """A small network standing for a material never seen: random weights (``bias`` None), or one whose
+    output is the constant ``clamp(bias)`` (all weights 0)."""
+    from gratnet.encoding import EncodingSpec, RangeSpec
+    from gratnet.modelfile import ModelFile
+
+    sizes = [163, 16, 3]
+    rng = np.random.default_rng(seed)
+    weights = [rng.normal(0.0, math.sqrt(2.0 / a), (b, a)).astype(np.float32)
+               for a, b in zip(sizes, sizes[1:], strict=False)]
+    biases = [rng.normal(0.0, 0.3, b).astype(np.float32) for b in sizes[1:]]
+    if bias is not None:
+        weights = [np.zeros_like(w) for w in weights]
+        biases = [np.zeros_like(biases[0]), np.full(3, bias, dtype=np.float32)]
+    return ModelFile(sizes, weights, biases, "relu", "clamp", EncodingSpec.for_grid(1001, 11), RangeSpec(),
+                     "simple-max", {})
+
+
+@pytest.mark.parametrize("kind", ["random", "black", "uniform"])
+def test_materials_never_seen_get_finite_defaults_on_every_mesh(kind):
+    """Generalisation: an arbitrary network, one that is black everywhere (no peak: the specular fallback,
+    exposure 1) and one that is uniformly grey (every key a peak) give usable defaults on every mesh."""
+    model = _network(seed=3) if kind == "random" else _network(bias=-5.0 if kind == "black" else 0.9)
+    display = analyse_model(model)
+    assert display.exposure > 0 and math.isfinite(display.exposure) and display.peak_keys_uv
+    if kind == "black":
+        assert display.peak_keys_uv == ((0.0, 0.0),) and display.exposure == 1.0
+    for mesh in (plane(), sphere(), defaults_mesh("cd")):
+        result = defaults.scene_defaults(model, mesh, display=display)
+        assert 0.0 <= result.light_theta_degrees <= defaults.MAX_LIGHT_DEGREES
+        assert result.camera_elevation_degrees in defaults.CAMERA_ELEVATIONS_DEGREES
+        assert 0 < result.exposure <= defaults.MAX_VISIBLE_RATIO * display.exposure
+    assert defaults.slice_defaults(model, display).exposure > 0
+
+
+def defaults_mesh(name: str) -> object:
+    from viewer.render_cli import build_mesh
+
+    return build_mesh(name)
+
+
 # --------------------------------------------------------------------------------------------------
 # Renders at the defaults
 
