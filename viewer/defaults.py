@@ -460,8 +460,25 @@ def fill_scene_defaults(arguments: argparse.Namespace) -> SceneDefaults | None:
     if arguments.camera_text is None:
         arguments.camera_text = defaults.camera_text
     if arguments.exposure is None:
-        arguments.exposure = defaults.exposure
+        arguments.exposure = defaults.exposure * (_point_light_distance_squared(arguments) or 1.0)
     return defaults
+
+
+def _point_light_distance_squared(arguments: argparse.Namespace) -> float | None:
+    """|position|² (m²) of a ``--point-light X,Y,Z`` whose irradiance at the origin is 1/|position|² of a
+    directional light's: the default exposure is scaled by it. ``None`` without one, or when it does not
+    parse (the command's own check reports that)."""
+    text = getattr(arguments, "point_light_text", None)
+    if text is None:
+        return None
+    try:
+        position = [float(part) for part in str(text).split(",")]
+    except ValueError:
+        return None
+    squared = sum(x * x for x in position)
+    if len(position) != 3 or not (math.isfinite(squared) and squared > 0):
+        return None
+    return _significant(squared)
 
 
 def state_defaults(material: str, mesh: str, slice_mode: bool = False, fov_degrees: float = FOV_DEGREES,
