@@ -98,7 +98,7 @@ MAX_EXPOSURE_RATIO = 4.0
 VISIBLE_PERCENT = 5.0
 VISIBLE_MARGIN = 8.0
 #: … but to at most this multiple of the material's suggested exposure (beyond it lies the network's noise floor).
-MAX_VISIBLE_RATIO = 300.0
+MAX_VISIBLE_RATIO = 1000.0
 #: Candidates are scored on this many of the samples (the final exposure uses all of them).
 SCORE_SAMPLES = 1024
 #: Candidates: the brightest peaks aimed at, …
