@@ -221,11 +221,12 @@ def _shows_diffraction(display_srgb8: np.ndarray) -> tuple[bool, str]:
     """The criterion for "shows its diffraction" (8-bit display sRGB, H × W × 3):
 
     - not black: under ``BLACK_FRACTION_WARNING`` (99 %) of the pixels black, i.e. the picture does not draw
-      ``gratnet render``'s warning (at 96×72 the thinnest, a grating's order line, measured 1.1–2.2 %);
+      ``gratnet render``'s warning (measured at 96×72: 1.9 % non-black for the thinnest, a grating's order
+      line on the plane, up to 52 %);
     - coloured: at least 10 pixels with chroma (max − min channel) ≥ 32/255 that are not white, spread over
-      at least 2 of the 6 hue sextants: dispersion, not a tinted highlight (measured ≥ 21 pixels and
-      2–6 sextants);
-    - not a saturated blob: at most 5 % of the pixels have a channel at 255 (measured ≤ 0.4 %).
+      at least 3 of the 6 hue sextants: dispersion, not a tinted highlight (measured ≥ 21 pixels, 5–6
+      sextants);
+    - not a saturated blob: at most 5 % of the pixels have a channel at 255 (measured ≤ 0.9 %).
     """
     pixels = display_srgb8.reshape(-1, 3).astype(int)
     black = float(np.mean(~np.any(pixels > 0, axis=1)))
@@ -233,7 +234,7 @@ def _shows_diffraction(display_srgb8: np.ndarray) -> tuple[bool, str]:
     coloured = pixels[(chroma >= 32) & ~np.all(pixels >= 250, axis=1)]
     sextants = {int(colorsys.rgb_to_hsv(*(p / 255.0))[0] * 6) % 6 for p in coloured}
     saturated = float(np.mean(np.any(pixels >= 255, axis=1)))
-    ok = black < BLACK_FRACTION_WARNING and len(coloured) >= 10 and len(sextants) >= 2 and saturated <= 0.05
+    ok = black < BLACK_FRACTION_WARNING and len(coloured) >= 10 and len(sextants) >= 3 and saturated <= 0.05
     return ok, (f"black {black:.3f}, {len(coloured)} coloured pixels in {len(sextants)} hue sextants, "
                 f"saturated {saturated:.3f}")
 
@@ -257,6 +258,10 @@ def test_every_shipped_material_shows_its_diffraction_on_every_mesh_at_the_defau
             ok, summary = _shows_diffraction(pixels)
             if not ok:
                 failures.append(f"{material} on {mesh} ({d.light_text}, exposure {d.exposure:g}): {summary}")
+        if material == "cd":  # the criterion can fail: the old fixed defaults of `gratnet render` show nothing
+            old = renderer.render(build_mesh("cd"), Camera(0.25, -90.0, 45.0), Light.directional(45.0, 90.0),
+                                  (96, 72), 1.0, 1.5)
+            assert not _shows_diffraction(SceneRenderer.display_srgb8(old))[0]
     assert not failures, "; ".join(failures)
 
 
