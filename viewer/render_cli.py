@@ -62,9 +62,8 @@ class RenderConfig:
     camera_elevation_degrees: float = config_field(FALLBACK.camera_elevation_degrees,
                                                    "camera elevation above the xy-plane, degrees", cli=False)
     fov_degrees: float = config_field(FOV_DEGREES, "vertical field of view, degrees", flag="--fov")
-    exposure: float | None = config_field(
-        None, "exposure: the factor applied to XYZ before display (linear); unset: chosen from the material "
-        "so that its diffraction shows")
+    exposure: float = config_field(FALLBACK.exposure, "exposure: the factor applied to XYZ before display (linear)",
+                                   cli=False)
     width: int = config_field(512, "image width, pixels", cli=False)
     height: int = config_field(512, "image height, pixels", cli=False)
     ior: float = config_field(1.5, "refractive index for the Fresnel factor of the A-term (0: none)")
@@ -161,8 +160,11 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     parser.add_argument("--point-light", dest="point_light_text", default=None, metavar="X,Y,Z",
                         help="point light position in metres instead of --light (irradiance 1 at 1 m)")
     parser.add_argument("--camera", dest="camera_text", default=None, metavar="DIST,AZIMUTH,ELEVATION",
-                        help="orbit camera around the origin: metres, degrees, degrees (default: framing the mesh, "
-                        "azimuth -90, elevation 45)")
+                        help="orbit camera around the origin: metres, degrees, degrees (default: chosen with the "
+                        "light: the distance that frames the mesh, azimuth -90)")
+    parser.add_argument("--exposure", type=float, default=None,
+                        help="exposure: the factor applied to XYZ before display, linear (default: chosen from the "
+                        "material and mesh so that the diffraction shows without saturating)")
     parser.add_argument("--size", dest="size_text", default="512,512", metavar="W,H",
                         help="image size in pixels (default: 512,512)")
     add_arguments(parser, RenderConfig)

@@ -48,11 +48,11 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                         help="directional light: polar angle from +z and azimuth from +x, degrees (default: chosen "
                         "from the material and mesh so that the diffraction shows, as in gratnet render)")
     parser.add_argument("--camera", dest="camera_text", default=None, metavar="DIST,AZIMUTH,ELEVATION",
-                        help="orbit camera around the origin: metres, degrees, degrees (default: framing the mesh, "
-                        "azimuth -90, elevation 45)")
+                        help="orbit camera around the origin: metres, degrees, degrees (default: chosen with the "
+                        "light: the distance that frames the mesh, azimuth -90)")
     parser.add_argument("--exposure", type=float, default=None,
-                        help="exposure: the factor applied to XYZ before display (default: chosen from the material "
-                        "so that its diffraction shows)")
+                        help="exposure: the factor applied to XYZ before display, linear (default: chosen from the "
+                        "material and mesh so that the diffraction shows without saturating)")
     parser.add_argument("--ior", type=float, default=1.5,
                         help="refractive index of the Fresnel factor (0: no Fresnel; default: 1.5)")
     parser.add_argument("--fresnel", action=argparse.BooleanOptionalAction, default=True,
