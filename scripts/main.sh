@@ -7,6 +7,7 @@ cd "$(dirname "$0")/.."
 bash scripts/setup.sh
 venv="${GRATNET_VENV:-.venv}"
 out="${1:-out}"
-"$venv/bin/gratnet" render --material cd --mesh cd --light 35,200 --camera 0.16,0,55 --exposure 250 --size 640,480 \
-    --out "$out/cd_render.png"
-"$venv/bin/gratnet" render --material cd --slice --light 30,0 --exposure 5000 --size 256,256 --out "$out/cd_brdf_slice.png"
+# No --light, --camera or --exposure: they are chosen from the material and the mesh so that the diffraction
+# shows (viewer/defaults.py); `gratnet view --material cd --mesh cd` opens at the same values.
+"$venv/bin/gratnet" render --material cd --mesh cd --size 640,480 --out "$out/cd_render.png"
+"$venv/bin/gratnet" render --material cd --slice --size 256,256 --out "$out/cd_brdf_slice.png"

@@ -246,7 +246,10 @@ def train(
         },
     )
     from gratnet.modelfile import save_model
+    from gratnet.showcase import with_display
 
+    # Where the diffraction lands and the exposure that shows it, for the renderers' defaults (docs/formats.md).
+    model_file = with_display(model_file)
     save_model(out_dir / "model.npz", model_file)
     write_text_atomic(out_dir / "history.json", json.dumps(history, indent=2) + "\n")
     return model, model_file, history

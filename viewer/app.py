@@ -47,6 +47,7 @@ import numpy as np
 
 from gratnet.errors import GratNetError
 from viewer.camera import Camera, Light
+from viewer.defaults import FALLBACK, FOV_DEGREES
 from viewer.render_cli import MESHES, RenderConfig, build_mesh, resolve_material, shipped_materials
 
 __all__ = [
@@ -72,13 +73,15 @@ class ViewerState:
 
     material: str = "blazed"
     mesh: str = "cd"
-    light_theta: float = 20.0
-    light_phi: float = 90.0
-    camera_azimuth: float = -90.0
-    camera_elevation: float = 50.0
-    camera_distance: float = 0.18
-    fov: float = 40.0
-    exposure: float = 5000.0
+    # The material-independent defaults shared with `gratnet render` (viewer.defaults.FALLBACK); `gratnet view`
+    # starts from viewer.defaults.resolve_defaults for its material and mesh instead.
+    light_theta: float = FALLBACK.light_theta_degrees
+    light_phi: float = FALLBACK.light_phi_degrees
+    camera_azimuth: float = FALLBACK.camera_azimuth_degrees
+    camera_elevation: float = FALLBACK.camera_elevation_degrees
+    camera_distance: float = FALLBACK.camera_distance
+    fov: float = FOV_DEGREES
+    exposure: float = FALLBACK.exposure
     fresnel: bool = True
     ior: float = 1.5
     slice_mode: bool = False

@@ -1,7 +1,10 @@
 """``gratnet render``: a shipped material (or any model file) on a mesh, or its BRDF slice, to PNG or EXR.
 
-    gratnet render --material blazed --mesh cd --light 45,90 --camera 0.25,-90,45 --exposure 20 \\
-        --size 512,512 --out cd.png
+    gratnet render --material blazed --mesh cd --size 512,512 --out cd.png
+
+- ``--light``, ``--camera``, ``--exposure`` left out: chosen from the material and the mesh so that the
+  diffraction shows (viewer.defaults; the same values as ``gratnet view``). A picture that is 99 % black on
+  the display draws a warning on stderr with an exposure that would show it (exit status unchanged).
 
 - ``--mesh``: ``cd`` (viewer.meshes.compact_disc), ``sphere``, ``plane`` or a Wavefront ``.obj`` file
   (metres); the world is +z up and the built-in meshes face +z.
@@ -25,6 +28,7 @@ from pathlib import Path
 
 from gratnet.config import add_arguments, config_field, from_arguments, save_config
 from gratnet.errors import GratNetError
+from viewer.defaults import FALLBACK, FOV_DEGREES, fill_scene_defaults
 
 __all__ = ["ASSETS", "MESHES", "RenderConfig", "register", "resolve_material", "run", "shipped_materials"]
 
@@ -45,15 +49,21 @@ class RenderConfig:
 
     material: str = config_field("blazed", "shipped material name (assets/NAME/model.npz) or a model-file path")
     mesh: str = config_field("cd", "cd, sphere, plane, or the path of a Wavefront .obj file (metres, +z up)")
-    light_theta_degrees: float = config_field(45.0, "directional light: polar angle from +z, degrees", cli=False)
-    light_phi_degrees: float = config_field(90.0, "directional light: azimuth from +x, degrees", cli=False)
+    light_theta_degrees: float = config_field(FALLBACK.light_theta_degrees,
+                                              "directional light: polar angle from +z, degrees", cli=False)
+    light_phi_degrees: float = config_field(FALLBACK.light_phi_degrees, "directional light: azimuth from +x, degrees",
+                                            cli=False)
     point_light: tuple[float, float, float] | None = config_field(
         None, "point light position, metres (replaces the directional light)", cli=False)
-    camera_distance: float = config_field(0.25, "camera distance from the origin, metres", cli=False)
-    camera_azimuth_degrees: float = config_field(-90.0, "camera azimuth from +x, degrees", cli=False)
-    camera_elevation_degrees: float = config_field(45.0, "camera elevation above the xy-plane, degrees", cli=False)
-    fov_degrees: float = config_field(40.0, "vertical field of view, degrees", flag="--fov")
-    exposure: float = config_field(1.0, "exposure: the factor applied to XYZ before display (linear)")
+    camera_distance: float = config_field(FALLBACK.camera_distance, "camera distance from the origin, metres",
+                                          cli=False)
+    camera_azimuth_degrees: float = config_field(FALLBACK.camera_azimuth_degrees, "camera azimuth from +x, degrees",
+                                                 cli=False)
+    camera_elevation_degrees: float = config_field(FALLBACK.camera_elevation_degrees,
+                                                   "camera elevation above the xy-plane, degrees", cli=False)
+    fov_degrees: float = config_field(FOV_DEGREES, "vertical field of view, degrees", flag="--fov")
+    exposure: float = config_field(FALLBACK.exposure, "exposure: the factor applied to XYZ before display (linear)",
+                                   cli=False)
     width: int = config_field(512, "image width, pixels", cli=False)
     height: int = config_field(512, "image height, pixels", cli=False)
     ior: float = config_field(1.5, "refractive index for the Fresnel factor of the A-term (0: none)")
@@ -144,13 +154,17 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     )
     parser.add_argument("--out", required=True, metavar="IMAGE.png|IMAGE.exr",
                         help="output: .png (display sRGB, 8-bit) or .exr (linear sRGB float, R G B)")
-    parser.add_argument("--light", dest="light_text", default="45,90", metavar="θ,φ",
+    parser.add_argument("--light", dest="light_text", default=None, metavar="θ,φ",
                         help="directional light in world space: polar angle from +z and azimuth from +x, "
-                        "degrees (default: 45,90)")
+                        "degrees (default: chosen from the material and mesh so that the diffraction shows)")
     parser.add_argument("--point-light", dest="point_light_text", default=None, metavar="X,Y,Z",
                         help="point light position in metres instead of --light (irradiance 1 at 1 m)")
-    parser.add_argument("--camera", dest="camera_text", default="0.25,-90,45", metavar="DIST,AZIMUTH,ELEVATION",
-                        help="orbit camera around the origin: metres, degrees, degrees (default: 0.25,-90,45)")
+    parser.add_argument("--camera", dest="camera_text", default=None, metavar="DIST,AZIMUTH,ELEVATION",
+                        help="orbit camera around the origin: metres, degrees, degrees (default: chosen with the "
+                        "light: the distance that frames the mesh, azimuth -90)")
+    parser.add_argument("--exposure", type=float, default=None,
+                        help="exposure: the factor applied to XYZ before display, linear (default: chosen from the "
+                        "material and mesh so that the diffraction shows without saturating)")
     parser.add_argument("--size", dest="size_text", default="512,512", metavar="W,H",
                         help="image size in pixels (default: 512,512)")
     add_arguments(parser, RenderConfig)
@@ -194,6 +208,7 @@ def run(arguments: argparse.Namespace) -> int:
     out = Path(arguments.out)
     if out.suffix.lower() not in _OUTPUT_SUFFIXES:
         raise GratNetError(f"--out must end in .png (display sRGB) or .exr (linear sRGB float), got {arguments.out}")
+    fill_scene_defaults(arguments)  # the unset --light, --camera, --exposure, from the material and mesh
     config = _resolve_config(arguments)
     if config.skip_dark and out.suffix.lower() != ".png":
         raise GratNetError("--skip-dark applies to .png output only: an EXR keeps values below the display's step")
@@ -238,7 +253,19 @@ def run(arguments: argparse.Namespace) -> int:
             else f"mesh {config.mesh}")
     print(f"wrote {out}: {Path(model_path).parent.name if model_path.name == 'model.npz' else model_path.name}, "
           f"{what}, {config.width}×{config.height}, exposure {config.exposure:g}")
+    _warn_if_black(xyz, config.exposure)
     return 0
+
+
+def _warn_if_black(xyz: object, exposure: float) -> None:
+    """The black-picture hint (gratnet.showcase.black_image_hint) on stderr; the exit status is unchanged."""
+    import sys
+
+    from gratnet.showcase import black_image_hint
+
+    hint = black_image_hint(xyz, exposure)  # type: ignore[arg-type]
+    if hint is not None:
+        print(f"warning: {hint}", file=sys.stderr)
 
 
 def _write_exr(path: Path, linear_srgb: object) -> None:

@@ -7,7 +7,8 @@
 - ``--mesh``: ``cd``, ``sphere``, ``plane`` or a Wavefront ``.obj`` file (metres, +z up).
 - ``--size W,H``: the render area in pixels (the window adds the panel on the left).
 - ``--light θ,φ``, ``--camera DIST,AZIMUTH,ELEVATION``, ``--exposure``, ``--ior``, ``--no-fresnel``,
-  ``--slice``: the starting view, as in ``gratnet render``.
+  ``--slice``: the starting view, as in ``gratnet render``; light, camera and exposure left out are chosen
+  from the material and the mesh (viewer.defaults), the same values as ``gratnet render``'s.
 - ``--weights-path auto|texture|baked``: where the shader reads the weights, as in ``gratnet render``.
 
 Mouse: drag over the picture to orbit (in BRDF-slice mode: to move the light), wheel to zoom. The
@@ -23,6 +24,7 @@ import argparse
 from pathlib import Path
 
 from gratnet.errors import GratNetError
+from viewer.defaults import fill_scene_defaults
 from viewer.render_cli import WEIGHT_PATHS
 
 __all__ = ["register", "run"]
@@ -42,12 +44,15 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                         help="cd, sphere, plane, or the path of a Wavefront .obj file (metres, +z up; default: cd)")
     parser.add_argument("--size", dest="size_text", default="512,512", metavar="W,H",
                         help="render area in pixels (default: 512,512)")
-    parser.add_argument("--light", dest="light_text", default="20,90", metavar="θ,φ",
-                        help="directional light: polar angle from +z and azimuth from +x, degrees (default: 20,90)")
-    parser.add_argument("--camera", dest="camera_text", default="0.18,-90,50", metavar="DIST,AZIMUTH,ELEVATION",
-                        help="orbit camera around the origin: metres, degrees, degrees (default: 0.18,-90,50)")
-    parser.add_argument("--exposure", type=float, default=5000.0,
-                        help="exposure: the factor applied to XYZ before display (default: 5000)")
+    parser.add_argument("--light", dest="light_text", default=None, metavar="θ,φ",
+                        help="directional light: polar angle from +z and azimuth from +x, degrees (default: chosen "
+                        "from the material and mesh so that the diffraction shows, as in gratnet render)")
+    parser.add_argument("--camera", dest="camera_text", default=None, metavar="DIST,AZIMUTH,ELEVATION",
+                        help="orbit camera around the origin: metres, degrees, degrees (default: chosen with the "
+                        "light: the distance that frames the mesh, azimuth -90)")
+    parser.add_argument("--exposure", type=float, default=None,
+                        help="exposure: the factor applied to XYZ before display, linear (default: chosen from the "
+                        "material and mesh so that the diffraction shows without saturating)")
     parser.add_argument("--ior", type=float, default=1.5,
                         help="refractive index of the Fresnel factor (0: no Fresnel; default: 1.5)")
     parser.add_argument("--fresnel", action=argparse.BooleanOptionalAction, default=True,
@@ -72,6 +77,7 @@ def _state(arguments: argparse.Namespace) -> object:
     from viewer.render_cli import MESHES, _numbers, resolve_material
     from viewer.renderer import _ior_uniform
 
+    fill_scene_defaults(arguments)  # the unset --light, --camera, --exposure, from the material and mesh
     theta, phi = _numbers(arguments.light_text, 2, "--light", "θ,φ in degrees such as 20,90")
     distance, azimuth, elevation = _numbers(arguments.camera_text, 3, "--camera",
                                             "DIST,AZIMUTH,ELEVATION (metres, degrees, degrees) such as 0.18,-90,50")

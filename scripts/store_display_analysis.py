@@ -1,0 +1,60 @@
+"""Add (or refresh) the ``metadata["display"]`` analysis in existing GratNet model files, in place.
+
+    python scripts/store_display_analysis.py assets/*/model.npz
+
+The trainer stores it in every model it saves (gratnet.showcase.with_display); files written before it
+get it computed at load time instead (about a second). This script stores it once. Only the JSON header
+changes: the script re-reads the written file and checks that every weight, bias and the packed texture
+are bit-identical to the original's, and restores the original otherwise.
+"""
+
+from __future__ import annotations
+
+import argparse
+import shutil
+import sys
+import tempfile
+from pathlib import Path
+
+import numpy as np
+
+from gratnet.modelfile import load_model, save_model
+from gratnet.showcase import DISPLAY_KEY, with_display
+
+
+def _arrays(path: Path) -> dict[str, bytes]:
+    """Every array of the archive except the JSON header, as raw bytes with dtype and shape."""
+    with np.load(path, allow_pickle=False) as archive:
+        return {name: (str(archive[name].dtype), archive[name].shape, archive[name].tobytes())  # type: ignore[misc]
+                for name in archive.files if name != "metadata_json"}
+
+
+def store(path: Path) -> str:
+    """Store the analysis in ``path``; returns a one-line report."""
+    before = _arrays(path)
+    model = load_model(path)
+    updated = with_display(model)
+    if model.metadata.get(DISPLAY_KEY) == updated.metadata[DISPLAY_KEY]:
+        return f"{path}: unchanged"
+    with tempfile.TemporaryDirectory() as folder:
+        backup = Path(folder) / "original.npz"
+        shutil.copy2(path, backup)
+        save_model(path, updated)
+        if _arrays(path) != before:
+            shutil.copy2(backup, path)
+            raise SystemExit(f"{path}: the rewritten arrays differ from the original; restored the original")
+    display = updated.metadata[DISPLAY_KEY]
+    return (f"{path}: stored exposure {display['exposure']:g}, peaks {display['peak_keys_uv'][:2]} "
+            "(weights bit-identical)")
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("models", nargs="+", type=Path, help="model files (.npz) to update in place")
+    for path in parser.parse_args(argv).models:
+        print(store(path))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
