@@ -81,7 +81,7 @@ def register(mi: ModuleType) -> None:
     mi.register_bsdf(PLUGIN_NAME, lambda props: cls(props))
 
 
-@functools.lru_cache(maxsize=None)
+@functools.cache
 def bsdf_class(variant: str) -> type:
     """The BSDF class for ``variant`` (Mitsuba's base classes differ per variant, so one class each)."""
     import drjit as dr

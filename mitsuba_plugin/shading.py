@@ -138,9 +138,10 @@ def sample_mixture(view: np.ndarray, xi0: np.ndarray, xi1: np.ndarray, xi2: np.n
     """``(directions (N, 3), valid (N,))``: the lobe where ``xi0 < probability``, else the cosine hemisphere;
     ``valid`` is False below the horizon (or for a view direction below it)."""
     view = np.asarray(view, dtype=np.float64).reshape(-1, 3)
-    xi0 = np.broadcast_to(np.asarray(xi0, dtype=np.float64).reshape(-1), view.shape[:1])
-    xi1 = np.broadcast_to(np.asarray(xi1, dtype=np.float64).reshape(-1), view.shape[:1])
-    xi2 = np.broadcast_to(np.asarray(xi2, dtype=np.float64).reshape(-1), view.shape[:1])
+    xi0, xi1, xi2 = (np.asarray(xi, dtype=np.float64).reshape(-1) for xi in (xi0, xi1, xi2))
+    count = max(view.shape[0], xi0.size, xi1.size, xi2.size)
+    view = np.broadcast_to(view, (count, 3))
+    xi0, xi1, xi2 = (np.broadcast_to(xi, (count,)) for xi in (xi0, xi1, xi2))
     lobe = xi0 < probability
     directions = cosine_hemisphere(xi1, xi2)
     if np.any(lobe):
