@@ -57,14 +57,12 @@ def _model(filename: str) -> ModelFile:
 
 
 def check_ior(ior: float) -> float | None:
-    """The A-term's ``ior`` argument for a plugin/flag value: None for 0 (no Fresnel), else a finite value
-    > 0 that float32 holds; anything else is one GratNetError."""
-    ior = float(ior)
-    if ior == 0.0:
-        return None
-    if not (math.isfinite(ior) and 1e-30 < ior < 3e38):
-        raise GratNetError(f"ior must be 0 (no Fresnel) or a finite refractive index > 0, got {ior!r}")
-    return ior
+    """The A-term's ``ior`` argument for a plugin/flag value: None for 0 (no Fresnel), else the value; refused
+    (one GratNetError) exactly where ``gratnet render`` refuses it (viewer.renderer's IOR check)."""
+    from viewer.renderer import _ior_uniform
+
+    value = _ior_uniform(float(ior))
+    return None if value == 0.0 else value
 
 
 def _checked(value: float, name: str, low: float, high: float, low_open: bool = False) -> float:
