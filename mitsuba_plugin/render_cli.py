@@ -208,10 +208,6 @@ def run(arguments: argparse.Namespace) -> int:
     variant = resolve_variant(config.variant)
 
     mi = set_variant(variant)
-    if variant == "scalar_rgb":
-        # Out-of-gamut XYZ gives negative linear sRGB, kept as gratnet render's EXR keeps it; the scalar image
-        # block would warn once per such sample.
-        mi.set_log_level(mi.LogLevel.Error)
     started = time.perf_counter()
     scene = mitsuba_scene.build_scene(
         mi, mesh,

@@ -133,14 +133,23 @@ def render_passes(mi: ModuleType, scene: Any, spp: int, seed: int = 0, samples_p
     total = np.zeros((height, width, 3), dtype=np.float64)
     done = 0
     pass_index = 0
-    while done < spp:
-        count = min(per_pass, spp - done)
-        image = np.asarray(mi.render(scene, seed=int(seed) * 1_000_003 + pass_index, spp=count), dtype=np.float64)
-        total += image[..., :3] * count
-        done += count
-        pass_index += 1
-        if progress is not None:
-            progress(done)
+    previous_level = mi.log_level()
+    if not mi.variant().startswith(("llvm", "cuda")):
+        # Out-of-gamut XYZ gives negative linear sRGB, kept as gratnet render's EXR keeps it; the scalar image
+        # block would warn once per such sample.
+        mi.set_log_level(mi.LogLevel.Error)
+    try:
+        while done < spp:
+            count = min(per_pass, spp - done)
+            image = np.asarray(mi.render(scene, seed=int(seed) * 1_000_003 + pass_index, spp=count),
+                               dtype=np.float64)
+            total += image[..., :3] * count
+            done += count
+            pass_index += 1
+            if progress is not None:
+                progress(done)
+    finally:
+        mi.set_log_level(previous_level)
     result = total / max(done, 1)
     if not math.isfinite(float(np.sum(result))):
         raise GratNetError("the Mitsuba render contains NaN or inf; nothing was written (please report this)")
