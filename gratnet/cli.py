@@ -26,6 +26,7 @@ SUBCOMMAND_MODULES: dict[str, str] = {
     "render": "viewer.render_cli",
     "view": "viewer.view_cli",
     "bench": "trainer.bench_cli",
+    "mitsuba-render": "mitsuba_plugin.render_cli",
 }
 
 

@@ -7,6 +7,7 @@ pyproject.toml:
 
 - ``gratnet/`` and ``viewer/`` (the runtime): the core ``dependencies`` only (no torch).
 - ``trainer/`` (the offline stage): core + the ``trainer`` extra.
+- ``mitsuba_plugin/`` (the Mitsuba 3 BSDF and ``gratnet mitsuba-render``): core + the ``mitsuba`` extra.
 - ``tests/`` and ``benchmarks/``: core + every extra.
 """
 
@@ -50,6 +51,7 @@ ALLOWED = {
     "gratnet": CORE,
     "viewer": CORE,
     "trainer": CORE | EXTRAS.get("trainer", set()),
+    "mitsuba_plugin": CORE | EXTRAS.get("mitsuba", set()),
     "tests": CORE.union(*EXTRAS.values()),
     "benchmarks": CORE.union(*EXTRAS.values()),
 }

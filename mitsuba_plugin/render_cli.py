@@ -1,0 +1,243 @@
+"""``gratnet mitsuba-render``: a shipped material (or any model file) on a mesh, path-traced by Mitsuba 3.
+
+    gratnet mitsuba-render --material cd --mesh cd --point-light 0.05,-0.1,0.15 --camera 0.25,-90,45 \\
+        --exposure 5000 --environment 2e-5 --spp 64 --size 512,512 --out cd_mitsuba.png
+
+The flags mean what they mean for ``gratnet render`` (same names: --material, --mesh, --light θ,φ,
+--point-light X,Y,Z, --camera DIST,AZIMUTH,ELEVATION, --fov, --exposure, --ior, --no-fresnel, --size, --out),
+so the two renderers show the same scene; with one light, no environment and ``--integrator direct`` they
+agree up to Monte Carlo noise (tests/test_mitsuba.py). Added: --spp, --environment (a constant radiance or
+a lat-long EXR), --light-intensity, --integrator, --max-depth, --variant, --seed, the sampling mixture, --quiet.
+
+Output: ``.png`` = display sRGB, 8-bit (``gratnet.display``); ``.exr`` = linear sRGB float32 R, G, B,
+exposure applied, unclipped. The resolved config is saved beside it (``NAME.config.json``); both atomically.
+Needs the ``mitsuba`` extra (``pip install -e '.[mitsuba]'``).
+"""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import math
+import os
+import sys
+import time
+from pathlib import Path
+
+from gratnet.config import add_arguments, config_field, from_arguments, save_config
+from gratnet.errors import GratNetError
+
+__all__ = ["MitsubaRenderConfig", "parse_environment", "register", "run"]
+
+_OUTPUT_SUFFIXES = (".png", ".exr")
+#: Largest --spp (a typo such as 1e9 would otherwise run for days).
+MAX_SPP = 1 << 16
+
+
+@dataclasses.dataclass
+class MitsubaRenderConfig:
+    """Path-tracing a material on a mesh with Mitsuba 3: lights, environment, camera and sampling."""
+
+    material: str = config_field("blazed", "shipped material name (assets/NAME/model.npz) or a model-file path")
+    mesh: str = config_field("cd", "cd, sphere, plane, or the path of a Wavefront .obj file (metres, +z up)")
+    light_theta_degrees: float = config_field(45.0, "directional light: polar angle from +z, degrees", cli=False)
+    light_phi_degrees: float = config_field(90.0, "directional light: azimuth from +x, degrees", cli=False)
+    point_light: tuple[float, float, float] | None = config_field(
+        None, "point light position, metres (replaces the directional light)", cli=False)
+    light_intensity: float = config_field(
+        1.0, "the light's irradiance (directional, on a plane facing it) or intensity (point, W/sr: irradiance "
+        "intensity/d² at d metres); 0: environment only")
+    environment: str = config_field(
+        "none", "environment light: none, a constant radiance (one number, or R,G,B in linear sRGB) or the path "
+        "of a lat-long .exr (its up is +z)", cli=False)
+    environment_scale: float = config_field(1.0, "factor on the environment's radiance")
+    camera_distance: float = config_field(0.25, "camera distance from the origin, metres", cli=False)
+    camera_azimuth_degrees: float = config_field(-90.0, "camera azimuth from +x, degrees", cli=False)
+    camera_elevation_degrees: float = config_field(45.0, "camera elevation above the xy-plane, degrees", cli=False)
+    fov_degrees: float = config_field(40.0, "vertical field of view, degrees", flag="--fov")
+    exposure: float = config_field(1.0, "exposure: the factor applied to the radiance before display (linear)")
+    width: int = config_field(512, "image width, pixels", cli=False)
+    height: int = config_field(512, "image height, pixels", cli=False)
+    ior: float = config_field(1.5, "refractive index for the Fresnel factor of the A-term (0: none)")
+    fresnel: bool = config_field(True, "apply the Fresnel factor (--no-fresnel: R/R0 = 1)")
+    spp: int = config_field(64, f"samples per pixel (1 … {MAX_SPP})")
+    integrator: str = config_field("path", "direct (one bounce, emitter + BSDF sampling) or path",
+                                   choices=["direct", "path"])
+    max_depth: int = config_field(8, "path: longest path, in segments (2 = direct lighting)")
+    variant: str = config_field("auto", "Mitsuba variant: llvm_ad_rgb (wide, needs LLVM ≥ 18), scalar_rgb (one "
+                                "lookup at a time) or auto", choices=["auto", "llvm_ad_rgb", "scalar_rgb"])
+    seed: int = config_field(0, "random seed of the sampler")
+    specular_probability: float = config_field(0.5, "share of BSDF samples drawn around the mirror direction")
+    lobe_degrees: float = config_field(2.0, "angular standard deviation of that lobe, degrees")
+
+    @property
+    def effective_ior(self) -> float | None:
+        """The A-term's ``ior`` argument: ``None`` when Fresnel is off."""
+        return self.ior if self.fresnel and self.ior != 0 else None
+
+
+def parse_environment(text: str) -> float | tuple[float, float, float] | Path | None:
+    """``none`` → None; a number or R,G,B (finite, ≥ 0) → a constant radiance; else an existing .exr file."""
+    text = str(text).strip()
+    if text.lower() in ("", "none"):
+        return None
+    parts = text.split(",")
+    try:
+        values = [float(part) for part in parts]
+    except ValueError:
+        values = None
+    if values is not None:
+        if len(values) not in (1, 3) or not all(math.isfinite(v) and v >= 0.0 for v in values):
+            raise GratNetError(f"--environment expects none, a radiance ≥ 0, R,G,B or an .exr file, got {text!r}")
+        return values[0] if len(values) == 1 else (values[0], values[1], values[2])
+    path = Path(text).expanduser()
+    if path.suffix.lower() != ".exr":
+        raise GratNetError(f"--environment expects none, a radiance ≥ 0, R,G,B or an .exr file, got {text!r}")
+    if not path.is_file():
+        raise GratNetError(f"environment map {text} does not exist")
+    return path
+
+
+def register(subparsers: argparse._SubParsersAction) -> None:
+    """Add the ``mitsuba-render`` subcommand."""
+    parser = subparsers.add_parser(
+        "mitsuba-render", help="path-trace a material on a mesh (cd, sphere, plane, .obj) with Mitsuba 3",
+        description="Path-trace a mesh shaded by the trained network (the gratnet BSDF plugin: the same "
+        "A · XYZ as gratnet render) under a directional or point light and an environment, with Mitsuba 3 "
+        "(the mitsuba extra). Flags shared with gratnet render mean the same.",
+    )
+    parser.add_argument("--out", required=True, metavar="IMAGE.png|IMAGE.exr",
+                        help="output: .png (display sRGB, 8-bit) or .exr (linear sRGB float, R G B)")
+    parser.add_argument("--light", dest="light_text", default="45,90", metavar="θ,φ",
+                        help="directional light in world space: polar angle from +z and azimuth from +x, "
+                        "degrees (default: 45,90)")
+    parser.add_argument("--point-light", dest="point_light_text", default=None, metavar="X,Y,Z",
+                        help="point light position in metres instead of --light")
+    parser.add_argument("--camera", dest="camera_text", default="0.25,-90,45", metavar="DIST,AZIMUTH,ELEVATION",
+                        help="orbit camera around the origin: metres, degrees, degrees (default: 0.25,-90,45)")
+    parser.add_argument("--size", dest="size_text", default="512,512", metavar="W,H",
+                        help="image size in pixels (default: 512,512)")
+    parser.add_argument("--environment", dest="environment", default="none", metavar="none|RADIANCE|R,G,B|MAP.exr",
+                        help="environment light: none (default), a constant radiance in linear sRGB, or a "
+                        "lat-long EXR whose up is +z")
+    parser.add_argument("--quiet", action="store_true", help="no progress bar")
+    add_arguments(parser, MitsubaRenderConfig)
+    parser.set_defaults(handler=run)
+
+
+def _check_output(out: Path) -> None:
+    """The output's suffix and place, before any work."""
+    if out.suffix.lower() not in _OUTPUT_SUFFIXES:
+        raise GratNetError(f"--out must end in .png (display sRGB) or .exr (linear sRGB float), got {out}")
+    if out.is_dir():
+        raise GratNetError(f"cannot write {out}: it is a directory")
+    for parent in (out.parent, *out.parent.parents):
+        if parent.exists():
+            if not parent.is_dir():
+                raise GratNetError(f"cannot write {out}: {parent} is not a directory")
+            if not os.access(parent, os.W_OK | os.X_OK):
+                raise GratNetError(f"cannot write {out}: {parent} is not writable")
+            break
+
+
+def _resolve_config(arguments: argparse.Namespace) -> MitsubaRenderConfig:
+    """The config from the flags, every value checked (nothing rendered, Mitsuba not loaded yet)."""
+    from viewer.render_cli import _numbers, parse_size
+
+    theta, phi = _numbers(arguments.light_text, 2, "--light", "θ,φ in degrees such as 45,90")
+    distance, azimuth, elevation = _numbers(arguments.camera_text, 3, "--camera",
+                                            "DIST,AZIMUTH,ELEVATION (metres, degrees, degrees) such as 0.25,-90,45")
+    point = None
+    if arguments.point_light_text is not None:
+        point = tuple(_numbers(arguments.point_light_text, 3, "--point-light", "X,Y,Z in metres such as 0,0.1,0.2"))
+    width, height = parse_size(arguments.size_text)
+    config = dataclasses.replace(
+        from_arguments(MitsubaRenderConfig, arguments),
+        light_theta_degrees=theta, light_phi_degrees=phi, point_light=point, camera_distance=distance,
+        camera_azimuth_degrees=azimuth, camera_elevation_degrees=elevation, width=width, height=height,
+        environment=str(arguments.environment),
+    )
+    for name, value in (("--exposure", config.exposure), ("--light-intensity", config.light_intensity),
+                        ("--environment-scale", config.environment_scale)):
+        if not (math.isfinite(value) and 0.0 <= value < 3e38):
+            raise GratNetError(f"{name} must be a finite number ≥ 0, got {value!r}")
+    if not 1 <= config.spp <= MAX_SPP:
+        raise GratNetError(f"--spp must be an integer in 1 … {MAX_SPP}, got {config.spp}")
+    if not 1 <= config.max_depth <= 1024:
+        raise GratNetError(f"--max-depth must be an integer in 1 … 1024, got {config.max_depth}")
+    if not (math.isfinite(config.specular_probability) and 0.0 <= config.specular_probability <= 1.0):
+        raise GratNetError(f"--specular-probability must be in [0, 1], got {config.specular_probability!r}")
+    if not (math.isfinite(config.lobe_degrees) and 0.0 < config.lobe_degrees <= 90.0):
+        raise GratNetError(f"--lobe-degrees must be in (0, 90], got {config.lobe_degrees!r}")
+    from mitsuba_plugin.bsdf import check_ior
+
+    if config.fresnel:
+        check_ior(config.ior)
+    parse_environment(config.environment)
+    return config
+
+
+def run(arguments: argparse.Namespace) -> int:
+    """Check every input, path-trace, write the image and its config atomically."""
+    import numpy as np
+
+    from gratnet.atomic import atomic_path
+    from gratnet.display import xyz_to_display_srgb8
+    from mitsuba_plugin import scene as mitsuba_scene
+    from mitsuba_plugin.runtime import resolve_variant, set_variant
+    from mitsuba_plugin.shading import xyz_to_linear_srgb_matrix
+    from viewer.camera import Camera, Light
+    from viewer.render_cli import _write_exr, build_mesh, resolve_material
+
+    out = Path(arguments.out)
+    _check_output(out)
+    config = _resolve_config(arguments)
+    model_path = resolve_material(config.material)
+    from gratnet.modelfile import load_model
+
+    load_model(model_path)  # a corrupt model file: one line now, not a Mitsuba traceback later
+    mesh = build_mesh(config.mesh)
+    camera = Camera(config.camera_distance, config.camera_azimuth_degrees, config.camera_elevation_degrees,
+                    fov_deg=config.fov_degrees)
+    light = None
+    if config.light_intensity > 0.0:
+        light = (Light.point(config.point_light, config.light_intensity) if config.point_light is not None
+                 else Light.directional(config.light_theta_degrees, config.light_phi_degrees,
+                                        config.light_intensity))
+    environment = parse_environment(config.environment)
+    variant = resolve_variant(config.variant)
+
+    mi = set_variant(variant)
+    started = time.perf_counter()
+    scene = mitsuba_scene.build_scene(
+        mi, mesh,
+        mitsuba_scene.bsdf_dict(model_path, config.effective_ior, specular_probability=config.specular_probability,
+                                lobe_degrees=config.lobe_degrees),
+        mitsuba_scene.sensor(mi, camera, config.width, config.height, config.spp),
+        mitsuba_scene.emitters(light, environment, config.environment_scale),
+        integrator=config.integrator, max_depth=config.max_depth)
+    from tqdm import tqdm
+
+    with tqdm(total=config.spp, desc=f"mitsuba-render ({variant})", unit="spp", file=sys.stderr,
+              disable=arguments.quiet) as bar:
+        image = mitsuba_scene.render_passes(mi, scene, config.spp, config.seed,
+                                            progress=lambda done: bar.update(done - bar.n))
+    seconds = time.perf_counter() - started
+    linear = image.astype(np.float64) * config.exposure
+    if not np.all(np.isfinite(linear)):
+        raise GratNetError("the render contains NaN or inf after the exposure; nothing was written")
+
+    if out.suffix.lower() == ".png":
+        from PIL import Image
+
+        xyz = linear @ np.linalg.inv(xyz_to_linear_srgb_matrix())  # gratnet.display's pipeline takes XYZ
+        with atomic_path(out) as temporary:
+            Image.fromarray(xyz_to_display_srgb8(xyz, 1.0)).save(temporary, format="PNG")
+    else:
+        _write_exr(out, linear.astype(np.float32))
+    save_config(out, mitsuba_render=config, model_file=str(model_path), variant=variant,
+                render_seconds=round(seconds, 3))
+    print(f"wrote {out}: {Path(model_path).parent.name if model_path.name == 'model.npz' else model_path.name}, "
+          f"mesh {config.mesh}, {config.width}×{config.height}, {config.spp} spp, {variant}, "
+          f"exposure {config.exposure:g}, {seconds:.1f} s")
+    return 0

@@ -1,0 +1,77 @@
+"""Importing Mitsuba 3 lazily, choosing a variant and registering the ``gratnet`` BSDF for it.
+
+The BSDF evaluates the network with numpy (``gratnet.modelfile.evaluate_keys``), so Dr.Jit must hand it
+evaluated arrays, not symbolic ones: in JIT variants :func:`set_variant` turns off Dr.Jit's symbolic loops
+and calls (``JitFlag.SymbolicLoops``, ``JitFlag.SymbolicCalls``; process-wide flags). Mitsuba then calls the
+BSDF once per bounce for all lanes that hit it (``llvm_ad_rgb``: wide numpy batches), or once per lookup in
+``scalar_rgb``.
+
+Dr.Jit's LLVM back end needs LLVM ≥ 18 here: with Debian 12's LLVM 14 and 15 every kernel containing a
+float maximum aborts the process ("Cannot select: fmaximum"); Debian's ``libllvm19`` works. ``auto`` picks
+``llvm_ad_rgb`` when such an LLVM is found, else ``scalar_rgb``.
+"""
+
+from __future__ import annotations
+
+from types import ModuleType
+
+from gratnet.errors import GratNetError
+
+__all__ = ["MIN_LLVM", "VARIANTS", "import_mitsuba", "llvm_usable", "resolve_variant", "set_variant"]
+
+#: Variants the plugin supports: RGB ones (the network's XYZ is converted to linear sRGB).
+VARIANTS = ("auto", "llvm_ad_rgb", "scalar_rgb")
+#: Oldest LLVM whose x86 back end selects the llvm.maximum intrinsic that Dr.Jit 1.x emits.
+MIN_LLVM = (18, 0, 0)
+
+
+def import_mitsuba() -> ModuleType:
+    """``mitsuba``, or one GratNetError saying how to install it."""
+    try:
+        import mitsuba
+    except ImportError as error:
+        raise GratNetError(
+            f"Mitsuba 3 is not installed ({error}); install the extra: pip install -e '.[mitsuba]'") from None
+    return mitsuba
+
+
+def llvm_usable() -> bool:
+    """True when Dr.Jit's LLVM back end loads an LLVM ≥ :data:`MIN_LLVM` (older ones abort on the first kernel)."""
+    import drjit as dr
+
+    try:
+        if not dr.has_backend(dr.JitBackend.LLVM):
+            return False
+        return tuple(dr.detail.llvm_version()) >= MIN_LLVM
+    except Exception:  # no LLVM at all: Dr.Jit raises while loading it
+        return False
+
+
+def resolve_variant(name: str) -> str:
+    """``auto`` → ``llvm_ad_rgb`` when usable, else ``scalar_rgb``; an unusable or unknown choice is refused."""
+    import_mitsuba()
+    if name not in VARIANTS:
+        raise GratNetError(f"unknown Mitsuba variant {name!r}; choose one of {', '.join(VARIANTS)}")
+    if name == "auto":
+        return "llvm_ad_rgb" if llvm_usable() else "scalar_rgb"
+    if name == "llvm_ad_rgb" and not llvm_usable():
+        raise GratNetError(f"llvm_ad_rgb needs Dr.Jit to find LLVM ≥ {MIN_LLVM[0]} (Debian: apt-get install "
+                           "libllvm19; or set DRJIT_LIBLLVM_PATH); use --variant scalar_rgb")
+    return name
+
+
+def set_variant(name: str = "auto") -> ModuleType:
+    """Set the Mitsuba variant (see :func:`resolve_variant`), put Dr.Jit in evaluated mode, register the
+    ``gratnet`` BSDF plugin for that variant and return the ``mitsuba`` module."""
+    mi = import_mitsuba()
+    variant = resolve_variant(name)
+    mi.set_variant(variant)
+    import drjit as dr
+
+    if dr.is_jit_v(mi.Float):
+        dr.set_flag(dr.JitFlag.SymbolicLoops, False)
+        dr.set_flag(dr.JitFlag.SymbolicCalls, False)
+    from mitsuba_plugin.bsdf import register
+
+    register(mi)
+    return mi

@@ -1,0 +1,156 @@
+"""GratNet scenes for Mitsuba 3: a ``viewer.meshes.Mesh``, the orbit camera, the lights and an environment.
+
+- **Mesh**: positions, normals, UVs and faces go to a ``mi.Mesh`` as they are; the per-vertex tangents go
+  along as the mesh attribute ``vertex_tangent``, which the BSDF interpolates (barycentrically, like the
+  GL rasterizer's ``in_tangent``) and Gram–Schmidts against the shading normal, as shaders/surface.glsl
+  does. So the CD's tangents run along its tracks exactly, not along each triangle's ∂p/∂u chord.
+- **Camera**: ``viewer.camera.Camera`` as Mitsuba's ``perspective`` sensor (same eye, target, up, vertical
+  field of view, clip range), or an ``orthographic`` one looking along the same axis.
+- **Lights**: ``viewer.camera.Light``: directional → ``directional`` with ``irradiance`` = its intensity
+  (irradiance on a plane facing the light); point → ``point`` with ``intensity`` = its intensity (W/sr,
+  so the irradiance at d metres is intensity/d², as the GL runtime's 1/d² falloff). White (1, 1, 1).
+- **Environment**: a constant radiance (linear sRGB) or a lat-long EXR (``envmap``), rotated so that its
+  up (Mitsuba's +y) is GratNet's +z.
+- **Film**: ``hdrfilm`` with a box filter (each pixel the mean over its area), linear sRGB float.
+"""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+from types import ModuleType
+from typing import Any
+
+import numpy as np
+
+from gratnet.errors import GratNetError
+from viewer.camera import Camera, Light
+from viewer.meshes import Mesh
+
+__all__ = ["TANGENT_ATTRIBUTE", "bsdf_dict", "build_scene", "emitters", "mitsuba_mesh", "sensor"]
+
+#: Name of the per-vertex tangent attribute of exported meshes.
+TANGENT_ATTRIBUTE = "vertex_tangent"
+
+
+def bsdf_dict(model_path: str | Path, ior: float | None, *, tangent_attribute: str = TANGENT_ATTRIBUTE,
+              specular_probability: float = 0.5, lobe_degrees: float = 2.0) -> dict[str, Any]:
+    """The ``gratnet`` BSDF's ``load_dict`` entry (``ior`` None: Fresnel off)."""
+    return {"type": "gratnet", "filename": str(model_path), "ior": 0.0 if ior is None else float(ior),
+            "tangent_attribute": tangent_attribute, "specular_probability": float(specular_probability),
+            "lobe_degrees": float(lobe_degrees)}
+
+
+def mitsuba_mesh(mi: ModuleType, mesh: Mesh, bsdf: Any, name: str = "gratnet_mesh") -> Any:
+    """``mesh`` as a ``mi.Mesh`` with ``bsdf`` (a loaded BSDF) and the ``vertex_tangent`` attribute."""
+    if mesh.triangle_count == 0:
+        raise GratNetError("the mesh has no triangles")
+    props = mi.Properties()
+    props["bsdf"] = bsdf
+    result = mi.Mesh(name, mesh.vertex_count, mesh.triangle_count, props=props, has_vertex_normals=True,
+                     has_vertex_texcoords=True)
+    params = mi.traverse(result)
+    params["vertex_positions"] = np.ascontiguousarray(mesh.positions, dtype=np.float32).ravel()
+    params["vertex_normals"] = np.ascontiguousarray(mesh.normals, dtype=np.float32).ravel()
+    params["vertex_texcoords"] = np.ascontiguousarray(mesh.uvs, dtype=np.float32).ravel()
+    params["faces"] = np.ascontiguousarray(mesh.indices, dtype=np.uint32).ravel()
+    params.update()
+    result.add_attribute(TANGENT_ATTRIBUTE, 3, np.ascontiguousarray(mesh.tangents, dtype=np.float32).ravel())
+    return result
+
+
+def _film(width: int, height: int) -> dict[str, Any]:
+    return {"type": "hdrfilm", "width": int(width), "height": int(height), "rfilter": {"type": "box"},
+            "pixel_format": "rgb", "component_format": "float32", "sample_border": False}
+
+
+def sensor(mi: ModuleType, camera: Camera, width: int, height: int, spp: int,
+           orthographic_half_height: float | None = None) -> dict[str, Any]:
+    """Mitsuba's sensor for ``camera``: ``perspective`` (vertical FOV ``camera.fov_deg``), or with
+    ``orthographic_half_height`` (metres) an ``orthographic`` sensor seeing that half height around the
+    target along the same viewing axis."""
+    look = mi.ScalarTransform4f().look_at(origin=[float(c) for c in camera.eye()],
+                                          target=[float(c) for c in camera.target],
+                                          up=[float(c) for c in camera.up()])
+    near, far = camera.clip_range()
+    result: dict[str, Any] = {"film": _film(width, height),
+                              "sampler": {"type": "independent", "sample_count": int(spp)},
+                              "near_clip": float(near), "far_clip": float(far)}
+    if orthographic_half_height is None:
+        result.update(type="perspective", fov=float(camera.fov_deg), fov_axis="y", to_world=look)
+    else:
+        # Mitsuba's orthographic sensor sees x ∈ [−1, 1], y ∈ [−1/aspect, 1/aspect] in camera space.
+        scale = float(orthographic_half_height) * width / height
+        result.update(type="orthographic", to_world=look @ mi.ScalarTransform4f().scale([scale, scale, 1.0]))
+    return result
+
+
+def emitters(light: Light | None, environment: float | tuple[float, float, float] | str | Path | None = None,
+             environment_scale: float = 1.0) -> dict[str, dict[str, Any]]:
+    """Mitsuba emitter entries: the light (if any) and the environment (a constant radiance, grey or linear
+    sRGB triple, or the path of a lat-long EXR, scaled by ``environment_scale``)."""
+    result: dict[str, dict[str, Any]] = {}
+    if light is not None:
+        white = {"type": "rgb", "value": [float(light.intensity)] * 3}
+        if light.kind == "directional":
+            result["light"] = {"type": "directional", "direction": [-float(c) for c in light.vector],
+                               "irradiance": white}
+        else:
+            result["light"] = {"type": "point", "position": [float(c) for c in light.vector], "intensity": white}
+    if isinstance(environment, (str, Path)):
+        import mitsuba as mi
+
+        result["environment"] = {"type": "envmap", "filename": str(environment), "scale": float(environment_scale),
+                                 "to_world": mi.ScalarTransform4f().rotate([1.0, 0.0, 0.0], 90.0)}
+    elif environment is not None:
+        values = [float(environment)] * 3 if np.isscalar(environment) else [float(v) for v in environment]
+        result["environment"] = {"type": "constant", "radiance": {
+            "type": "rgb", "value": [v * float(environment_scale) for v in values]}}
+    return result
+
+
+def build_scene(mi: ModuleType, mesh: Mesh, bsdf: dict[str, Any], sensor_dict: dict[str, Any],
+                emitter_dicts: dict[str, dict[str, Any]], integrator: str = "path", max_depth: int = 8) -> Any:
+    """A loaded ``mi.Scene``: the mesh with the BSDF, the sensor, the emitters and the integrator
+    (``direct``: emitter and BSDF sampling with MIS, one bounce; ``path``: up to ``max_depth`` bounces)."""
+    if integrator not in ("direct", "path"):
+        raise GratNetError(f"unknown integrator {integrator!r}; choose direct or path")
+    integrator_dict: dict[str, Any] = {"type": integrator}
+    if integrator == "path":
+        integrator_dict["max_depth"] = int(max_depth)
+    shape = mitsuba_mesh(mi, mesh, mi.load_dict(bsdf))
+    return mi.load_dict({"type": "scene", "integrator": integrator_dict, "sensor": sensor_dict, "mesh": shape,
+                         **emitter_dicts})
+
+
+def render_passes(mi: ModuleType, scene: Any, spp: int, seed: int = 0, samples_per_pass: int = 1 << 19,
+                  progress: Any = None) -> np.ndarray:
+    """Render ``spp`` samples per pixel in passes of at most ``samples_per_pass`` samples (bounded memory,
+    and progress between passes); returns the mean, linear sRGB ``float32`` ``(H, W, 3)``, row 0 at the top.
+    ``progress``: called with the number of samples per pixel done so far after each pass."""
+    width, height = (int(v) for v in scene.sensors()[0].film().size())
+    per_pass = max(1, min(int(spp), samples_per_pass // max(width * height, 1)))
+    total = np.zeros((height, width, 3), dtype=np.float64)
+    done = 0
+    pass_index = 0
+    previous_level = mi.log_level()
+    if not mi.variant().startswith(("llvm", "cuda")):
+        # Out-of-gamut XYZ gives negative linear sRGB, kept as gratnet render's EXR keeps it; the scalar image
+        # block would warn once per such sample.
+        mi.set_log_level(mi.LogLevel.Error)
+    try:
+        while done < spp:
+            count = min(per_pass, spp - done)
+            image = np.asarray(mi.render(scene, seed=int(seed) * 1_000_003 + pass_index, spp=count),
+                               dtype=np.float64)
+            total += image[..., :3] * count
+            done += count
+            pass_index += 1
+            if progress is not None:
+                progress(done)
+    finally:
+        mi.set_log_level(previous_level)
+    result = total / max(done, 1)
+    if not math.isfinite(float(np.sum(result))):
+        raise GratNetError("the Mitsuba render contains NaN or inf; nothing was written (please report this)")
+    return result.astype(np.float32)
