@@ -10,7 +10,9 @@ from __future__ import annotations
 import argparse
 import importlib
 import logging
+import re
 import sys
+import typing
 from collections.abc import Sequence
 
 from gratnet import __version__
@@ -29,9 +31,29 @@ SUBCOMMAND_MODULES: dict[str, str] = {
 }
 
 
+class GratNetParser(argparse.ArgumentParser):
+    """argparse with GratNet's rules for bad input: one line on stderr, exit status 2; and values that
+    start with a minus sign (``--light -30,0``, ``--exposure -inf``) are values, not unknown options."""
+
+    # argparse takes only '-5' and '-.5' for negative numbers; comma lists, exponents, inf and nan too.
+    _NEGATIVE_VALUE = re.compile(r"^-(?:\d|\.\d|inf|nan)[\w.,+-]*$", re.IGNORECASE)
+
+    def __init__(self, *args: object, **kwargs: object) -> None:
+        super().__init__(*args, **kwargs)  # type: ignore[arg-type]
+        self._negative_number_matcher = self._NEGATIVE_VALUE
+
+    def error(self, message: str) -> typing.NoReturn:
+        """One line, ``gratnet SUBCOMMAND: error: …``, then exit status 2 (no usage dump)."""
+        words = self.prog.split()
+        command = " ".join(words[:2])
+        hint = f" (see {self.prog} --help)"
+        print(f"{command}: error: {' '.join(message.split())}{hint}", file=sys.stderr)
+        self.exit(2)
+
+
 def build_parser(only: str | None = None) -> argparse.ArgumentParser:
     """The full parser; with ``only``, import and register just that subcommand."""
-    parser = argparse.ArgumentParser(
+    parser = GratNetParser(
         prog="gratnet", description="GratNet: neural rendering of diffractive surfaces."
     )
     parser.add_argument("--version", action="version", version=f"gratnet {__version__}")
@@ -50,18 +72,24 @@ def main(argv: Sequence[str] | None = None) -> int:
     argv = list(sys.argv[1:] if argv is None else argv)
     command = next((word for word in argv if not word.startswith("-")), None)
     parser = build_parser(only=command if command in SUBCOMMAND_MODULES else None)
-    arguments = parser.parse_args(argv)
+    try:
+        arguments = parser.parse_args(argv)
+    except SystemExit as exit_:  # --help, --version, or a one-line argparse error (GratNetParser.error)
+        return exit_.code if isinstance(exit_.code, int) else 2
     if not getattr(arguments, "handler", None):
         parser.print_help()
         return 0 if not argv else 2
     # Library modules report slow one-off steps (e.g. a baked shader's first compile) on the "gratnet"
-    # logger; the command shows them on stderr, one line each.
+    # logger; the command shows them on stderr, one line each. --quiet keeps warnings and errors only.
     logger = logging.getLogger("gratnet")
-    if not logger.handlers:
+    handler = next((h for h in logger.handlers if getattr(h, "gratnet_cli", False)), None)
+    if handler is None:
         handler = logging.StreamHandler(sys.stderr)
-        handler.setFormatter(logging.Formatter(f"gratnet {arguments.command}: %(message)s"))
+        handler.gratnet_cli = True  # type: ignore[attr-defined]
         logger.addHandler(handler)
-        logger.setLevel(logging.INFO)
+    handler.setStream(sys.stderr)  # the current stderr (tests capture it per call)
+    handler.setFormatter(logging.Formatter(f"gratnet {arguments.command}: %(message)s"))
+    logger.setLevel(logging.WARNING if getattr(arguments, "quiet", False) else logging.INFO)
     try:
         return int(arguments.handler(arguments) or 0)
     except GratNetError as error:
