@@ -31,6 +31,15 @@ SUBCOMMAND_MODULES: dict[str, str] = {
 }
 
 
+class _HelpFormatter(argparse.HelpFormatter):
+    """argparse's formatter, except that an epilog starting "typical use:" keeps its lines (commands)."""
+
+    def _fill_text(self, text: str, width: int, indent: str) -> str:
+        if text.startswith("typical use:"):
+            return "\n".join(indent + line for line in text.splitlines())
+        return super()._fill_text(text, width, indent)
+
+
 class GratNetParser(argparse.ArgumentParser):
     """argparse with GratNet's rules for bad input: one line on stderr, exit status 2; and values that
     start with a minus sign (``--light -30,0``, ``--exposure -inf``) are values, not unknown options."""
@@ -39,6 +48,7 @@ class GratNetParser(argparse.ArgumentParser):
     _NEGATIVE_VALUE = re.compile(r"^-(?:\d|\.\d|inf|nan)[\w.,+-]*$", re.IGNORECASE)
 
     def __init__(self, *args: object, **kwargs: object) -> None:
+        kwargs.setdefault("formatter_class", _HelpFormatter)
         super().__init__(*args, **kwargs)  # type: ignore[arg-type]
         self._negative_number_matcher = self._NEGATIVE_VALUE
 

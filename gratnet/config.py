@@ -70,6 +70,26 @@ def parse_int(text: str) -> int:
     return value
 
 
+def parse_numbers(text: str, count: int | tuple[int, ...], flag: str, form: str) -> list[float]:
+    """Comma-separated numbers that float32 holds (``count`` of them), or a one-line GratNetError naming
+    ``flag`` and the expected ``form`` (e.g. "θ,φ in degrees such as 45,90")."""
+    from gratnet.errors import GratNetError
+
+    counts = (count,) if isinstance(count, int) else count
+    parts = [part.strip() for part in str(text).split(",")]
+    try:
+        values = [float(part) + 0.0 for part in parts]  # + 0.0: -0 → 0
+    except ValueError:
+        values = []
+    if len(values) not in counts:
+        raise GratNetError(f"{flag} expects {form}, got {text!r}")
+    for part, value in zip(parts, values, strict=True):
+        problem = float32_problem(value)
+        if problem is not None:
+            raise GratNetError(f"{flag} expects {form}; {part!r} is {problem}")
+    return values
+
+
 def add_quiet_flag(parser: argparse.ArgumentParser) -> None:
     """``--quiet``, with the same meaning in every subcommand (the CLI silences the progress logger)."""
     parser.add_argument("--quiet", action="store_true", help=QUIET_HELP)
@@ -88,7 +108,9 @@ def _flag_of(field: dataclasses.Field, prefix: str) -> str:
 def add_arguments(parser: argparse.ArgumentParser, config_class: type, prefix: str = "") -> None:
     """Add one flag per field of ``config_class`` (a dataclass) to ``parser``."""
     hints = typing.get_type_hints(config_class)
-    group = parser.add_argument_group(config_class.__name__, (config_class.__doc__ or "").strip().splitlines()[0])
+    # The group's title is the class docstring's first line (users read --help: no class names there).
+    title = (config_class.__doc__ or config_class.__name__).strip().splitlines()[0].replace("``", "").rstrip(".")
+    group = parser.add_argument_group(title[:1].lower() + title[1:])
     for field in dataclasses.fields(config_class):
         if not field.init or field.metadata.get("cli") is False:
             continue

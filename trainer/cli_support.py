@@ -3,11 +3,10 @@
 from __future__ import annotations
 
 import argparse
-import sys
 from collections.abc import Callable
 from pathlib import Path
 
-from gratnet.config import add_arguments, from_arguments
+from gratnet.config import add_arguments, add_quiet_flag, from_arguments
 from gratnet.errors import GratNetError
 from trainer.fourier import OpticsConfig
 from trainer.heightfield import HeightField
@@ -16,8 +15,10 @@ from trainer.loaders import LoadOptions, load_heightfield
 
 def add_heightfield_input(parser: argparse.ArgumentParser) -> None:
     """HEIGHTFIELD (file or generator name), --quiet, and the OpticsConfig and LoadOptions flags."""
-    parser.add_argument("heightfield", metavar="HEIGHTFIELD", help="height-field file or built-in generator name")
-    parser.add_argument("--quiet", action="store_true", help="no progress bar")
+    parser.add_argument("heightfield", metavar="HEIGHTFIELD",
+                        help="height-field file (.npz .gsf .npy .png .exr) or built-in generator name (such as "
+                        "blazed; list: gratnet heightfield list)")
+    add_quiet_flag(parser)
     add_arguments(parser, OpticsConfig)
     add_arguments(parser, LoadOptions)
 
@@ -36,8 +37,13 @@ def read_heightfield_input(arguments: argparse.Namespace) -> tuple[HeightField, 
 
 
 def reporter(command: str) -> Callable[[str], None]:
-    """A callback that prints preparation messages (resampled, repeated) to stderr."""
+    """A callback that reports ``command``'s preparation steps (resampled, repeated) on stderr, one line each,
+    through the "gratnet" logger: ``--quiet`` silences them like every other progress message."""
+    import logging
+
+    logger = logging.getLogger("gratnet.prepare")  # gratnet.cli prefixes "gratnet COMMAND: "
+
     def report(message: str) -> None:
-        print(f"gratnet {command}: {message}", file=sys.stderr)
+        logger.info(message)
 
     return report
