@@ -61,6 +61,16 @@ class GratNetParser(argparse.ArgumentParser):
         self.exit(2)
 
 
+class _StderrHandler(logging.Handler):
+    """One line per record on the *current* ``sys.stderr`` (tests capture it anew for each command)."""
+
+    def emit(self, record: logging.LogRecord) -> None:
+        try:
+            print(self.format(record), file=sys.stderr)
+        except Exception:  # logging's rule: a failing handler must not raise
+            self.handleError(record)
+
+
 def build_parser(only: str | None = None) -> argparse.ArgumentParser:
     """The full parser; with ``only``, import and register just that subcommand."""
     parser = GratNetParser(
@@ -92,12 +102,10 @@ def main(argv: Sequence[str] | None = None) -> int:
     # Library modules report slow one-off steps (e.g. a baked shader's first compile) on the "gratnet"
     # logger; the command shows them on stderr, one line each. --quiet keeps warnings and errors only.
     logger = logging.getLogger("gratnet")
-    handler = next((h for h in logger.handlers if getattr(h, "gratnet_cli", False)), None)
+    handler = next((h for h in logger.handlers if isinstance(h, _StderrHandler)), None)
     if handler is None:
-        handler = logging.StreamHandler(sys.stderr)
-        handler.gratnet_cli = True  # type: ignore[attr-defined]
+        handler = _StderrHandler()
         logger.addHandler(handler)
-    handler.setStream(sys.stderr)  # the current stderr (tests capture it per call)
     handler.setFormatter(logging.Formatter(f"gratnet {arguments.command}: %(message)s"))
     logger.setLevel(logging.WARNING if getattr(arguments, "quiet", False) else logging.INFO)
     try:
@@ -105,6 +113,10 @@ def main(argv: Sequence[str] | None = None) -> int:
     except GratNetError as error:
         print(f"gratnet {arguments.command}: error: {error}", file=sys.stderr)
         return error.exit_code
+    except MemoryError:  # a limit we did not foresee: still one line, and the writers left nothing behind
+        print(f"gratnet {arguments.command}: error: not enough memory for these settings; use smaller sizes "
+              f"or resolutions (see gratnet {arguments.command} --help)", file=sys.stderr)
+        return 2
     except KeyboardInterrupt:
         print(f"gratnet {arguments.command}: interrupted; no output was written", file=sys.stderr)
         return 130

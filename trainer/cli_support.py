@@ -29,9 +29,21 @@ def require_suffix(path: str, suffix: str, what: str) -> None:
         raise GratNetError(f"--out must name {what} ({suffix}), got {path}")
 
 
+#: Command-line limits of the optics (memory and time grow with the grid side squared and the wavelength count).
+MIN_WAVELENGTH_STEP_NM = 0.1
+GRID_SAMPLES_RANGE = (16, 16384)
+
+
 def read_heightfield_input(arguments: argparse.Namespace) -> tuple[HeightField, OpticsConfig, LoadOptions]:
-    """The loaded height field with the resolved optics and load options."""
+    """The loaded height field with the resolved optics and load options (limits checked before loading)."""
     optics = from_arguments(OpticsConfig, arguments)
+    if optics.wavelength_step_nm < MIN_WAVELENGTH_STEP_NM:
+        raise GratNetError(f"--wavelength-step-nm must be at least {MIN_WAVELENGTH_STEP_NM} nm (typical: 5), "
+                           f"got {optics.wavelength_step_nm:g}")
+    low, high = GRID_SAMPLES_RANGE
+    if not low <= optics.max_grid_samples <= high:
+        raise GratNetError(f"--max-grid-samples must be from {low} to {high} (typical: 4096), "
+                           f"got {optics.max_grid_samples}")
     load_options = from_arguments(LoadOptions, arguments)
     return load_heightfield(arguments.heightfield, load_options), optics, load_options
 
