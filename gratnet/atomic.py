@@ -73,9 +73,11 @@ def _probe(folder: Path, target: Path, flag: str) -> None:
         os.unlink(name)
 
 
-def _check_names(target: Path, flag: str) -> None:
-    if not str(target).strip():
+def _check_names(given: str | os.PathLike[str], flag: str) -> Path:
+    """``given`` as a Path, refused if empty or blank (Path('') would quietly mean the working folder)."""
+    if not os.fspath(given).strip():
         raise GratNetError(f"{flag} is empty; give a path")
+    target = Path(given)
     for part in target.parts:
         try:
             encoded = os.fsencode(part)
@@ -85,6 +87,7 @@ def _check_names(target: Path, flag: str) -> None:
             raise GratNetError(f"{flag} {target!r} contains a NUL character")
         if len(encoded) > _NAME_MAX - 40:  # room for the temporary name's prefix and suffix
             raise GratNetError(f"{flag} {target}: the name {part[:40]}… is too long ({len(encoded)} bytes)")
+    return target
 
 
 def check_output_file(target: str | os.PathLike[str], flag: str = "--out") -> Path:
@@ -95,8 +98,7 @@ def check_output_file(target: str | os.PathLike[str], flag: str = "--out") -> Pa
     accepts a new file (probed, not read from permission bits). Missing folders are created later
     by the writer.
     """
-    target = Path(target)
-    _check_names(target, flag)
+    target = _check_names(target, flag)
     blocker = _blocking_file(target)
     if blocker is not None:
         raise GratNetError(f"cannot write {flag} {target}: {blocker} is a file, not a folder")
@@ -115,8 +117,7 @@ def check_output_folder(folder: str | os.PathLike[str], flag: str = "--out") -> 
 
     It may be missing (the writer creates it) but not a file, and no component of its path may be a file.
     """
-    folder = Path(folder)
-    _check_names(folder, flag)
+    folder = _check_names(folder, flag)
     blocker = _blocking_file(folder)
     if blocker is not None:
         raise GratNetError(f"cannot write {flag} {folder}: {blocker} is a file, not a folder")
