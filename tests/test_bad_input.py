@@ -684,3 +684,21 @@ def test_rendered_fresnel_ratio_is_exact_for_ior_near_one_and_extreme(tmp_path, 
     lit = inside & np.all(np.abs(without) > 1e-6 * np.abs(without).max(), axis=-1)
     assert np.count_nonzero(lit) > size * size // 3
     np.testing.assert_allclose(with_fresnel[lit], without[lit] * expected[lit][:, None], rtol=2e-4)
+
+
+def test_view_reads_model_and_mesh_before_opening_a_window(tmp_path, capsys):
+    # Without this the window (or the no-display message) came first and a bad file surfaced later.
+    (tmp_path / "bad.npz").write_bytes(b"not a model")
+    (tmp_path / "bad.obj").write_bytes(bytes(range(256)) * 8)
+    for argv, needle in ((["--material", str(tmp_path / "bad.npz")], "not a GratNet model"),
+                         (["--mesh", str(tmp_path / "bad.obj")], "OBJ")):
+        code, stderr = run_cli(["view", *argv, "--max-frames", "1", "--screenshot-dir", str(tmp_path)], capsys)
+        assert_one_clear_error(code, stderr, "view", needle)
+
+
+def test_resume_without_a_checkpoint_is_refused(tmp_path, capsys, volume_bytes):
+    volume = tmp_path / "v.exr"
+    volume.write_bytes(volume_bytes)
+    code, stderr = run_cli(["train", str(volume), "--out", str(tmp_path / "run"), "--resume", "--quiet"], capsys)
+    assert_one_clear_error(code, stderr, "train", "checkpoint.pt")
+    assert_nothing_written(tmp_path, {"v.exr"})

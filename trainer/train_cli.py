@@ -114,6 +114,9 @@ def run_train(arguments: argparse.Namespace) -> int:
 
     config = from_arguments(TrainConfig, arguments)
     _check_before_work(arguments, evaluating=not arguments.no_evaluate)
+    checkpoint = Path(arguments.out) / "checkpoint.pt"
+    if arguments.resume and not checkpoint.is_file():  # training afresh would silently ignore --resume
+        raise GratNetError(f"--resume: there is no {checkpoint} to continue from; leave out --resume to start afresh")
     held_out = _slice_list(config.test_slices, "--test-slices") if config.split == "slices" else []
     volume = read_volume(arguments.volume)
     out = Path(arguments.out)

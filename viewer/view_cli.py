@@ -72,8 +72,9 @@ def _state(arguments: argparse.Namespace) -> object:
     """The starting :class:`~viewer.app.ViewerState`, every value checked before a window opens."""
     from gratnet.atomic import check_output_folder
     from gratnet.brdf import check_exposure, check_ior
+    from gratnet.modelfile import load_model
     from viewer.app import SLIDERS, ViewerState
-    from viewer.render_cli import MESHES, _numbers, check_scene_numbers, resolve_material
+    from viewer.render_cli import MESHES, _numbers, build_mesh, check_scene_numbers, resolve_material
 
     theta, phi = _numbers(arguments.light_text, 2, "--light", "θ,φ in degrees such as 20,90")
     distance, azimuth, elevation = _numbers(arguments.camera_text, 3, "--camera",
@@ -84,13 +85,13 @@ def _state(arguments: argparse.Namespace) -> object:
     check_output_folder(arguments.screenshot_dir, "--screenshot-dir")
     if arguments.max_frames < 0:
         raise GratNetError(f"--max-frames must be ≥ 0, got {arguments.max_frames}")
-    resolve_material(arguments.material)
+    # Read (cheaply) before a window opens: a bad model or mesh file is one line, not a broken window.
+    load_model(resolve_material(arguments.material))
     if arguments.mesh not in MESHES:
         path = Path(arguments.mesh).expanduser()
         if path.suffix.lower() != ".obj":
             raise GratNetError(f"unknown mesh {arguments.mesh!r}: choose {', '.join(MESHES)} or a Wavefront .obj file")
-        if not path.is_file():
-            raise GratNetError(f"mesh file {arguments.mesh} does not exist")
+        build_mesh(arguments.mesh)
     fresnel, ior = arguments.fresnel, arguments.ior
     if ior == 0:  # as in gratnet render: --ior 0 means no Fresnel factor
         fresnel, ior = False, ViewerState.ior
