@@ -37,12 +37,14 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 
 def run(arguments: argparse.Namespace) -> int:
     from gratnet.atomic import check_output_folder
+    from gratnet.brdf import check_exposure
     from trainer.bench import BenchConfig, ModelEntry, run_bench, write_outputs
     from viewer.context import create_headless_context
     from viewer.render_cli import resolve_material, shipped_materials
 
     config = from_arguments(BenchConfig, arguments)
     config.size_list(), config.path_list()  # validate before any work
+    check_exposure(config.exposure)
     out = check_output_folder(arguments.out)
     names = arguments.models or shipped_materials()
     entries = []
