@@ -111,7 +111,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     try:
         return int(arguments.handler(arguments) or 0)
     except GratNetError as error:
-        print(f"gratnet {arguments.command}: error: {error}", file=sys.stderr)
+        # One line even when a library's message (OpenEXR, Pillow) spans several.
+        print(f"gratnet {arguments.command}: error: {' '.join(str(error).split())}", file=sys.stderr)
         return error.exit_code
     except MemoryError:  # a limit we did not foresee: still one line, and the writers left nothing behind
         print(f"gratnet {arguments.command}: error: not enough memory for these settings; use smaller sizes "
