@@ -1,52 +1,130 @@
-"""Atomic file output: write to a temporary file beside the target, then rename.
+"""Atomic file output, and output paths checked before any work is done.
 
-Nothing is ever half-written: on an exception (or Ctrl-C) the temporary file is removed and the
-target is left untouched.
+- :func:`check_output_file` / :func:`check_output_folder`: refuse, with one line, an output that
+  cannot be written (a component of its path is a file, it is a folder where a file is wanted, the
+  folder is read-only, the name is too long) *before* a long computation. They really probe: a
+  temporary file is created and removed in the deepest existing folder, because permission bits
+  say nothing when running as root (CI does).
+- :func:`atomic_paths`: several outputs that belong together (an image and its ``.config.json``)
+  land together or not at all: every temporary is written first, then all are renamed; if a rename
+  fails, the ones already renamed are rolled back (an existing output is restored where the file
+  system allows a hard link).
+- :func:`atomic_path`: the one-file case. Nothing is ever half-written: on an exception (or
+  Ctrl-C) the temporary file is removed and the target is left untouched.
 """
 
 from __future__ import annotations
 
 import contextlib
 import os
+import stat
 import tempfile
 from collections.abc import Iterator
 from pathlib import Path
 
 from gratnet.errors import GratNetError
 
+#: Longest file name (bytes) that the usual file systems accept.
+_NAME_MAX = 255
 
-@contextlib.contextmanager
-def atomic_path(target: str | os.PathLike[str]) -> Iterator[Path]:
-    """Yield a temporary path in the target's folder; rename it onto ``target`` on success.
 
-    The temporary name keeps the target's suffix so that writers choosing a format by extension
-    (Pillow, OpenEXR) still work.
-    """
-    target = Path(target)
-    folder = target.parent if str(target.parent) else Path(".")
+def _blocking_file(target: Path) -> Path | None:
+    """The first component of ``target``'s parent folders that exists but is not a folder, if any."""
+    for ancestor in reversed(target.parents):
+        if ancestor.is_dir():
+            continue
+        if ancestor.exists() or ancestor.is_symlink():
+            return ancestor
+        return None  # missing from here on: it will be created
+    return None
+
+
+def _reason(target: Path, error: OSError | None = None) -> str:
+    """Why ``target`` cannot be written, in words (the OS error's own words are often misleading:
+    mkdir under a file says "File exists", where the cause is "Not a directory")."""
+    blocker = _blocking_file(target)
+    if blocker is not None:
+        return f"{blocker} is a file, not a folder"
+    if target.is_dir():
+        return "it is a folder, not a file"
+    if error is not None:
+        return str(error.strerror or error)
+    return "unknown reason"
+
+
+def _deepest_existing_folder(target: Path) -> Path:
+    """The deepest folder on ``target``'s path that exists (``target`` itself excluded)."""
+    for ancestor in target.parents:
+        if ancestor.is_dir():
+            return ancestor
+    return Path(".")
+
+
+def _probe(folder: Path, target: Path, flag: str) -> None:
+    """Create and remove a temporary file in ``folder`` named like :func:`atomic_path`'s temporaries."""
     try:
-        folder.mkdir(parents=True, exist_ok=True)
-        handle, temporary_name = tempfile.mkstemp(
-            prefix=f".{target.stem}.", suffix=f".tmp{target.suffix}", dir=folder
-        )
-    except OSError as error:
-        raise GratNetError(f"cannot write {target}: {error.strerror or error}") from error
+        handle, name = tempfile.mkstemp(prefix=f".{target.stem[:100]}.", suffix=f".tmp{target.suffix[:20]}",
+                                        dir=folder)
+    except (OSError, UnicodeError, ValueError) as error:
+        detail = error.strerror if isinstance(error, OSError) and error.strerror else str(error)
+        raise GratNetError(f"cannot write {flag} {target}: the folder {folder} is not writable ({detail})") from None
     os.close(handle)
-    temporary = Path(temporary_name)
-    # mkstemp makes the file private (0600); give it the permissions a plain open() would.
-    umask = os.umask(0)
-    os.umask(umask)
-    os.chmod(temporary, 0o666 & ~umask)
-    try:
+    with contextlib.suppress(OSError):
+        os.unlink(name)
+
+
+def _check_names(given: str | os.PathLike[str], flag: str) -> Path:
+    """``given`` as a Path, refused if empty or blank (Path('') would quietly mean the working folder)."""
+    if not os.fspath(given).strip():
+        raise GratNetError(f"{flag} is empty; give a path")
+    target = Path(given)
+    for part in target.parts:
         try:
-            yield temporary
-            os.replace(temporary, target)
-        except OSError as error:  # e.g. a folder in the target's place, or the disk is full
-            raise GratNetError(f"cannot write {target}: {error.strerror or error}") from error
-    except BaseException:
-        with contextlib.suppress(FileNotFoundError):
-            temporary.unlink()
-        raise
+            encoded = os.fsencode(part)
+        except UnicodeError:
+            raise GratNetError(f"{flag} {target!s}: the name {part!r} cannot be encoded for this file system") from None
+        if b"\0" in encoded:
+            raise GratNetError(f"{flag} {target!r} contains a NUL character")
+        if len(encoded) > _NAME_MAX - 40:  # room for the temporary name's prefix and suffix
+            raise GratNetError(f"{flag} {target}: the name {part[:40]}… is too long ({len(encoded)} bytes)")
+    return target
+
+
+def check_output_file(target: str | os.PathLike[str], flag: str = "--out") -> Path:
+    """Refuse ``target`` (one GratNetError) unless a file can be written there; nothing is created.
+
+    Checks: the name is not empty and not too long; no component of its folder is a file; it is not
+    itself a folder or a special file (a device, a pipe); the deepest existing folder on its path
+    accepts a new file (probed, not read from permission bits). Missing folders are created later
+    by the writer.
+    """
+    target = _check_names(target, flag)
+    blocker = _blocking_file(target)
+    if blocker is not None:
+        raise GratNetError(f"cannot write {flag} {target}: {blocker} is a file, not a folder")
+    if target.is_dir():
+        raise GratNetError(f"cannot write {flag} {target}: it is a folder; give a file name inside it")
+    if target.exists() or target.is_symlink():
+        mode = os.lstat(target).st_mode
+        if not (stat.S_ISREG(mode) or stat.S_ISLNK(mode)):
+            raise GratNetError(f"cannot write {flag} {target}: it exists and is not a regular file")
+    _probe(_deepest_existing_folder(target), target, flag)
+    return target
+
+
+def check_output_folder(folder: str | os.PathLike[str], flag: str = "--out") -> Path:
+    """Refuse ``folder`` (one GratNetError) unless files can be written in it; nothing is created.
+
+    It may be missing (the writer creates it) but not a file, and no component of its path may be a file.
+    """
+    folder = _check_names(folder, flag)
+    blocker = _blocking_file(folder)
+    if blocker is not None:
+        raise GratNetError(f"cannot write {flag} {folder}: {blocker} is a file, not a folder")
+    if folder.exists() and not folder.is_dir():
+        raise GratNetError(f"cannot write {flag} {folder}: it is a file, not a folder")
+    _probe(folder if folder.is_dir() else _deepest_existing_folder(folder), folder / "probe", flag)
+    return folder
 
 
 def make_folder(folder: str | os.PathLike[str]) -> Path:
@@ -55,8 +133,99 @@ def make_folder(folder: str | os.PathLike[str]) -> Path:
     try:
         folder.mkdir(parents=True, exist_ok=True)
     except OSError as error:  # a file in its place or on its path, a read-only or virtual file system
-        raise GratNetError(f"cannot create the output folder {folder}: {error.strerror or error}") from error
+        blocker = folder if folder.exists() and not folder.is_dir() else _blocking_file(folder)
+        reason = f"{blocker} is a file, not a folder" if blocker is not None else error.strerror or str(error)
+        raise GratNetError(f"cannot create the output folder {folder}: {reason}") from error
     return folder
+
+
+def _temporary_beside(target: Path) -> Path:
+    """A new empty file in ``target``'s folder (created if needed), keeping ``target``'s suffix so that
+    writers choosing a format by extension (Pillow, OpenEXR) still work."""
+    folder = target.parent
+    try:
+        folder.mkdir(parents=True, exist_ok=True)
+        handle, name = tempfile.mkstemp(prefix=f".{target.stem[:100]}.", suffix=f".tmp{target.suffix[:20]}",
+                                        dir=folder)
+    except OSError as error:
+        raise GratNetError(f"cannot write {target}: {_reason(target, error)}") from error
+    os.close(handle)
+    # mkstemp makes the file private (0600); give it the permissions a plain open() would.
+    umask = os.umask(0)
+    os.umask(umask)
+    os.chmod(name, 0o666 & ~umask)
+    return Path(name)
+
+
+def _commit(targets: list[Path], temporaries: list[Path]) -> None:
+    """Rename every temporary onto its target; on a failure undo the renames already done."""
+    backups: list[Path | None] = []
+    try:
+        for target in targets:
+            backup = None
+            if target.is_file():  # keep the old output reachable until every new one is in place
+                backup = target.with_name(f".{target.name[:100]}.{os.getpid()}.backup")
+                with contextlib.suppress(OSError):
+                    os.unlink(backup)
+                try:
+                    os.link(target, backup)
+                except OSError:
+                    backup = None  # no hard links here: the old file cannot be restored
+            backups.append(backup)
+        done = 0
+        try:
+            for target, temporary in zip(targets, temporaries, strict=True):
+                try:
+                    os.replace(temporary, target)
+                except OSError as error:
+                    raise GratNetError(f"cannot write {target}: {_reason(target, error)}") from error
+                done += 1
+        except BaseException:
+            for target, backup in zip(targets[:done], backups[:done], strict=True):
+                with contextlib.suppress(OSError):
+                    if backup is not None:
+                        os.replace(backup, target)
+                    else:
+                        os.unlink(target)
+            raise
+    finally:
+        for backup in backups:
+            if backup is not None:
+                with contextlib.suppress(OSError):
+                    os.unlink(backup)
+
+
+@contextlib.contextmanager
+def atomic_paths(*targets: str | os.PathLike[str]) -> Iterator[tuple[Path, ...]]:
+    """Yield one temporary path per target (same folder, same suffix); on success rename them all.
+
+    On an exception nothing new is left: every temporary is removed, and targets already renamed
+    are put back as they were.
+    """
+    paths = [Path(target) for target in targets]
+    if len({os.path.abspath(path) for path in paths}) != len(paths):
+        raise GratNetError(f"two outputs share one path: {', '.join(map(str, paths))}")
+    temporaries: list[Path] = []
+    try:
+        for path in paths:
+            temporaries.append(_temporary_beside(path))
+        try:
+            yield tuple(temporaries)
+        except OSError as error:  # the writer failed, e.g. the disk is full
+            names = " and ".join(map(str, paths))
+            raise GratNetError(f"cannot write {names}: {error.strerror or error}") from error
+        _commit(paths, temporaries)
+    finally:
+        for temporary in temporaries:
+            with contextlib.suppress(OSError):
+                temporary.unlink()
+
+
+@contextlib.contextmanager
+def atomic_path(target: str | os.PathLike[str]) -> Iterator[Path]:
+    """Yield a temporary path in the target's folder; rename it onto ``target`` on success."""
+    with atomic_paths(target) as (temporary,):
+        yield temporary
 
 
 def write_bytes_atomic(target: str | os.PathLike[str], data: bytes) -> None:

@@ -8,6 +8,9 @@ away from the surface; a direction at polar angle θ and azimuth φ (degrees) is
 
 with R the unpolarised Fresnel reflectance (intensity) of a dielectric of refractive
 index ``ior`` at the half-vector angle and R0 its value at normal incidence (``ior=None``: R/R0 = 1).
+R/R0 is computed in a form where the factor (n² − 1)² of both R and R0 cancels analytically
+(:func:`fresnel_ratio`), so it stays exact in float32 as n → 1 and has a limit at n = 1. A is capped
+at :data:`A_MAX` so that exposure · A · XYZ cannot overflow float32 (physics.md, "The A-term").
 Runtime-side (numpy only); the GLSL runtime implements the same formula and a parity test ties them.
 """
 
@@ -18,6 +21,10 @@ import math
 import numpy as np
 
 W_EPSILON = 1e-6  # |w| below this: A = 0 (grazing: the 1/w² factor is meaningless there)
+#: Cap on A: above the largest value it takes within the |w| cut-off for IOR ≥ 1 + 1e-6 or off (retro-
+#: reflection at |w| = 1e-6 gives 1/cos⁴θ = 1.6e25); reached only for IOR within 1e-6 of 1 at grazing
+#: half-vectors, or for degenerate mesh normals. With exposure ≤ 1e10 the product stays in float32.
+A_MAX = 1e26
 
 
 def cos_sin_degrees(angle_degrees: float) -> tuple[float, float]:
@@ -67,6 +74,68 @@ def fresnel_dielectric(cos_incidence: np.ndarray, ior: float) -> np.ndarray:
     return np.where(sin_t_squared >= 1.0, 1.0, reflectance)
 
 
+#: Largest exposure the command line takes (physics.md, "The A-term": exposure · A_MAX · XYZ in float32).
+EXPOSURE_MAX = 1e10
+#: IOR range accepted (0 or None: Fresnel off). R/R0 is exact in float32 over all of it; beyond, n or
+#: 1/n leaves float32's normal range.
+IOR_RANGE = (1e-30, 1e30)
+
+
+def check_exposure(exposure: float, flag: str = "--exposure") -> float:
+    """``exposure`` if it is a number in [0, EXPOSURE_MAX], else one GratNetError naming ``flag``."""
+    from gratnet.errors import GratNetError
+
+    value = float(exposure)
+    if not (math.isfinite(value) and 0.0 <= value <= EXPOSURE_MAX):
+        raise GratNetError(f"{flag} must be a number from 0 to {EXPOSURE_MAX:.0e} (typical: 1 to 1e4), "
+                           f"got {exposure!r}")
+    return value + 0.0
+
+
+def check_ior(ior: float | None, flag: str = "--ior") -> float | None:
+    """``ior`` checked: None/0 (Fresnel off) or a number in IOR_RANGE (1 included: the limit of R/R0)."""
+    from gratnet.errors import GratNetError
+
+    if ior is None or ior == 0:
+        return None
+    value = float(ior)
+    low, high = IOR_RANGE
+    if not (math.isfinite(value) and low <= value <= high):
+        raise GratNetError(f"{flag} must be 0 (no Fresnel) or a refractive index from {low:g} to {high:g} "
+                           f"(typical: 1.3 to 2.5), got {ior!r}")
+    return value
+
+
+def fresnel_ratio(cos_incidence: np.ndarray, ior: float) -> np.ndarray:
+    """R(θ)/R0: the unpolarised Fresnel reflectance at cos θ over its value at normal incidence.
+
+    With cos θt = sqrt(1 − sin²θ/n²), the amplitudes are rs = (1 − n²)/(cosθ + n cosθt)² (from
+    cosθ − n cosθt = (cos²θ − n²cos²θt)/(cosθ + n cosθt) and cos²θ − n²cos²θt = 1 − n²) and
+    rp = (n² − 1)·q/(n cosθ + cosθt)² with q = cos²θ − sin²θt; at normal incidence both are
+    ±(n² − 1)/(n + 1)². So, with s = (n + 1)/(cosθ + n cosθt) and p = (n + 1)/(n cosθ + cosθt),
+
+        R/R0 = (s⁴ + q²·p⁴) / 2,
+
+    free of the (n² − 1)² that cancels catastrophically in float32 as n → 1. At n = 1 it is the limit
+    (1 + cos²2θ)/(2cos⁴θ). Under total internal reflection (n < 1) R = 1, so R/R0 = ((n + 1)/(n − 1))².
+    Near n = 1, cos²θt is taken as (cos²θ + (n − 1)(n + 1))/n², which does not cancel at grazing θ.
+    """
+    cos_i = np.clip(np.asarray(cos_incidence, dtype=np.float64), 0.0, 1.0)
+    n = float(ior)
+    with np.errstate(over="ignore", divide="ignore", invalid="ignore"):
+        sin_t_squared = (1.0 - cos_i * cos_i) / n / n  # two divisions: n² under/overflows for extreme n
+        cos_t_squared = 1.0 - sin_t_squared
+        if abs(n - 1.0) < 0.5:  # 1 − sin²θt cancels at grazing angles near n = 1; n − 1 is exact
+            cos_t_squared = (cos_i * cos_i + (n - 1.0) * (n + 1.0)) / (n * n)
+        cos_t = np.sqrt(np.clip(cos_t_squared, 0.0, None))
+        s = (n + 1.0) / (cos_i + n * cos_t)
+        p = (n + 1.0) / (n * cos_i + cos_t)
+        q = cos_i * cos_i - sin_t_squared
+        ratio = 0.5 * (s**4 + (q * q) * p**4)
+        total = ((n + 1.0) / (n - 1.0)) ** 2 if n != 1.0 else np.inf
+    return np.where(cos_t_squared <= 0.0, total, ratio)
+
+
 def a_term(light: np.ndarray, view: np.ndarray, ior: float | None = 1.5) -> np.ndarray:
     """A(ωi, ωo) for directions of shape (…, 3) (broadcast); 0 where |w| ≤ 1e-6 or below the horizon."""
     light, view = np.broadcast_arrays(np.asarray(light, dtype=np.float64), np.asarray(view, dtype=np.float64))
@@ -77,12 +146,12 @@ def a_term(light: np.ndarray, view: np.ndarray, ior: float | None = 1.5) -> np.n
     one_plus_cosine = 0.5 * np.sum(key * key, axis=-1)
     geometry = np.square(one_plus_cosine) / np.maximum(cos_light * cos_view, 1e-300)
     if ior is None:
-        fresnel_ratio = 1.0
+        ratio_squared = 1.0
     else:
         # Half-vector angle: cos θh = ωi·h = sqrt((1 + ωi·ωo)/2).
         cos_half = np.sqrt(np.clip(0.5 * one_plus_cosine, 0.0, 1.0))
-        fresnel_ratio = np.square(fresnel_dielectric(cos_half, ior) / fresnel_dielectric(np.ones(1), ior)[0])
+        ratio_squared = np.square(fresnel_ratio(cos_half, ior))
     valid = (np.abs(w) > W_EPSILON) & (cos_light > 0.0) & (cos_view > 0.0)
-    with np.errstate(divide="ignore", invalid="ignore"):
-        value = fresnel_ratio * geometry / np.square(w)
+    with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
+        value = np.minimum(ratio_squared * geometry / np.square(w), A_MAX)
     return np.where(valid, value, 0.0)

@@ -10,7 +10,9 @@ from __future__ import annotations
 import argparse
 import importlib
 import logging
+import re
 import sys
+import typing
 from collections.abc import Sequence
 
 from gratnet import __version__
@@ -30,9 +32,49 @@ SUBCOMMAND_MODULES: dict[str, str] = {
 }
 
 
+class _HelpFormatter(argparse.HelpFormatter):
+    """argparse's formatter, except that an epilog starting "typical use:" keeps its lines (commands)."""
+
+    def _fill_text(self, text: str, width: int, indent: str) -> str:
+        if text.startswith("typical use:"):
+            return "\n".join(indent + line for line in text.splitlines())
+        return super()._fill_text(text, width, indent)
+
+
+class GratNetParser(argparse.ArgumentParser):
+    """argparse with GratNet's rules for bad input: one line on stderr, exit status 2; and values that
+    start with a minus sign (``--light -30,0``, ``--exposure -inf``) are values, not unknown options."""
+
+    # argparse takes only '-5' and '-.5' for negative numbers; comma lists, exponents, inf and nan too.
+    _NEGATIVE_VALUE = re.compile(r"^-(?:\d|\.\d|inf|nan)[\w.,+-]*$", re.IGNORECASE)
+
+    def __init__(self, *args: object, **kwargs: object) -> None:
+        kwargs.setdefault("formatter_class", _HelpFormatter)
+        super().__init__(*args, **kwargs)  # type: ignore[arg-type]
+        self._negative_number_matcher = self._NEGATIVE_VALUE
+
+    def error(self, message: str) -> typing.NoReturn:
+        """One line, ``gratnet SUBCOMMAND: error: …``, then exit status 2 (no usage dump)."""
+        words = self.prog.split()
+        command = " ".join(words[:2])
+        hint = f" (see {self.prog} --help)"
+        print(f"{command}: error: {' '.join(message.split())}{hint}", file=sys.stderr)
+        self.exit(2)
+
+
+class _StderrHandler(logging.Handler):
+    """One line per record on the *current* ``sys.stderr`` (tests capture it anew for each command)."""
+
+    def emit(self, record: logging.LogRecord) -> None:
+        try:
+            print(self.format(record), file=sys.stderr)
+        except Exception:  # logging's rule: a failing handler must not raise
+            self.handleError(record)
+
+
 def build_parser(only: str | None = None) -> argparse.ArgumentParser:
     """The full parser; with ``only``, import and register just that subcommand."""
-    parser = argparse.ArgumentParser(
+    parser = GratNetParser(
         prog="gratnet", description="GratNet: neural rendering of diffractive surfaces."
     )
     parser.add_argument("--version", action="version", version=f"gratnet {__version__}")
@@ -51,23 +93,32 @@ def main(argv: Sequence[str] | None = None) -> int:
     argv = list(sys.argv[1:] if argv is None else argv)
     command = next((word for word in argv if not word.startswith("-")), None)
     parser = build_parser(only=command if command in SUBCOMMAND_MODULES else None)
-    arguments = parser.parse_args(argv)
+    try:
+        arguments = parser.parse_args(argv)
+    except SystemExit as exit_:  # --help, --version, or a one-line argparse error (GratNetParser.error)
+        return exit_.code if isinstance(exit_.code, int) else 2
     if not getattr(arguments, "handler", None):
         parser.print_help()
         return 0 if not argv else 2
     # Library modules report slow one-off steps (e.g. a baked shader's first compile) on the "gratnet"
-    # logger; the command shows them on stderr, one line each.
+    # logger; the command shows them on stderr, one line each. --quiet keeps warnings and errors only.
     logger = logging.getLogger("gratnet")
-    if not logger.handlers:
-        handler = logging.StreamHandler(sys.stderr)
-        handler.setFormatter(logging.Formatter(f"gratnet {arguments.command}: %(message)s"))
+    handler = next((h for h in logger.handlers if isinstance(h, _StderrHandler)), None)
+    if handler is None:
+        handler = _StderrHandler()
         logger.addHandler(handler)
-        logger.setLevel(logging.INFO)
+    handler.setFormatter(logging.Formatter(f"gratnet {arguments.command}: %(message)s"))
+    logger.setLevel(logging.WARNING if getattr(arguments, "quiet", False) else logging.INFO)
     try:
         return int(arguments.handler(arguments) or 0)
     except GratNetError as error:
-        print(f"gratnet {arguments.command}: error: {error}", file=sys.stderr)
+        # One line even when a library's message (OpenEXR, Pillow) spans several.
+        print(f"gratnet {arguments.command}: error: {' '.join(str(error).split())}", file=sys.stderr)
         return error.exit_code
+    except MemoryError:  # a limit we did not foresee: still one line, and the writers left nothing behind
+        print(f"gratnet {arguments.command}: error: not enough memory for these settings; use smaller sizes "
+              f"or resolutions (see gratnet {arguments.command} --help)", file=sys.stderr)
+        return 2
     except KeyboardInterrupt:
         print(f"gratnet {arguments.command}: interrupted; no output was written", file=sys.stderr)
         return 130

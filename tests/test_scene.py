@@ -512,7 +512,7 @@ def test_render_cli_obj_mesh(ctx, tmp_path):
         (["--size", "10.5,10"], "--size"),
         (["--light", "30"], "--light"),
         (["--camera", "1,2"], "--camera"),
-        (["--ior", "1"], "ior"),
+        (["--ior", "-1"], "ior"),  # 1 is accepted: the limit of R/R0 (physics.md)
         (["--slice", "--size", "10,20"], "square"),
         (["--exposure", "nan"], "exposure"),
     ],

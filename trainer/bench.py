@@ -57,7 +57,7 @@ class BenchConfig:
         60.0, "stop repeating a measurement once its frames have taken this long in total, seconds")
     baked_max_macs: int = config_field(
         BAKED_MAX_MACS, "time the baked path only for nets up to this many MACs per pixel (above it Mesa's JIT "
-        "takes minutes: viewer.renderer.BAKED_MAX_MACS)")
+        "takes minutes)")
     torch_devices: str = config_field("auto", "torch devices for the reference: auto (cpu, plus cuda if present)")
     torch_threads: int = config_field(0, "torch CPU threads (0: torch's default, one per core)")
 

@@ -10,9 +10,8 @@ OUT/pareto.png and OUT/bench.config.json. See :mod:`trainer.bench` for what is m
 from __future__ import annotations
 
 import argparse
-from pathlib import Path
 
-from gratnet.config import add_arguments, from_arguments, save_config
+from gratnet.config import add_arguments, add_quiet_flag, from_arguments, save_config
 
 __all__ = ["register", "run"]
 
@@ -24,11 +23,12 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         description="Time the GLSL BRDF-slice program (texture and baked weight paths, skip-work off) and the same "
         "MLP in torch on the same key vectors, for each model; plot its error (mean FLIP of the evaluation "
         "slices, from metrics.json beside the model) against frame time, with the Pareto front.",
+        epilog="typical use:\n  gratnet bench --sizes 256,512 --out out/bench",
     )
     parser.add_argument("models", nargs="*", metavar="MATERIAL",
                         help="shipped material names or model-file paths (default: every shipped material)")
     parser.add_argument("--out", required=True, metavar="DIR", help="output folder (bench.json, bench.md, pareto.png)")
-    parser.add_argument("--quiet", action="store_true", help="no progress bars")
+    add_quiet_flag(parser)
     from trainer.bench import BenchConfig
 
     add_arguments(parser, BenchConfig)
@@ -36,12 +36,16 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 
 
 def run(arguments: argparse.Namespace) -> int:
+    from gratnet.atomic import check_output_folder
+    from gratnet.brdf import check_exposure
     from trainer.bench import BenchConfig, ModelEntry, run_bench, write_outputs
     from viewer.context import create_headless_context
     from viewer.render_cli import resolve_material, shipped_materials
 
     config = from_arguments(BenchConfig, arguments)
     config.size_list(), config.path_list()  # validate before any work
+    check_exposure(config.exposure)
+    out = check_output_folder(arguments.out)
     names = arguments.models or shipped_materials()
     entries = []
     for name in names:
@@ -53,7 +57,6 @@ def run(arguments: argparse.Namespace) -> int:
         results = run_bench(ctx, entries, config, progress=not arguments.quiet)
     finally:
         ctx.release()
-    out = Path(arguments.out)
     write_outputs(results, out)
     save_config(out / "bench.json", bench=config, models=[str(entry.path) for entry in entries])
     print(f"wrote {out / 'bench.md'}, {out / 'bench.json'} and {out / 'pareto.png'}")

@@ -3,11 +3,10 @@
 from __future__ import annotations
 
 import argparse
-import sys
 from collections.abc import Callable
 from pathlib import Path
 
-from gratnet.config import add_arguments, from_arguments
+from gratnet.config import add_arguments, add_quiet_flag, from_arguments
 from gratnet.errors import GratNetError
 from trainer.fourier import OpticsConfig
 from trainer.heightfield import HeightField
@@ -16,8 +15,10 @@ from trainer.loaders import LoadOptions, load_heightfield
 
 def add_heightfield_input(parser: argparse.ArgumentParser) -> None:
     """HEIGHTFIELD (file or generator name), --quiet, and the OpticsConfig and LoadOptions flags."""
-    parser.add_argument("heightfield", metavar="HEIGHTFIELD", help="height-field file or built-in generator name")
-    parser.add_argument("--quiet", action="store_true", help="no progress bar")
+    parser.add_argument("heightfield", metavar="HEIGHTFIELD",
+                        help="height-field file (.npz .gsf .npy .png .exr) or built-in generator name (such as "
+                        "blazed; list: gratnet heightfield list)")
+    add_quiet_flag(parser)
     add_arguments(parser, OpticsConfig)
     add_arguments(parser, LoadOptions)
 
@@ -28,16 +29,33 @@ def require_suffix(path: str, suffix: str, what: str) -> None:
         raise GratNetError(f"--out must name {what} ({suffix}), got {path}")
 
 
+#: Command-line limits of the optics (memory and time grow with the grid side squared and the wavelength count).
+MIN_WAVELENGTH_STEP_NM = 0.1
+GRID_SAMPLES_RANGE = (16, 16384)
+
+
 def read_heightfield_input(arguments: argparse.Namespace) -> tuple[HeightField, OpticsConfig, LoadOptions]:
-    """The loaded height field with the resolved optics and load options."""
+    """The loaded height field with the resolved optics and load options (limits checked before loading)."""
     optics = from_arguments(OpticsConfig, arguments)
+    if optics.wavelength_step_nm < MIN_WAVELENGTH_STEP_NM:
+        raise GratNetError(f"--wavelength-step-nm must be at least {MIN_WAVELENGTH_STEP_NM} nm (typical: 5), "
+                           f"got {optics.wavelength_step_nm:g}")
+    low, high = GRID_SAMPLES_RANGE
+    if not low <= optics.max_grid_samples <= high:
+        raise GratNetError(f"--max-grid-samples must be from {low} to {high} (typical: 4096), "
+                           f"got {optics.max_grid_samples}")
     load_options = from_arguments(LoadOptions, arguments)
     return load_heightfield(arguments.heightfield, load_options), optics, load_options
 
 
 def reporter(command: str) -> Callable[[str], None]:
-    """A callback that prints preparation messages (resampled, repeated) to stderr."""
+    """A callback that reports ``command``'s preparation steps (resampled, repeated) on stderr, one line each,
+    through the "gratnet" logger: ``--quiet`` silences them like every other progress message."""
+    import logging
+
+    logger = logging.getLogger("gratnet.prepare")  # gratnet.cli prefixes "gratnet COMMAND: "
+
     def report(message: str) -> None:
-        print(f"gratnet {command}: {message}", file=sys.stderr)
+        logger.info(message)
 
     return report

@@ -68,7 +68,8 @@ _CHECKS: dict[str, tuple[Callable[[float], bool], str]] = {
     "positive": (lambda value: value > 0, "must be > 0"),
     "nonnegative": (lambda value: value >= 0, "must be ≥ 0"),
     "fraction": (lambda value: 0 <= value < 1, "must be a fraction in [0, 1)"),
-    "count": (lambda value: value >= 0, "must be a whole number ≥ 0"),
+    # Bounded so that a typo (1e9 scratches) is refused instead of running for days.
+    "count": (lambda value: 0 <= value <= 10_000, "must be a whole number from 0 to 10000"),
     "seed": (lambda value: value >= 0, "must be a whole number ≥ 0"),
 }
 

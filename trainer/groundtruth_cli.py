@@ -7,9 +7,16 @@ from __future__ import annotations
 
 import argparse
 import time
+from pathlib import Path
 
-from gratnet.config import add_arguments, from_arguments, save_config
+from gratnet.config import add_arguments, from_arguments, parse_float, parse_int
 from gratnet.volume import write_volume
+
+#: Largest --res and --slices: R² · S samples, each a spectral integral (2001² · 101 ≈ 4e8 would take days).
+MAX_RESOLUTION = 4001
+MAX_SLICES = 1001
+#: Largest volume held in memory (float32 XYZ): 8 GB.
+MAX_VOLUME_BYTES = 8e9
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
@@ -22,13 +29,18 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         help="compute the ground-truth reflectance volume (OpenEXR) of a height field",
         description="Compute CIE XYZ(u,v,w) of a height field (a file or a built-in generator's name) "
         "with the windowed Kirchhoff integral, spectrally (D65, CIE 1931 2°), and write it as OpenEXR.",
+        epilog="typical use:\n"
+        "  gratnet groundtruth blazed --res 101 --slices 11 --out blazed.exr --preview blazed.png  (minutes)\n"
+        "  gratnet groundtruth surface.gsf --res 1001 --out surface.exr  (the paper's grid: hours on a CPU)",
     )
     add_heightfield_input(parser)
-    parser.add_argument("--out", required=True, metavar="VOLUME.exr", help="output volume (OpenEXR)")
+    parser.add_argument("--out", required=True, metavar="VOLUME.exr",
+                        help="output volume (OpenEXR); its settings go to VOLUME.config.json")
     parser.add_argument("--preview", metavar="PNG", help="also write a PNG of one slice (display sRGB)")
-    parser.add_argument("--preview-slice", type=int, default=-1, help="slice shown by --preview (default: last)")
-    parser.add_argument("--exposure", type=float, default=None,
-                        help="preview exposure (default: chosen so the slice's brightest 0.1%% is white)")
+    parser.add_argument("--preview-slice", type=parse_int, default=-1,
+                        help="slice shown by --preview, 0 to SLICES−1 or negative from the end (default: -1, the last)")
+    parser.add_argument("--exposure", type=parse_float, default=None,
+                        help="preview exposure, > 0 (default: chosen so the slice's brightest 0.1%% is white)")
     add_arguments(parser, VolumeConfig)
     parser.set_defaults(handler=run)
 
@@ -37,30 +49,58 @@ def run(arguments: argparse.Namespace) -> int:
     """Load, compute, write atomically (volume, config, optional preview)."""
     import numpy as np
 
+    from gratnet.atomic import atomic_paths, check_output_file
+    from gratnet.config import config_path_for, config_text
+    from gratnet.errors import GratNetError
     from trainer.cli_support import read_heightfield_input, reporter, require_suffix
     from trainer.groundtruth import VolumeConfig, compute_volume
     from trainer.preview import save_slice_preview
 
+    # Every output is checked before minutes of computation.
     require_suffix(arguments.out, ".exr", "an OpenEXR file")
+    outputs = [arguments.out, config_path_for(arguments.out)]
+    if arguments.preview:
+        if Path(arguments.preview).suffix.lower() != ".png":
+            raise GratNetError(f"--preview must name a PNG image (.png), got {arguments.preview}")
+        outputs.append(arguments.preview)
+    for output in outputs:
+        check_output_file(output, "--preview" if output is arguments.preview else "--out")
     volume_config = from_arguments(VolumeConfig, arguments)
+    if volume_config.resolution > MAX_RESOLUTION:
+        raise GratNetError(f"--res must be at most {MAX_RESOLUTION} (typical: 101 to 1001), "
+                           f"got {volume_config.resolution}")
+    if volume_config.slices > MAX_SLICES:
+        raise GratNetError(f"--slices must be at most {MAX_SLICES} (typical: 11), got {volume_config.slices}")
+    volume_bytes = volume_config.resolution**2 * volume_config.slices * 3 * 4
+    if volume_bytes > MAX_VOLUME_BYTES:
+        raise GratNetError(f"--res {volume_config.resolution} with --slices {volume_config.slices} makes a "
+                           f"{volume_bytes / 1e9:.0f} GB volume (at most {MAX_VOLUME_BYTES / 1e9:.0f} GB)")
+    if arguments.preview and not -volume_config.slices <= arguments.preview_slice < volume_config.slices:
+        raise GratNetError(f"--preview-slice {arguments.preview_slice} is out of range: the volume will have "
+                           f"{volume_config.slices} slices")
+    if arguments.exposure is not None and not arguments.exposure > 0:
+        raise GratNetError(f"--exposure must be > 0, got {arguments.exposure:g}")
     field, optics, load_options = read_heightfield_input(arguments)
     started = time.perf_counter()
     volume = compute_volume(field, volume_config, optics, report=reporter("groundtruth"),
                             progress=not arguments.quiet)
     elapsed = time.perf_counter() - started
     volume.metadata["compute_seconds"] = round(elapsed, 3)
-    write_volume(arguments.out, volume)
-    save_config(arguments.out, volume=volume_config, optics=optics, load=load_options,
-                heightfield=arguments.heightfield, source=field.source)
+    slice_index, exposure = arguments.preview_slice, arguments.exposure
+    if arguments.preview and exposure is None:
+        luminance = volume.xyz[slice_index % volume.slices, ..., 1]
+        bright = float(np.percentile(luminance, 99.9))
+        exposure = 1.0 / bright if bright > 0 else 1.0
+    # Volume, config and preview land together or not at all.
+    with atomic_paths(*outputs) as temporaries:
+        write_volume(temporaries[0], volume)
+        temporaries[1].write_text(config_text(arguments.out, volume=volume_config, optics=optics, load=load_options,
+                                              heightfield=arguments.heightfield, source=field.source),
+                                  encoding="utf-8")
+        if arguments.preview:
+            save_slice_preview(volume, temporaries[2], slice_index, exposure)
     print(f"wrote {arguments.out}: {volume.slices} slices of {volume.resolution}² "
           f"({volume.metadata['scheme']}), {elapsed:.1f} s")
     if arguments.preview:
-        slice_index = arguments.preview_slice
-        exposure = arguments.exposure
-        if exposure is None:
-            luminance = volume.xyz[slice_index % volume.slices, ..., 1]
-            bright = float(np.percentile(luminance, 99.9))
-            exposure = 1.0 / bright if bright > 0 else 1.0
-        save_slice_preview(volume, arguments.preview, slice_index, exposure)
         print(f"wrote {arguments.preview} (slice {slice_index}, exposure {exposure:.4g})")
     return 0

@@ -17,7 +17,8 @@ import dataclasses
 from pathlib import Path
 from typing import Any
 
-from gratnet.config import add_arguments, from_arguments, save_config
+from gratnet.atomic import atomic_paths, check_output_file
+from gratnet.config import add_arguments, config_path_for, config_text, from_arguments
 from gratnet.errors import GratNetError
 from trainer import generators
 from trainer.heightfield import HeightField
@@ -31,6 +32,10 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     parser = subparsers.add_parser(
         "heightfield", help="generate, convert and preview height fields",
         description="Height fields: heights in µm on a square grid of spacing dx (µm).",
+        epilog="typical use:\n"
+        "  gratnet heightfield list\n"
+        "  gratnet heightfield generate blazed --out blazed.npz --preview blazed.png\n"
+        "  gratnet heightfield convert scan.png --dx-um 0.1 --height-scale-um 0.5 --out scan.npz",
     )
     actions = parser.add_subparsers(dest="action", metavar="ACTION", required=True)
 
@@ -59,13 +64,16 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     preview = actions.add_parser("preview", help="write a colour-mapped PNG of a height field (axes in µm)")
     preview.add_argument("input", metavar="IN", help="file (.npy .npz .gsf .png .exr) or generator name")
     add_arguments(preview, LoadOptions)
-    preview.add_argument("--out", required=True, type=Path, help="output preview image (.png)")
+    preview.add_argument("--out", required=True, type=Path, metavar="PREVIEW.png",
+                         help="output preview image (.png); its settings go to PREVIEW.config.json")
     preview.set_defaults(handler=_preview)
 
 
 def _add_outputs(parser: argparse.ArgumentParser, suffixes: tuple[str, ...]) -> None:
-    parser.add_argument("--out", required=True, type=Path, help=f"output height field ({' or '.join(suffixes)})")
-    parser.add_argument("--preview", type=Path, default=None, help="also write a preview image (.png)")
+    parser.add_argument("--out", required=True, type=Path, metavar="FIELD" + "|FIELD".join(suffixes),
+                        help=f"output height field ({' or '.join(suffixes)}); its settings go to FIELD.config.json")
+    parser.add_argument("--preview", type=Path, default=None, metavar="PREVIEW.png",
+                        help="also write a preview image (.png)")
 
 
 def _check_suffix(path: Path, suffixes: tuple[str, ...], what: str) -> None:
@@ -84,15 +92,30 @@ def _describe(field: HeightField) -> str:
     return f"{columns} × {rows} samples, dx = {field.dx_um:.4g} µm, height span {field.span_um:.4g} µm"
 
 
-def _write(field: HeightField, arguments: argparse.Namespace, **configs: Any) -> None:
-    """Save the field (and its optional preview) with the resolved config beside the field."""
-    save_heightfield(arguments.out, field)
+def _outputs(arguments: argparse.Namespace, suffixes: tuple[str, ...]) -> list[Path]:
+    """--out, its config and the optional --preview, checked before any work (suffixes, writable)."""
+    _check_suffix(arguments.out, suffixes, "--out")
+    outputs = [arguments.out, config_path_for(arguments.out)]
+    if getattr(arguments, "preview", None) is not None:
+        _check_suffix(arguments.preview, (".png",), "--preview")
+        outputs.append(arguments.preview)
+    for output in outputs:
+        check_output_file(output, "--preview" if output is getattr(arguments, "preview", None) else "--out")
+    return outputs
+
+
+def _write(field: HeightField, arguments: argparse.Namespace, outputs: list[Path], **configs: Any) -> None:
+    """Save the field, the resolved config beside it and the optional preview: all of them or none."""
     # One config, beside the field; it names the preview (which may share the field's stem).
     preview = None if arguments.preview is None else str(arguments.preview)
-    save_config(arguments.out, **configs, field=_summary(field), preview=preview)
+    with atomic_paths(*outputs) as temporaries:
+        save_heightfield(temporaries[0], field)
+        temporaries[1].write_text(config_text(arguments.out, **configs, field=_summary(field), preview=preview),
+                                  encoding="utf-8")
+        if arguments.preview is not None:
+            preview_png(field, temporaries[2])
     print(f"wrote {arguments.out}: {_describe(field)}")
     if arguments.preview is not None:
-        preview_png(field, arguments.preview)
         print(f"wrote {arguments.preview}")
 
 
@@ -106,30 +129,28 @@ def _list(arguments: argparse.Namespace) -> int:
 
 
 def _generate(arguments: argparse.Namespace) -> int:
-    _check_suffix(arguments.out, FIELD_SUFFIXES, "--out")
-    if arguments.preview is not None:
-        _check_suffix(arguments.preview, (".png",), "--preview")
+    outputs = _outputs(arguments, FIELD_SUFFIXES)
     params = from_arguments(arguments.params_class, arguments)
     field = generators.GENERATORS[arguments.generator][1](params)
-    _write(field, arguments, generator=arguments.generator, parameters=params)
+    _write(field, arguments, outputs, generator=arguments.generator, parameters=params)
     return 0
 
 
 def _convert(arguments: argparse.Namespace) -> int:
-    _check_suffix(arguments.out, FIELD_SUFFIXES, "--out")
-    if arguments.preview is not None:
-        _check_suffix(arguments.preview, (".png",), "--preview")
+    outputs = _outputs(arguments, FIELD_SUFFIXES)
     options = from_arguments(LoadOptions, arguments)
     field = load_heightfield(arguments.input, options)
-    _write(field, arguments, input=arguments.input, load_options=options)
+    _write(field, arguments, outputs, input=arguments.input, load_options=options)
     return 0
 
 
 def _preview(arguments: argparse.Namespace) -> int:
-    _check_suffix(arguments.out, (".png",), "--out")
+    outputs = _outputs(arguments, (".png",))
     options = from_arguments(LoadOptions, arguments)
     field = load_heightfield(arguments.input, options)
-    preview_png(field, arguments.out)
-    save_config(arguments.out, input=arguments.input, load_options=options, field=_summary(field))
+    with atomic_paths(*outputs) as (image_temporary, config_temporary):
+        preview_png(field, image_temporary)
+        config_temporary.write_text(config_text(arguments.out, input=arguments.input, load_options=options,
+                                                field=_summary(field)), encoding="utf-8")
     print(f"wrote {arguments.out}: {_describe(field)}")
     return 0

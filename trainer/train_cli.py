@@ -8,7 +8,7 @@ import sys
 from pathlib import Path
 from typing import Any
 
-from gratnet.config import add_arguments, from_arguments, save_config
+from gratnet.config import add_arguments, add_quiet_flag, from_arguments, save_config
 from gratnet.errors import GratNetError
 
 
@@ -23,6 +23,7 @@ def _add_evaluation_inputs(parser: argparse.ArgumentParser) -> None:
     )
     add_arguments(parser, EvaluateConfig)
     add_arguments(parser, LoadOptions)
+    add_quiet_flag(parser)
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
@@ -34,12 +35,12 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         help="train a funnel MLP on a ground-truth volume and evaluate it",
         description="Train the funnel MLP on a volume (LogCosh, Adam, cosine schedule), write DIR/model.npz, "
         "DIR/checkpoint.pt, DIR/history.json, then a report (metrics.json, report.md, PNG figures).",
+        epilog="typical use:\n  gratnet train blazed.exr --out out/blazed --epochs 6",
     )
     train.add_argument("volume", metavar="VOLUME.exr", help="ground-truth volume from gratnet groundtruth")
     train.add_argument("--out", required=True, metavar="DIR", help="output folder")
     train.add_argument("--resume", action="store_true", help="continue from DIR/checkpoint.pt")
     train.add_argument("--no-evaluate", action="store_true", help="skip the evaluation report")
-    train.add_argument("--quiet", action="store_true", help="no progress bars")
     add_arguments(train, TrainConfig)
     _add_evaluation_inputs(train)
     train.set_defaults(handler=run_train)
@@ -48,11 +49,13 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         "evaluate",
         help="evaluate a model file on held-out volume slices and the paper's BRDF slices",
         description="Write DIR/metrics.json, DIR/report.md and PNG figures (ground truth | network | FLIP).",
+        epilog="typical use:\n  gratnet evaluate assets/blazed/model.npz --volume blazed.exr --out out/report",
     )
     evaluate.add_argument("model", metavar="MODEL.npz", help="model file from gratnet train")
     evaluate.add_argument("--out", required=True, metavar="DIR", help="report folder")
     evaluate.add_argument("--volume", metavar="VOLUME.exr", help="ground-truth volume for the volume-slice metrics")
-    evaluate.add_argument("--volume-slices", default="4,7,10", help="volume slices to evaluate (default: 4,7,10)")
+    evaluate.add_argument("--volume-slices", default="4,7,10",
+                          help="volume slices to evaluate, comma-separated indices (default: 4,7,10)")
     _add_evaluation_inputs(evaluate)
     evaluate.set_defaults(handler=run_evaluate)
 
@@ -75,9 +78,31 @@ def _ground_truth_inputs(arguments: argparse.Namespace, volume_metadata: dict[st
 
 def _slice_list(text: str, what: str) -> list[int]:
     try:
-        return sorted({int(part) for part in text.split(",") if part.strip()})
+        slices = sorted({int(part) for part in text.split(",") if part.strip()})
     except ValueError:
         raise GratNetError(f"{what} must be comma-separated integers, got {text!r}") from None
+    if not slices:
+        raise GratNetError(f"{what} names no slice, got {text!r}")
+    return slices
+
+
+#: Largest BRDF-slice --size of the evaluation (pixels; each one is a network evaluation and a ground truth).
+MAX_EVALUATION_SIZE = 4096
+
+
+def _check_before_work(arguments: argparse.Namespace, evaluating: bool) -> None:
+    """The output folder, the cache folder and the evaluation numbers, before any loading or training."""
+    from gratnet.atomic import check_output_folder
+    from gratnet.brdf import check_ior
+
+    check_output_folder(arguments.out)
+    if evaluating:
+        if not 2 <= arguments.size <= MAX_EVALUATION_SIZE:
+            raise GratNetError(f"--size must be from 2 to {MAX_EVALUATION_SIZE} pixels (typical: 256), "
+                               f"got {arguments.size}")
+        check_ior(arguments.ior)
+        if arguments.brdf_slices:
+            check_output_folder(arguments.cache_dir, "--cache-dir")
 
 
 def run_train(arguments: argparse.Namespace) -> int:
@@ -88,6 +113,11 @@ def run_train(arguments: argparse.Namespace) -> int:
     from trainer.train_config import TrainConfig
 
     config = from_arguments(TrainConfig, arguments)
+    _check_before_work(arguments, evaluating=not arguments.no_evaluate)
+    checkpoint = Path(arguments.out) / "checkpoint.pt"
+    if arguments.resume and not checkpoint.is_file():  # training afresh would silently ignore --resume
+        raise GratNetError(f"--resume: there is no {checkpoint} to continue from; leave out --resume to start afresh")
+    held_out = _slice_list(config.test_slices, "--test-slices") if config.split == "slices" else []
     volume = read_volume(arguments.volume)
     out = Path(arguments.out)
     model, model_file, history = train(volume, config, out, resume=arguments.resume, progress=not arguments.quiet)
@@ -101,7 +131,6 @@ def run_train(arguments: argparse.Namespace) -> int:
         field, optics = (
             _ground_truth_inputs(arguments, volume.metadata) if evaluate_config.brdf_slices else (None, None)
         )
-        held_out = _slice_list(config.test_slices, "--test-slices") if config.split == "slices" else []
         evaluate_model(
             model_file,
             out,
@@ -122,12 +151,13 @@ def run_evaluate(arguments: argparse.Namespace) -> int:
     from gratnet.volume import read_volume
     from trainer.evaluate import EvaluateConfig, evaluate_model
 
+    evaluate_config = dataclasses.replace(from_arguments(EvaluateConfig, arguments), progress=not arguments.quiet)
+    _check_before_work(arguments, evaluating=True)
+    slices = _slice_list(arguments.volume_slices, "--volume-slices") if arguments.volume else []
     model = load_model(arguments.model)
-    evaluate_config = from_arguments(EvaluateConfig, arguments)
     volume = read_volume(arguments.volume) if arguments.volume else None
     metadata = volume.metadata if volume is not None else model.metadata.get("volume", {})
     field, optics = _ground_truth_inputs(arguments, metadata) if evaluate_config.brdf_slices else (None, None)
-    slices = _slice_list(arguments.volume_slices, "--volume-slices") if volume is not None else []
     evaluate_model(
         model, arguments.out, evaluate_config, volume=volume, field=field, optics=optics, volume_slices=slices
     )

@@ -448,7 +448,7 @@ def fill_scene_defaults(arguments: argparse.Namespace) -> SceneDefaults | None:
         return None
     fresnel = getattr(arguments, "fresnel", True)
     ior = arguments.ior if fresnel and arguments.ior not in (None, 0) else None
-    if ior is not None and not (isinstance(ior, (int, float)) and math.isfinite(ior) and ior > 1.0):
+    if ior is not None and not (isinstance(ior, (int, float)) and math.isfinite(ior) and ior > 0.0):
         ior = 1.5  # an invalid --ior is reported by the command's own check; the defaults must not fail first
     fov = getattr(arguments, "fov_degrees", FOV_DEGREES)
     if not (isinstance(fov, (int, float)) and 0.0 < fov < 180.0):

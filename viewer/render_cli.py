@@ -26,7 +26,7 @@ import dataclasses
 import math
 from pathlib import Path
 
-from gratnet.config import add_arguments, config_field, from_arguments, save_config
+from gratnet.config import add_arguments, add_quiet_flag, config_field, from_arguments, parse_float, parse_numbers
 from gratnet.errors import GratNetError
 from viewer.defaults import FALLBACK, FOV_DEGREES, fill_scene_defaults
 
@@ -61,23 +61,23 @@ class RenderConfig:
                                                  cli=False)
     camera_elevation_degrees: float = config_field(FALLBACK.camera_elevation_degrees,
                                                    "camera elevation above the xy-plane, degrees", cli=False)
-    fov_degrees: float = config_field(FOV_DEGREES, "vertical field of view, degrees", flag="--fov")
+    fov_degrees: float = config_field(FOV_DEGREES, "vertical field of view, degrees (typical: 20 to 60)", flag="--fov")
     exposure: float = config_field(FALLBACK.exposure, "exposure: the factor applied to XYZ before display (linear)",
                                    cli=False)
     width: int = config_field(512, "image width, pixels", cli=False)
     height: int = config_field(512, "image height, pixels", cli=False)
-    ior: float = config_field(1.5, "refractive index for the Fresnel factor of the A-term (0: none)")
+    ior: float = config_field(1.5, "refractive index for the Fresnel factor of the A-term (typical: 1.3 to 2.5; "
+                              "0: none)")
     fresnel: bool = config_field(True, "apply the Fresnel factor (--no-fresnel: R/R0 = 1)")
     slice: bool = config_field(False, "render the network's BRDF slice for the light θ,φ instead of a mesh")
     weights_path: str = config_field(
         "auto", "where the shader reads the network's weights: texture (packed RGBA32F texture), baked "
         "(literals in a generated shader: faster on a CPU rasterizer, slower first compile) or auto (baked for "
-        "nets up to 32k multiply-adds (the shipped size) on Mesa llvmpipe/softpipe, else texture; "
-        "viewer.renderer.choose_weights_path)",
+        "nets up to 32k multiply-adds (the shipped size) on a CPU rasterizer such as Mesa llvmpipe, else texture)",
         choices=WEIGHT_PATHS)
     skip_dark: bool = config_field(
         False, "PNG only: skip the network where exposure · A · (the model's cached output bound) cannot reach the "
-        "display's smallest step (gratnet.bounds); the first use per model builds the bound (minutes on a CPU)")
+        "display's smallest step; the first use per model builds the bound (minutes on a CPU)")
 
     @property
     def effective_ior(self) -> float | None:
@@ -86,16 +86,34 @@ class RenderConfig:
 
 
 def _numbers(text: str, count: int | tuple[int, ...], flag: str, form: str) -> list[float]:
-    """Comma-separated finite numbers (``count`` of them) or a one-line GratNetError naming ``flag``."""
-    counts = (count,) if isinstance(count, int) else count
-    parts = [part.strip() for part in str(text).split(",")]
-    try:
-        values = [float(part) for part in parts]
-    except ValueError:
-        values = []
-    if len(values) not in counts or not all(math.isfinite(value) for value in values):
-        raise GratNetError(f"{flag} expects {form}, got {text!r}")
-    return values
+    """Comma-separated numbers that float32 holds (``count`` of them), or a one-line GratNetError naming
+    ``flag``. Negative values parse in both ``--flag -1,2`` and ``--flag=-1,2`` (gratnet.cli)."""
+    return parse_numbers(text, count, flag, form)
+
+
+#: Ranges of the scene's numbers that the float32 shaders handle (beyond them view matrices, 1/d² and
+#: exposure · A · XYZ overflow or lose every digit).
+ANGLE_LIMIT_DEGREES = 1e6
+DISTANCE_RANGE_METRES = (1e-6, 1e6)
+
+
+def check_scene_numbers(light: tuple[float, float] | None, point: tuple[float, ...] | None,
+                        camera: tuple[float, float, float]) -> None:
+    """Refuse (one line) light, point-light and camera values the float32 shaders cannot use."""
+    low, high = DISTANCE_RANGE_METRES
+    for flag, angles in (("--light", light or ()), ("--camera", camera[1:])):
+        for angle in angles:
+            if abs(angle) > ANGLE_LIMIT_DEGREES:
+                raise GratNetError(f"{flag} angles must lie within ±{ANGLE_LIMIT_DEGREES:g} degrees "
+                                   f"(typical: 0 to 90 and −180 to 180), got {angle:g}")
+    if not low <= camera[0] <= high:
+        raise GratNetError(f"--camera distance must be from {low:g} to {high:g} metres (typical: 0.1 to 1), "
+                           f"got {camera[0]:g}")
+    if point is not None:
+        if max(abs(value) for value in point) > high:
+            raise GratNetError(f"--point-light coordinates must lie within ±{high:g} metres, got {point}")
+        if math.hypot(*point) < low:
+            raise GratNetError(f"--point-light must be at least {low:g} m from the origin, got {point}")
 
 
 def parse_size(text: str) -> tuple[int, int]:
@@ -151,6 +169,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         description="Rasterize a mesh lit by one light and shade every pixel with the trained network "
         "(exposure · A · XYZ of the key vector in the surface's tangent frame); or, with --slice, the "
         "network's BRDF slice. Headless OpenGL (EGL).",
+        epilog="typical use:\n"
+        "  gratnet render --material blazed --mesh cd --size 512,512 --out cd.png\n"
+        "  gratnet render --material blazed --slice --light 30,0 --size 256,256 --out slice.exr",
     )
     parser.add_argument("--out", required=True, metavar="IMAGE.png|IMAGE.exr",
                         help="output: .png (display sRGB, 8-bit) or .exr (linear sRGB float, R G B)")
@@ -162,11 +183,12 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     parser.add_argument("--camera", dest="camera_text", default=None, metavar="DIST,AZIMUTH,ELEVATION",
                         help="orbit camera around the origin: metres, degrees, degrees (default: chosen with the "
                         "light: the distance that frames the mesh, azimuth -90)")
-    parser.add_argument("--exposure", type=float, default=None,
+    parser.add_argument("--exposure", type=parse_float, default=None,
                         help="exposure: the factor applied to XYZ before display, linear (default: chosen from the "
                         "material and mesh so that the diffraction shows without saturating)")
     parser.add_argument("--size", dest="size_text", default="512,512", metavar="W,H",
-                        help="image size in pixels (default: 512,512)")
+                        help="image size in pixels (typical: 256,256 to 1024,1024; default: 512,512)")
+    add_quiet_flag(parser)
     add_arguments(parser, RenderConfig)
     parser.set_defaults(handler=run)
 
@@ -185,11 +207,11 @@ def _resolve_config(arguments: argparse.Namespace) -> RenderConfig:
         light_theta_degrees=theta, light_phi_degrees=phi, point_light=point, camera_distance=distance,
         camera_azimuth_degrees=azimuth, camera_elevation_degrees=elevation, width=width, height=height,
     )
-    if not (math.isfinite(config.exposure) and config.exposure >= 0.0):
-        raise GratNetError(f"--exposure must be a finite number ≥ 0, got {config.exposure!r}")
-    from viewer.renderer import _ior_uniform
+    from gratnet.brdf import check_exposure, check_ior
 
-    _ior_uniform(config.effective_ior)  # checks --ior
+    check_exposure(config.exposure)
+    check_ior(config.ior)  # 0: no Fresnel; 1 is its limit (physics.md, "The A-term")
+    check_scene_numbers((theta, phi), point, (distance, azimuth, elevation))
     if config.slice and width != height:
         raise GratNetError(f"--slice renders a square image; give --size N,N (got {width},{height})")
     if config.slice and point is not None:
@@ -201,23 +223,26 @@ def run(arguments: argparse.Namespace) -> int:
     """Check every input, render, write the image and its config atomically."""
     import numpy as np
 
-    from gratnet.atomic import atomic_path
+    from gratnet.atomic import atomic_paths, check_output_file
+    from gratnet.config import config_path_for, config_text
     from gratnet.modelfile import load_model
     from viewer.camera import Camera, Light
 
     out = Path(arguments.out)
     if out.suffix.lower() not in _OUTPUT_SUFFIXES:
         raise GratNetError(f"--out must end in .png (display sRGB) or .exr (linear sRGB float), got {arguments.out}")
+    check_output_file(out)
+    check_output_file(config_path_for(out))
     fill_scene_defaults(arguments)  # the unset --light, --camera, --exposure, from the material and mesh
     config = _resolve_config(arguments)
     if config.skip_dark and out.suffix.lower() != ".png":
         raise GratNetError("--skip-dark applies to .png output only: an EXR keeps values below the display's step")
-    model_path = resolve_material(config.material)
-    model = load_model(model_path)
     camera = Camera(config.camera_distance, config.camera_azimuth_degrees, config.camera_elevation_degrees,
                     fov_deg=config.fov_degrees)
     light = (Light.point(config.point_light) if config.point_light is not None
              else Light.directional(config.light_theta_degrees, config.light_phi_degrees))
+    model_path = resolve_material(config.material)
+    model = load_model(model_path)
     mesh = None if config.slice else build_mesh(config.mesh)
 
     from gratnet.bounds import DISPLAY_SKIP_THRESHOLD
@@ -241,14 +266,15 @@ def run(arguments: argparse.Namespace) -> int:
     if not np.all(np.isfinite(xyz)):
         raise GratNetError("the render contains NaN or inf; nothing was written (please report this)")
 
-    if out.suffix.lower() == ".png":
-        from PIL import Image
+    # The image and its config land together or not at all.
+    with atomic_paths(out, config_path_for(out)) as (image_temporary, config_temporary):
+        if out.suffix.lower() == ".png":
+            from PIL import Image
 
-        with atomic_path(out) as temporary:
-            Image.fromarray(SceneRenderer.display_srgb8(xyz)).save(temporary, format="PNG")
-    else:
-        _write_exr(out, SceneRenderer.linear_srgb(xyz))
-    save_config(out, render=config, model_file=str(model_path))
+            Image.fromarray(SceneRenderer.display_srgb8(xyz)).save(image_temporary, format="PNG")
+        else:
+            _write_exr(image_temporary, SceneRenderer.linear_srgb(xyz), out)
+        config_temporary.write_text(config_text(out, render=config, model_file=str(model_path)), encoding="utf-8")
     what = (f"BRDF slice, light θ={config.light_theta_degrees:g}° φ={config.light_phi_degrees:g}°" if config.slice
             else f"mesh {config.mesh}")
     print(f"wrote {out}: {Path(model_path).parent.name if model_path.name == 'model.npz' else model_path.name}, "
@@ -268,20 +294,18 @@ def _warn_if_black(xyz: object, exposure: float) -> None:
         print(f"warning: {hint}", file=sys.stderr)
 
 
-def _write_exr(path: Path, linear_srgb: object) -> None:
-    """Float32 channels R, G, B of a linear-sRGB image (row 0 at the top), ZIP-compressed, atomically."""
+def _write_exr(path: Path, linear_srgb: object, name: Path) -> None:
+    """Float32 channels R, G, B of a linear-sRGB image (row 0 at the top), ZIP-compressed, to ``path`` (a
+    temporary of :func:`gratnet.atomic.atomic_paths`; ``name``: the output it becomes, for messages)."""
     import numpy as np
     import OpenEXR
-
-    from gratnet.atomic import atomic_path
 
     image = np.asarray(linear_srgb, dtype=np.float32)
     header = {"compression": OpenEXR.ZIP_COMPRESSION, "type": OpenEXR.scanlineimage,
               "chromaticities": _SRGB_CHROMATICITIES}
     channels = {name: np.ascontiguousarray(image[..., k]) for k, name in enumerate("RGB")}
-    with atomic_path(path) as temporary:
-        try:
-            with OpenEXR.File(header, channels) as exr:
-                exr.write(str(temporary))
-        except Exception as error:  # OpenEXR raises plain exceptions (RuntimeError, …)
-            raise GratNetError(f"cannot write {path}: {' '.join(str(error).split())}") from error
+    try:
+        with OpenEXR.File(header, channels) as exr:
+            exr.write(str(path))
+    except Exception as error:  # OpenEXR raises plain exceptions (RuntimeError, …)
+        raise GratNetError(f"cannot write {name}: {' '.join(str(error).split())}") from error

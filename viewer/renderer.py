@@ -107,11 +107,10 @@ def xyz_to_linear_srgb_matrix() -> np.ndarray:
 
 def _ior_uniform(ior: float | None) -> float:
     """The shader's IOR uniform: 0 turns Fresnel off (``None`` or 0, as in physics.md eq. 5)."""
-    if ior is None or ior == 0:
-        return 0.0
-    if not (math.isfinite(ior) and ior > 0) or ior == 1.0:
-        raise GratNetError(f"ior must be a finite number > 0 other than 1 (or 0/None for no Fresnel), got {ior!r}")
-    return float(ior)
+    from gratnet.brdf import check_ior
+
+    checked = check_ior(ior, "ior")  # 1 is allowed: R/R0 has a limit there (physics.md, "The A-term")
+    return 0.0 if checked is None else checked
 
 
 def skip_threshold_value(threshold: float | None) -> float:

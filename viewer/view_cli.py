@@ -23,6 +23,7 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
+from gratnet.config import add_quiet_flag, parse_float, parse_int
 from gratnet.errors import GratNetError
 from viewer.defaults import fill_scene_defaults
 from viewer.render_cli import WEIGHT_PATHS
@@ -37,6 +38,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         description="Open a window showing a trained material on a mesh (or its BRDF slice), with sliders for "
         "the light, camera, exposure and Fresnel term. Renders at reduced resolution while you move things "
         "and refines to full resolution when you stop. Needs a display and OpenGL 4.3.",
+        epilog="typical use:\n  gratnet view --material blazed --mesh cd\n  gratnet view --material blazed --slice",
     )
     parser.add_argument("--material", default="blazed",
                         help="shipped material name (assets/NAME/model.npz) or a model-file path (default: blazed)")
@@ -50,11 +52,12 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     parser.add_argument("--camera", dest="camera_text", default=None, metavar="DIST,AZIMUTH,ELEVATION",
                         help="orbit camera around the origin: metres, degrees, degrees (default: chosen with the "
                         "light: the distance that frames the mesh, azimuth -90)")
-    parser.add_argument("--exposure", type=float, default=None,
+    parser.add_argument("--exposure", type=parse_float, default=None,
                         help="exposure: the factor applied to XYZ before display, linear (default: chosen from the "
                         "material and mesh so that the diffraction shows without saturating)")
-    parser.add_argument("--ior", type=float, default=1.5,
-                        help="refractive index of the Fresnel factor (0: no Fresnel; default: 1.5)")
+    parser.add_argument("--ior", type=parse_float, default=1.5,
+                        help="refractive index of the Fresnel factor (typical: 1.3 to 2.5; 0: no Fresnel; "
+                        "default: 1.5)")
     parser.add_argument("--fresnel", action=argparse.BooleanOptionalAction, default=True,
                         help="apply the Fresnel factor (default: on)")
     parser.add_argument("--slice", action="store_true", help="start in BRDF-slice mode")
@@ -64,39 +67,40 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                         "default: auto)")
     parser.add_argument("--screenshot-dir", default=".", metavar="DIR",
                         help="folder for the Screenshot button's PNGs (default: the working folder)")
-    parser.add_argument("--max-frames", type=int, default=0, metavar="N",
+    parser.add_argument("--max-frames", type=parse_int, default=0, metavar="N",
                         help="close after N frames (0: when the window is closed; for scripted runs)")
+    add_quiet_flag(parser)
     parser.set_defaults(handler=run)
 
 
 def _state(arguments: argparse.Namespace) -> object:
     """The starting :class:`~viewer.app.ViewerState`, every value checked before a window opens."""
-    import math
-
+    from gratnet.atomic import check_output_folder
+    from gratnet.brdf import check_exposure, check_ior
+    from gratnet.modelfile import load_model
     from viewer.app import SLIDERS, ViewerState
-    from viewer.render_cli import MESHES, _numbers, resolve_material
-    from viewer.renderer import _ior_uniform
+    from viewer.render_cli import MESHES, _numbers, build_mesh, check_scene_numbers, resolve_material
 
     fill_scene_defaults(arguments)  # the unset --light, --camera, --exposure, from the material and mesh
     theta, phi = _numbers(arguments.light_text, 2, "--light", "θ,φ in degrees such as 20,90")
     distance, azimuth, elevation = _numbers(arguments.camera_text, 3, "--camera",
                                             "DIST,AZIMUTH,ELEVATION (metres, degrees, degrees) such as 0.18,-90,50")
-    for flag, value in (("--exposure", arguments.exposure), ("--ior", arguments.ior)):
-        if not (math.isfinite(value) and value >= 0.0):
-            raise GratNetError(f"{flag} must be a finite number ≥ 0, got {value!r}")
+    check_exposure(arguments.exposure)
+    check_ior(arguments.ior)  # 0: no Fresnel; 1 is its limit (physics.md, "The A-term")
+    check_scene_numbers((theta, phi), None, (distance, azimuth, elevation))
+    check_output_folder(arguments.screenshot_dir, "--screenshot-dir")
     if arguments.max_frames < 0:
         raise GratNetError(f"--max-frames must be ≥ 0, got {arguments.max_frames}")
-    resolve_material(arguments.material)
+    # Read (cheaply) before a window opens: a bad model or mesh file is one line, not a broken window.
+    load_model(resolve_material(arguments.material))
     if arguments.mesh not in MESHES:
         path = Path(arguments.mesh).expanduser()
         if path.suffix.lower() != ".obj":
             raise GratNetError(f"unknown mesh {arguments.mesh!r}: choose {', '.join(MESHES)} or a Wavefront .obj file")
-        if not path.is_file():
-            raise GratNetError(f"mesh file {arguments.mesh} does not exist")
+        build_mesh(arguments.mesh)
     fresnel, ior = arguments.fresnel, arguments.ior
     if ior == 0:  # as in gratnet render: --ior 0 means no Fresnel factor
         fresnel, ior = False, ViewerState.ior
-    _ior_uniform(ior)  # checks it (n = 1 is refused: no Fresnel reflection at all)
     values = {"light_theta": theta, "light_phi": phi, "camera_distance": distance, "camera_azimuth": azimuth,
               "camera_elevation": elevation, "exposure": arguments.exposure, "ior": ior}
     for name, value in values.items():
