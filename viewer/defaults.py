@@ -68,6 +68,7 @@ __all__ = [
     "SceneDefaults",
     "black_picture_hint",
     "fill_scene_defaults",
+    "with_fallback",
     "resolve_defaults",
     "scene_defaults",
     "slice_defaults",
@@ -428,6 +429,17 @@ def resolve_defaults(material: str, mesh: str, slice_mode: bool = False, fov_deg
     mesh_key = mesh if slice_mode or mesh in ("cd", "sphere", "plane") else str(Path(mesh).expanduser().resolve())
     return _resolve_cached(str(path), (status.st_mtime_ns, status.st_size), "" if slice_mode else mesh_key,
                            bool(slice_mode), float(fov_degrees), ior)
+
+
+def with_fallback(arguments: argparse.Namespace) -> argparse.Namespace:
+    """A copy of ``arguments`` whose unset ``--light``, ``--camera`` and ``--exposure`` hold :data:`FALLBACK`'s
+    values: the command checks the flags the user gave on it before :func:`fill_scene_defaults` reads the
+    model, so that bad input is refused before any work."""
+    probe = argparse.Namespace(**vars(arguments))
+    probe.light_text = FALLBACK.light_text if probe.light_text is None else probe.light_text
+    probe.camera_text = FALLBACK.camera_text if probe.camera_text is None else probe.camera_text
+    probe.exposure = FALLBACK.exposure if probe.exposure is None else probe.exposure
+    return probe
 
 
 def fill_scene_defaults(arguments: argparse.Namespace) -> SceneDefaults | None:

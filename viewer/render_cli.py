@@ -28,7 +28,7 @@ from pathlib import Path
 
 from gratnet.config import add_arguments, add_quiet_flag, config_field, from_arguments, parse_float, parse_numbers
 from gratnet.errors import GratNetError
-from viewer.defaults import FALLBACK, FOV_DEGREES, fill_scene_defaults
+from viewer.defaults import FALLBACK, FOV_DEGREES, fill_scene_defaults, with_fallback
 
 __all__ = ["ASSETS", "MESHES", "RenderConfig", "register", "resolve_material", "run", "shipped_materials"]
 
@@ -233,6 +233,7 @@ def run(arguments: argparse.Namespace) -> int:
         raise GratNetError(f"--out must end in .png (display sRGB) or .exr (linear sRGB float), got {arguments.out}")
     check_output_file(out)
     check_output_file(config_path_for(out))
+    _resolve_config(with_fallback(arguments))  # the flags given are checked before the defaults read the model
     fill_scene_defaults(arguments)  # the unset --light, --camera, --exposure, from the material and mesh
     config = _resolve_config(arguments)
     if config.skip_dark and out.suffix.lower() != ".png":
@@ -303,7 +304,7 @@ def _write_exr(path: Path, linear_srgb: object, name: Path) -> None:
     image = np.asarray(linear_srgb, dtype=np.float32)
     header = {"compression": OpenEXR.ZIP_COMPRESSION, "type": OpenEXR.scanlineimage,
               "chromaticities": _SRGB_CHROMATICITIES}
-    channels = {name: np.ascontiguousarray(image[..., k]) for k, name in enumerate("RGB")}
+    channels = {channel: np.ascontiguousarray(image[..., k]) for k, channel in enumerate("RGB")}
     try:
         with OpenEXR.File(header, channels) as exr:
             exr.write(str(path))

@@ -25,7 +25,7 @@ from pathlib import Path
 
 from gratnet.config import add_quiet_flag, parse_float, parse_int
 from gratnet.errors import GratNetError
-from viewer.defaults import fill_scene_defaults
+from viewer.defaults import fill_scene_defaults, with_fallback
 from viewer.render_cli import WEIGHT_PATHS
 
 __all__ = ["register", "run"]
@@ -73,22 +73,31 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     parser.set_defaults(handler=run)
 
 
-def _state(arguments: argparse.Namespace) -> object:
-    """The starting :class:`~viewer.app.ViewerState`, every value checked before a window opens."""
-    from gratnet.atomic import check_output_folder
+def _scene_numbers(arguments: argparse.Namespace) -> tuple[float, float, float, float, float]:
+    """--light θ,φ and --camera DIST,AZIMUTH,ELEVATION parsed, and every scene number checked (one line if bad)."""
     from gratnet.brdf import check_exposure, check_ior
-    from gratnet.modelfile import load_model
-    from viewer.app import SLIDERS, ViewerState
-    from viewer.render_cli import MESHES, _numbers, build_mesh, check_scene_numbers, resolve_material
+    from viewer.render_cli import _numbers, check_scene_numbers
 
-    fill_scene_defaults(arguments)  # the unset --light, --camera, --exposure, from the material and mesh
     theta, phi = _numbers(arguments.light_text, 2, "--light", "θ,φ in degrees such as 20,90")
     distance, azimuth, elevation = _numbers(arguments.camera_text, 3, "--camera",
                                             "DIST,AZIMUTH,ELEVATION (metres, degrees, degrees) such as 0.18,-90,50")
     check_exposure(arguments.exposure)
     check_ior(arguments.ior)  # 0: no Fresnel; 1 is its limit (physics.md, "The A-term")
     check_scene_numbers((theta, phi), None, (distance, azimuth, elevation))
+    return theta, phi, distance, azimuth, elevation
+
+
+def _state(arguments: argparse.Namespace) -> object:
+    """The starting :class:`~viewer.app.ViewerState`, every value checked before a window opens."""
+    from gratnet.atomic import check_output_folder
+    from gratnet.modelfile import load_model
+    from viewer.app import SLIDERS, ViewerState
+    from viewer.render_cli import MESHES, build_mesh, resolve_material
+
     check_output_folder(arguments.screenshot_dir, "--screenshot-dir")
+    _scene_numbers(with_fallback(arguments))  # the flags given are checked before the defaults read the model
+    fill_scene_defaults(arguments)  # the unset --light, --camera, --exposure, from the material and mesh
+    theta, phi, distance, azimuth, elevation = _scene_numbers(arguments)
     if arguments.max_frames < 0:
         raise GratNetError(f"--max-frames must be ≥ 0, got {arguments.max_frames}")
     # Read (cheaply) before a window opens: a bad model or mesh file is one line, not a broken window.
