@@ -212,6 +212,9 @@ def _resolve_config(arguments: argparse.Namespace) -> RenderConfig:
     check_exposure(config.exposure)
     check_ior(config.ior)  # 0: no Fresnel; 1 is its limit (physics.md, "The A-term")
     check_scene_numbers((theta, phi), point, (distance, azimuth, elevation))
+    from viewer.camera import Camera
+
+    Camera(distance, azimuth, elevation, fov_deg=config.fov_degrees)  # checks the elevation and the field of view
     if config.slice and width != height:
         raise GratNetError(f"--slice renders a square image; give --size N,N (got {width},{height})")
     if config.slice and point is not None:
