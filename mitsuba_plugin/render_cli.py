@@ -1,16 +1,19 @@
 """``gratnet mitsuba-render``: a shipped material (or any model file) on a mesh, path-traced by Mitsuba 3.
 
-    gratnet mitsuba-render --material cd --mesh cd --point-light 0.05,-0.1,0.15 --camera 0.25,-90,45 \\
-        --exposure 5000 --environment 2e-5 --spp 64 --size 512,512 --out cd_mitsuba.png
+    gratnet mitsuba-render --material cd --mesh cd --environment 2e-5 --spp 64 --size 512,512 --out cd_mitsuba.png
 
 The flags mean what they mean for ``gratnet render`` (same names: --material, --mesh, --light θ,φ,
---point-light X,Y,Z, --camera DIST,AZIMUTH,ELEVATION, --fov, --exposure, --ior, --no-fresnel, --size, --out),
-so the two renderers show the same scene; with one light, no environment and ``--integrator direct`` they
-agree up to Monte Carlo noise (tests/test_mitsuba.py). Added: --spp, --environment (a constant radiance or
-a lat-long EXR), --light-intensity, --integrator, --max-depth, --variant, --seed, the sampling mixture, --quiet.
+--point-light X,Y,Z, --camera DIST,AZIMUTH,ELEVATION, --fov, --exposure, --ior, --no-fresnel, --size, --out,
+--quiet) and are checked by the same functions, so the two renderers show the same scene: --light, --camera
+and --exposure left out take ``gratnet render``'s defaults for the material and mesh (viewer.defaults), and a
+picture that is 99 % black on the display draws the same warning. With one light, no environment and
+``--integrator direct`` the two agree up to Monte Carlo noise (tests/test_mitsuba.py). Added: --spp,
+--environment (a constant radiance or a lat-long EXR), --light-intensity, --integrator, --max-depth, --variant,
+--seed, the sampling mixture.
 
 Output: ``.png`` = display sRGB, 8-bit (``gratnet.display``); ``.exr`` = linear sRGB float32 R, G, B,
-exposure applied, unclipped. The resolved config is saved beside it (``NAME.config.json``); both atomically.
+exposure applied, unclipped. The resolved config is saved beside it (``NAME.config.json``); the two land
+together (gratnet.atomic), and both are checked before any work.
 Needs the ``mitsuba`` extra (``pip install -e '.[mitsuba]'``).
 """
 
@@ -19,13 +22,13 @@ from __future__ import annotations
 import argparse
 import dataclasses
 import math
-import os
 import sys
 import time
 from pathlib import Path
 
-from gratnet.config import add_arguments, config_field, from_arguments, save_config
+from gratnet.config import add_arguments, add_quiet_flag, config_field, from_arguments, parse_float
 from gratnet.errors import GratNetError
+from viewer.defaults import FALLBACK, FOV_DEGREES, fill_scene_defaults, with_fallback
 
 __all__ = ["MitsubaRenderConfig", "parse_environment", "register", "run"]
 
@@ -40,35 +43,43 @@ class MitsubaRenderConfig:
 
     material: str = config_field("blazed", "shipped material name (assets/NAME/model.npz) or a model-file path")
     mesh: str = config_field("cd", "cd, sphere, plane, or the path of a Wavefront .obj file (metres, +z up)")
-    light_theta_degrees: float = config_field(45.0, "directional light: polar angle from +z, degrees", cli=False)
-    light_phi_degrees: float = config_field(90.0, "directional light: azimuth from +x, degrees", cli=False)
+    light_theta_degrees: float = config_field(FALLBACK.light_theta_degrees,
+                                              "directional light: polar angle from +z, degrees", cli=False)
+    light_phi_degrees: float = config_field(FALLBACK.light_phi_degrees, "directional light: azimuth from +x, degrees",
+                                            cli=False)
     point_light: tuple[float, float, float] | None = config_field(
         None, "point light position, metres (replaces the directional light)", cli=False)
     light_intensity: float = config_field(
         1.0, "the light's irradiance (directional, on a plane facing it) or intensity (point, W/sr: irradiance "
-        "intensity/d² at d metres); 0: environment only")
+        "intensity/d² at d metres), as gratnet render's at 1; 0: environment only (typical: 0 to 10)")
     environment: str = config_field(
         "none", "environment light: none, a constant radiance (one number, or R,G,B in linear sRGB) or the path "
         "of a lat-long .exr (its up is +z)", cli=False)
-    environment_scale: float = config_field(1.0, "factor on the environment's radiance")
-    camera_distance: float = config_field(0.25, "camera distance from the origin, metres", cli=False)
-    camera_azimuth_degrees: float = config_field(-90.0, "camera azimuth from +x, degrees", cli=False)
-    camera_elevation_degrees: float = config_field(45.0, "camera elevation above the xy-plane, degrees", cli=False)
-    fov_degrees: float = config_field(40.0, "vertical field of view, degrees", flag="--fov")
-    exposure: float = config_field(1.0, "exposure: the factor applied to the radiance before display (linear)")
+    environment_scale: float = config_field(1.0, "factor on the environment's radiance (typical: 1e-5 to 1)")
+    camera_distance: float = config_field(FALLBACK.camera_distance, "camera distance from the origin, metres",
+                                          cli=False)
+    camera_azimuth_degrees: float = config_field(FALLBACK.camera_azimuth_degrees, "camera azimuth from +x, degrees",
+                                                 cli=False)
+    camera_elevation_degrees: float = config_field(FALLBACK.camera_elevation_degrees,
+                                                   "camera elevation above the xy-plane, degrees", cli=False)
+    fov_degrees: float = config_field(FOV_DEGREES, "vertical field of view, degrees (typical: 20 to 60)", flag="--fov")
+    exposure: float = config_field(FALLBACK.exposure, "exposure: the factor applied to the radiance before display "
+                                   "(linear)", cli=False)
     width: int = config_field(512, "image width, pixels", cli=False)
     height: int = config_field(512, "image height, pixels", cli=False)
-    ior: float = config_field(1.5, "refractive index for the Fresnel factor of the A-term (0: none)")
+    ior: float = config_field(1.5, "refractive index for the Fresnel factor of the A-term (typical: 1.3 to 2.5; "
+                              "0: none)")
     fresnel: bool = config_field(True, "apply the Fresnel factor (--no-fresnel: R/R0 = 1)")
-    spp: int = config_field(64, f"samples per pixel (1 … {MAX_SPP})")
+    spp: int = config_field(64, f"samples per pixel (1 … {MAX_SPP}; typical: 16 to 256)")
     integrator: str = config_field("path", "direct (one bounce, emitter + BSDF sampling) or path",
                                    choices=["direct", "path"])
-    max_depth: int = config_field(8, "path: longest path, in segments (2 = direct lighting)")
+    max_depth: int = config_field(8, "path: longest path, in segments (2 = direct lighting; typical: 3 to 16)")
     variant: str = config_field("auto", "Mitsuba variant: llvm_ad_rgb (wide, needs LLVM ≥ 18), scalar_rgb (one "
                                 "lookup at a time) or auto", choices=["auto", "llvm_ad_rgb", "scalar_rgb"])
     seed: int = config_field(0, "random seed of the sampler")
-    specular_probability: float = config_field(0.5, "share of BSDF samples drawn around the mirror direction")
-    lobe_degrees: float = config_field(2.0, "angular standard deviation of that lobe, degrees")
+    specular_probability: float = config_field(0.5, "share of BSDF samples drawn around the mirror direction "
+                                               "(0 to 1)")
+    lobe_degrees: float = config_field(2.0, "angular standard deviation of that lobe, degrees (typical: 0.5 to 10)")
 
     @property
     def effective_ior(self) -> float | None:
@@ -104,45 +115,42 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         "mitsuba-render", help="path-trace a material on a mesh (cd, sphere, plane, .obj) with Mitsuba 3",
         description="Path-trace a mesh shaded by the trained network (the gratnet BSDF plugin: the same "
         "A · XYZ as gratnet render) under a directional or point light and an environment, with Mitsuba 3 "
-        "(the mitsuba extra). Flags shared with gratnet render mean the same.",
+        "(the mitsuba extra). Flags shared with gratnet render mean the same and have the same defaults.",
+        epilog="typical use:\n"
+        "  gratnet mitsuba-render --material cd --mesh cd --spp 64 --size 512,512 --out cd_mitsuba.png\n"
+        "  gratnet mitsuba-render --material blazed --mesh sphere --environment 1e-4 --integrator path "
+        "--out sphere.exr",
     )
     parser.add_argument("--out", required=True, metavar="IMAGE.png|IMAGE.exr",
                         help="output: .png (display sRGB, 8-bit) or .exr (linear sRGB float, R G B)")
-    parser.add_argument("--light", dest="light_text", default="45,90", metavar="θ,φ",
+    parser.add_argument("--light", dest="light_text", default=None, metavar="θ,φ",
                         help="directional light in world space: polar angle from +z and azimuth from +x, "
-                        "degrees (default: 45,90)")
+                        "degrees (default: gratnet render's, chosen from the material and mesh so that the "
+                        "diffraction shows)")
     parser.add_argument("--point-light", dest="point_light_text", default=None, metavar="X,Y,Z",
-                        help="point light position in metres instead of --light")
-    parser.add_argument("--camera", dest="camera_text", default="0.25,-90,45", metavar="DIST,AZIMUTH,ELEVATION",
-                        help="orbit camera around the origin: metres, degrees, degrees (default: 0.25,-90,45)")
+                        help="point light position in metres instead of --light (intensity --light-intensity)")
+    parser.add_argument("--camera", dest="camera_text", default=None, metavar="DIST,AZIMUTH,ELEVATION",
+                        help="orbit camera around the origin: metres, degrees, degrees (default: gratnet render's, "
+                        "chosen with the light: the distance that frames the mesh, azimuth -90)")
+    parser.add_argument("--exposure", type=parse_float, default=None,
+                        help="exposure: the factor applied to the radiance before display, linear (default: "
+                        "gratnet render's for the material and mesh, made for --light-intensity 1 without "
+                        "an environment)")
     parser.add_argument("--size", dest="size_text", default="512,512", metavar="W,H",
-                        help="image size in pixels (default: 512,512)")
+                        help="image size in pixels (typical: 256,256 to 1024,1024; default: 512,512)")
     parser.add_argument("--environment", dest="environment", default="none", metavar="none|RADIANCE|R,G,B|MAP.exr",
-                        help="environment light: none (default), a constant radiance in linear sRGB, or a "
-                        "lat-long EXR whose up is +z")
-    parser.add_argument("--quiet", action="store_true", help="no progress bar")
+                        help="environment light: none (default), a constant radiance in linear sRGB (typical: "
+                        "1e-5 to 1e-3 with the default exposure), or a lat-long EXR whose up is +z")
+    add_quiet_flag(parser)
     add_arguments(parser, MitsubaRenderConfig)
     parser.set_defaults(handler=run)
 
 
-def _check_output(out: Path) -> None:
-    """The output's suffix and place, before any work."""
-    if out.suffix.lower() not in _OUTPUT_SUFFIXES:
-        raise GratNetError(f"--out must end in .png (display sRGB) or .exr (linear sRGB float), got {out}")
-    if out.is_dir():
-        raise GratNetError(f"cannot write {out}: it is a directory")
-    for parent in (out.parent, *out.parent.parents):
-        if parent.exists():
-            if not parent.is_dir():
-                raise GratNetError(f"cannot write {out}: {parent} is not a directory")
-            if not os.access(parent, os.W_OK | os.X_OK):
-                raise GratNetError(f"cannot write {out}: {parent} is not writable")
-            break
-
-
 def _resolve_config(arguments: argparse.Namespace) -> MitsubaRenderConfig:
-    """The config from the flags, every value checked (nothing rendered, Mitsuba not loaded yet)."""
-    from viewer.render_cli import _numbers, parse_size
+    """The config from the flags, every value checked as ``gratnet render`` checks it (nothing rendered,
+    Mitsuba not loaded yet)."""
+    from gratnet.brdf import check_exposure, check_ior
+    from viewer.render_cli import _numbers, check_scene_numbers, parse_size
 
     theta, phi = _numbers(arguments.light_text, 2, "--light", "θ,φ in degrees such as 45,90")
     distance, azimuth, elevation = _numbers(arguments.camera_text, 3, "--camera",
@@ -157,7 +165,10 @@ def _resolve_config(arguments: argparse.Namespace) -> MitsubaRenderConfig:
         camera_azimuth_degrees=azimuth, camera_elevation_degrees=elevation, width=width, height=height,
         environment=str(arguments.environment),
     )
-    for name, value in (("--exposure", config.exposure), ("--light-intensity", config.light_intensity),
+    check_exposure(config.exposure)
+    check_ior(config.ior)  # 0: no Fresnel; 1 is its limit (physics.md, "The A-term")
+    check_scene_numbers((theta, phi), point, (distance, azimuth, elevation))
+    for name, value in (("--light-intensity", config.light_intensity),
                         ("--environment-scale", config.environment_scale)):
         if not (math.isfinite(value) and 0.0 <= value < 3e38):
             raise GratNetError(f"{name} must be a finite number ≥ 0, got {value!r}")
@@ -169,34 +180,30 @@ def _resolve_config(arguments: argparse.Namespace) -> MitsubaRenderConfig:
         raise GratNetError(f"--specular-probability must be in [0, 1], got {config.specular_probability!r}")
     if not (math.isfinite(config.lobe_degrees) and 0.0 < config.lobe_degrees <= 90.0):
         raise GratNetError(f"--lobe-degrees must be in (0, 90], got {config.lobe_degrees!r}")
-    from mitsuba_plugin.bsdf import check_ior
-
-    if config.fresnel:
-        check_ior(config.ior)
     parse_environment(config.environment)
     return config
 
 
 def run(arguments: argparse.Namespace) -> int:
-    """Check every input, path-trace, write the image and its config atomically."""
+    """Check the outputs and every input, path-trace, write the image and its config together."""
     import numpy as np
 
-    from gratnet.atomic import atomic_path
+    from gratnet.atomic import atomic_paths, check_output_file
+    from gratnet.config import config_path_for, config_text
     from gratnet.display import xyz_to_display_srgb8
-    from mitsuba_plugin import scene as mitsuba_scene
-    from mitsuba_plugin.runtime import resolve_variant, set_variant
-    from mitsuba_plugin.shading import xyz_to_linear_srgb_matrix
+    from gratnet.modelfile import load_model
+    from mitsuba_plugin.runtime import resolve_variant
     from viewer.camera import Camera, Light
-    from viewer.render_cli import _write_exr, build_mesh, resolve_material
+    from viewer.render_cli import _warn_if_black, _write_exr, build_mesh, resolve_material
 
     out = Path(arguments.out)
-    _check_output(out)
+    if out.suffix.lower() not in _OUTPUT_SUFFIXES:
+        raise GratNetError(f"--out must end in .png (display sRGB) or .exr (linear sRGB float), got {arguments.out}")
+    check_output_file(out)
+    check_output_file(config_path_for(out))
+    resolve_variant(_resolve_config(with_fallback(arguments)).variant)  # flags, then Mitsuba, before the defaults
+    fill_scene_defaults(arguments)  # the unset --light, --camera, --exposure: gratnet render's
     config = _resolve_config(arguments)
-    model_path = resolve_material(config.material)
-    from gratnet.modelfile import load_model
-
-    load_model(model_path)  # a corrupt model file: one line now, not a Mitsuba traceback later
-    mesh = build_mesh(config.mesh)
     camera = Camera(config.camera_distance, config.camera_azimuth_degrees, config.camera_elevation_degrees,
                     fov_deg=config.fov_degrees)
     light = None
@@ -204,9 +211,16 @@ def run(arguments: argparse.Namespace) -> int:
         light = (Light.point(config.point_light, config.light_intensity) if config.point_light is not None
                  else Light.directional(config.light_theta_degrees, config.light_phi_degrees,
                                         config.light_intensity))
+    model_path = resolve_material(config.material)
+    load_model(model_path)  # a corrupt model file: one line now, not a Mitsuba traceback later
+    mesh = build_mesh(config.mesh)
     environment = parse_environment(config.environment)
-    variant = resolve_variant(config.variant)
 
+    from mitsuba_plugin import scene as mitsuba_scene
+    from mitsuba_plugin.runtime import set_variant
+    from mitsuba_plugin.shading import xyz_to_linear_srgb_matrix
+
+    variant = resolve_variant(config.variant)
     mi = set_variant(variant)
     started = time.perf_counter()
     scene = mitsuba_scene.build_scene(
@@ -226,18 +240,20 @@ def run(arguments: argparse.Namespace) -> int:
     linear = image.astype(np.float64) * config.exposure
     if not np.all(np.isfinite(linear)):
         raise GratNetError("the render contains NaN or inf after the exposure; nothing was written")
+    xyz = linear @ np.linalg.inv(xyz_to_linear_srgb_matrix())  # the display pipeline and the black check take XYZ
 
-    if out.suffix.lower() == ".png":
-        from PIL import Image
+    # The image and its config land together or not at all.
+    with atomic_paths(out, config_path_for(out)) as (image_temporary, config_temporary):
+        if out.suffix.lower() == ".png":
+            from PIL import Image
 
-        xyz = linear @ np.linalg.inv(xyz_to_linear_srgb_matrix())  # gratnet.display's pipeline takes XYZ
-        with atomic_path(out) as temporary:
-            Image.fromarray(xyz_to_display_srgb8(xyz, 1.0)).save(temporary, format="PNG")
-    else:
-        _write_exr(out, linear.astype(np.float32))
-    save_config(out, mitsuba_render=config, model_file=str(model_path), variant=variant,
-                render_seconds=round(seconds, 3))
+            Image.fromarray(xyz_to_display_srgb8(xyz, 1.0)).save(image_temporary, format="PNG")
+        else:
+            _write_exr(image_temporary, linear.astype(np.float32), out)
+        config_temporary.write_text(config_text(out, mitsuba_render=config, model_file=str(model_path),
+                                                variant=variant, render_seconds=round(seconds, 3)), encoding="utf-8")
     print(f"wrote {out}: {Path(model_path).parent.name if model_path.name == 'model.npz' else model_path.name}, "
           f"mesh {config.mesh}, {config.width}×{config.height}, {config.spp} spp, {variant}, "
           f"exposure {config.exposure:g}, {seconds:.1f} s")
+    _warn_if_black(xyz, config.exposure)
     return 0

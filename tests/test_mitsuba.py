@@ -391,7 +391,7 @@ def test_mitsuba_render_refuses_a_bad_output_before_work(tmp_path: object, capsy
 
     blocker = tmp_path / "file"
     blocker.write_text("x")
-    for out, message in ((tmp_path / "x.jpg", ".png"), (blocker / "x.png", "not a directory"),
+    for out, message in ((tmp_path / "x.jpg", ".png"), (blocker / "x.png", "is a file, not a folder"),
                          (tmp_path, ".png")):
         assert main(["mitsuba-render", "--quiet", "--out", str(out)]) == 2
         assert message in capsys.readouterr().err
@@ -439,7 +439,7 @@ def test_mitsuba_render_command_takes_an_obj_a_point_light_and_an_exr_environmen
     out = tmp_path / "quad.exr"
     status = main(["mitsuba-render", "--material", "blazed", "--mesh", str(obj), "--point-light", "0,-0.1,0.2",
                    "--environment", str(tmp_path / "sky.exr"), "--environment-scale", "0.01", "--camera",
-                   "0.3,-90,60", "--size", "16,12", "--spp", "2", "--quiet", "--out", str(out)])
+                   "0.3,-90,60", "--exposure", "1", "--size", "16,12", "--spp", "2", "--quiet", "--out", str(out)])
     assert status == 0, capsys.readouterr().err
     import OpenEXR
 
@@ -460,3 +460,45 @@ def test_without_mitsuba_the_command_says_how_to_install_it(tmp_path: object, ca
     assert main(["mitsuba-render", "--quiet", "--out", str(tmp_path / "x.png")]) == 2
     error = capsys.readouterr().err.strip()
     assert len(error.splitlines()) == 1 and "[mitsuba]" in error, error
+
+
+SCENE_FIELDS = ("light_theta_degrees", "light_phi_degrees", "point_light", "camera_distance", "camera_azimuth_degrees",
+                "camera_elevation_degrees", "exposure")
+
+
+@pytest.mark.parametrize("flags", [[], ["--point-light", "0,-0.1,0.2"], ["--light", "30,0", "--camera", "0.3,-80,60",
+                                                                         "--exposure", "700"]],
+                         ids=["all defaults", "point light", "all given"])
+def test_mitsuba_render_and_render_resolve_the_same_light_camera_and_exposure(
+        tmp_path: object, capsys: pytest.CaptureFixture, flags: list[str]) -> None:
+    # Both commands end to end, on one material and mesh: the scene their configs record must be the same,
+    # and be the defaults of viewer.defaults (or the flags, where given).
+    import json
+
+    from gratnet.cli import main
+    from viewer.defaults import resolve_defaults
+
+    material, mesh = "cd", "sphere"
+    scenes = {}
+    for command, extra in (("render", ["--weights-path", "texture"]), ("mitsuba-render", ["--spp", "1"])):
+        out = tmp_path / f"{command}.png"
+        status = main([command, "--material", material, "--mesh", mesh, "--size", "8,8", "--quiet", *extra, *flags,
+                       "--out", str(out)])
+        assert status == 0, capsys.readouterr().err
+        recorded = json.loads((tmp_path / f"{command}.config.json").read_text())[command.replace("-", "_")]
+        scenes[command] = {name: recorded[name] for name in SCENE_FIELDS}
+    assert scenes["mitsuba-render"] == scenes["render"]
+    scene = scenes["render"]
+    if not flags:
+        defaults = resolve_defaults(material, mesh)
+        assert (scene["light_theta_degrees"], scene["light_phi_degrees"], scene["camera_distance"],
+                scene["camera_elevation_degrees"], scene["exposure"]) == (
+            defaults.light_theta_degrees, defaults.light_phi_degrees, defaults.camera_distance,
+            defaults.camera_elevation_degrees, defaults.exposure)
+    elif flags[0] == "--point-light":
+        assert scene["point_light"] == [0.0, -0.1, 0.2]
+        assert scene["exposure"] == pytest.approx(resolve_defaults(material, mesh).exposure * 0.05)  # × |p|² (m²)
+    else:
+        assert (scene["light_theta_degrees"], scene["light_phi_degrees"], scene["camera_distance"],
+                scene["camera_azimuth_degrees"], scene["camera_elevation_degrees"], scene["exposure"]) == (
+            30.0, 0.0, 0.3, -80.0, 60.0, 700.0)
