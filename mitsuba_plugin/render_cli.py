@@ -150,6 +150,7 @@ def _resolve_config(arguments: argparse.Namespace) -> MitsubaRenderConfig:
     """The config from the flags, every value checked as ``gratnet render`` checks it (nothing rendered,
     Mitsuba not loaded yet)."""
     from gratnet.brdf import check_exposure, check_ior
+    from viewer.camera import Camera
     from viewer.render_cli import _numbers, check_scene_numbers, parse_size
 
     theta, phi = _numbers(arguments.light_text, 2, "--light", "θ,φ in degrees such as 45,90")
@@ -168,6 +169,7 @@ def _resolve_config(arguments: argparse.Namespace) -> MitsubaRenderConfig:
     check_exposure(config.exposure)
     check_ior(config.ior)  # 0: no Fresnel; 1 is its limit (physics.md, "The A-term")
     check_scene_numbers((theta, phi), point, (distance, azimuth, elevation))
+    Camera(distance, azimuth, elevation, fov_deg=config.fov_degrees)  # checks the elevation and the field of view
     for name, value in (("--light-intensity", config.light_intensity),
                         ("--environment-scale", config.environment_scale)):
         if not (math.isfinite(value) and 0.0 <= value < 3e38):

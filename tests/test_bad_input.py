@@ -9,6 +9,7 @@ no usage dump), and nothing (not even a temporary file) at the destination.
 
 from __future__ import annotations
 
+import importlib.util
 import json
 import os
 import subprocess
@@ -322,6 +323,15 @@ def test_unwritable_output_is_one_line_and_leaves_nothing(tmp_path, capsys, volu
 # Issue 11: outputs are checked before any work, in every subcommand that writes
 
 RENDER = ["render", "--size", "8,8", "--weights-path", "texture", "--quiet"]
+MITSUBA = ["mitsuba-render", "--size", "8,8", "--spp", "1", "--quiet"]
+needs_mitsuba = pytest.mark.skipif(importlib.util.find_spec("mitsuba") is None,
+                                   reason="the mitsuba extra is not installed (pip install -e '.[mitsuba]')")
+
+
+def with_mitsuba_marked(cases: list[str]) -> list[object]:
+    """Parameters for ``cases``: those of ``gratnet mitsuba-render`` skipped where Mitsuba is not installed."""
+    return [pytest.param(case, marks=needs_mitsuba) if case.startswith("mitsuba-render") else case for case in cases]
+
 
 # (argv with {out}, the heavy step that must not start, is the output a folder)
 WRITERS: dict[str, tuple[list[str], str, bool]] = {
@@ -345,6 +355,8 @@ WRITERS: dict[str, tuple[list[str], str, bool]] = {
     "bench": (["bench", "--quiet", "--out", "{out}"], "viewer.render_cli.resolve_material", True),
     "view screenshots": (["view", "--screenshot-dir", "{out}", "--max-frames", "1"],
                          "viewer.render_cli.resolve_material", True),
+    "mitsuba-render": ([*MITSUBA, "--out", "{out}.png"], "gratnet.modelfile.load_model", False),
+    "mitsuba-render exr": ([*MITSUBA, "--out", "{out}.exr"], "gratnet.modelfile.load_model", False),
 }
 
 WHERE_NEEDLES = {"parent is a file": "a-file is a file, not a folder", "in /proc": "not writable",
@@ -352,7 +364,7 @@ WHERE_NEEDLES = {"parent is a file": "a-file is a file, not a folder", "in /proc
 
 
 @pytest.mark.parametrize("where", list(WHERE_NEEDLES))
-@pytest.mark.parametrize("writer", list(WRITERS))
+@pytest.mark.parametrize("writer", with_mitsuba_marked(list(WRITERS)))
 def test_unwritable_output_is_refused_before_any_work(tmp_path, capsys, monkeypatch, model_path, writer, where):
     argv_template, heavy_step, is_folder = WRITERS[writer]
 
@@ -376,11 +388,12 @@ def test_unwritable_output_is_refused_before_any_work(tmp_path, capsys, monkeypa
     assert_nothing_written(tmp_path, {"a-file", "a-folder"})
 
 
-def test_a_config_that_cannot_be_written_is_found_before_rendering(tmp_path, capsys, monkeypatch):
+@pytest.mark.parametrize("command", with_mitsuba_marked(["render", "mitsuba-render"]))
+def test_a_config_that_cannot_be_written_is_found_before_rendering(tmp_path, capsys, monkeypatch, command):
     monkeypatch.setattr("gratnet.modelfile.load_model", lambda *a, **k: pytest.fail("rendering started"))
     (tmp_path / "x.config.json").mkdir()
-    code, stderr = run_cli([*RENDER, "--out", str(tmp_path / "x.png")], capsys)
-    assert_one_clear_error(code, stderr, "render", "x.config.json", "folder")
+    code, stderr = run_cli([*(RENDER if command == "render" else MITSUBA), "--out", str(tmp_path / "x.png")], capsys)
+    assert_one_clear_error(code, stderr, command, "x.config.json", "folder")
     assert_nothing_written(tmp_path, {"x.config.json"})
 
 
@@ -388,7 +401,7 @@ def test_a_config_that_cannot_be_written_is_found_before_rendering(tmp_path, cap
 def test_an_empty_output_name_is_refused(tmp_path, capsys, monkeypatch, name):
     monkeypatch.chdir(tmp_path)
     for argv, command in (([*RENDER, "--out", name], "render"), (["train", "v.exr", "--out", name], "train"),
-                          (["bench", "--out", name], "bench")):
+                          (["bench", "--out", name], "bench"), ([*MITSUBA, "--out", name], "mitsuba-render")):
         code, stderr = run_cli(argv, capsys)
         assert_one_clear_error(code, stderr, command)
     assert_nothing_written(tmp_path, set())
@@ -437,7 +450,8 @@ def test_atomic_paths_leaves_nothing_when_the_writer_fails(tmp_path):
     assert list(tmp_path.iterdir()) == []
 
 
-def test_render_leaves_no_image_when_its_config_cannot_be_written(tmp_path, capsys, monkeypatch):
+@pytest.mark.parametrize("command", with_mitsuba_marked(["render", "mitsuba-render"]))
+def test_render_leaves_no_image_when_its_config_cannot_be_written(tmp_path, capsys, monkeypatch, command):
     # The config's text fails after the image is encoded: neither lands (it used to leave the image behind).
     import gratnet.config
 
@@ -445,8 +459,9 @@ def test_render_leaves_no_image_when_its_config_cannot_be_written(tmp_path, caps
         raise OSError(5, "I/O error")
 
     monkeypatch.setattr(gratnet.config, "config_text", broken)
-    code, stderr = run_cli([*RENDER, "--slice", "--out", str(tmp_path / "x.png")], capsys)
-    assert_one_clear_error(code, stderr, "render", "x.png", "I/O error")
+    argv = [*RENDER, "--slice"] if command == "render" else [*MITSUBA, "--mesh", "plane"]
+    code, stderr = run_cli([*argv, "--out", str(tmp_path / "x.png")], capsys)
+    assert_one_clear_error(code, stderr, command, "x.png", "I/O error")
     assert_nothing_written(tmp_path, set())
 
 
@@ -527,10 +542,29 @@ NUMBERS: dict[str, tuple[list[str], str]] = {
     "evaluate ior 1e39": (["evaluate", "m.npz", "--ior", "1e39"], "float32"),
     "evaluate no volume slice": (["evaluate", "m.npz", "--volume", "v.exr", "--volume-slices", ","], "no slice"),
     "bench exposure 1e39": (["bench", "--exposure", "1e39"], "float32"),
+    # gratnet mitsuba-render: render's checks (the same functions), and its own flags'
+    "mitsuba-render exposure 1e39": ([*MITSUBA, "--exposure", "1e39"], "float32"),
+    "mitsuba-render exposure above the product limit": ([*MITSUBA, "--exposure", "1e11"], "--exposure"),
+    "mitsuba-render exposure negative": ([*MITSUBA, "--exposure", "-1"], "--exposure"),
+    "mitsuba-render ior 1e31": ([*MITSUBA, "--ior", "1e31"], "--ior"),
+    "mitsuba-render ior negative": ([*MITSUBA, "--ior", "-1.5"], "--ior"),
+    "mitsuba-render fov 180": ([*MITSUBA, "--fov", "180"], "field of view"),
+    "mitsuba-render light 1e30": ([*MITSUBA, "--light", "1e30,0"], "--light"),
+    "mitsuba-render light nan": ([*MITSUBA, "--light", "nan,0"], "not a number"),
+    "mitsuba-render camera distance 0": ([*MITSUBA, "--camera", "0,-90,45"], "--camera"),
+    "mitsuba-render camera elevation 91": ([*MITSUBA, "--camera", "0.2,-90,91"], "elevation"),
+    "mitsuba-render point light at the origin": ([*MITSUBA, "--point-light", "0,0,0"], "--point-light"),
+    "mitsuba-render point light 1e30": ([*MITSUBA, "--point-light", "0,0,1e30"], "--point-light"),
+    "mitsuba-render size 0": ([*MITSUBA, "--size", "0,8"], "--size"),
+    "mitsuba-render spp 0": ([*MITSUBA, "--spp", "0"], "--spp"),
+    "mitsuba-render light intensity nan": ([*MITSUBA, "--light-intensity", "nan"], "not a number"),
+    "mitsuba-render environment scale negative": ([*MITSUBA, "--environment-scale", "-1"], "--environment-scale"),
+    "mitsuba-render environment negative": ([*MITSUBA, "--environment", "-1"], "--environment"),
+    "mitsuba-render lobe 0": ([*MITSUBA, "--lobe-degrees", "0"], "--lobe-degrees"),
 }
 
 
-@pytest.mark.parametrize("case", list(NUMBERS))
+@pytest.mark.parametrize("case", with_mitsuba_marked(list(NUMBERS)))
 def test_bad_number_is_one_line_before_any_work(tmp_path, capsys, monkeypatch, case):
     argv, needle = NUMBERS[case]
     monkeypatch.chdir(tmp_path)
@@ -607,9 +641,10 @@ def test_argparse_errors_are_one_line_without_a_usage_dump(capsys):
 # --------------------------------------------------------------------------------------------------
 # Issue 11: --quiet everywhere (one meaning), and --help with typical values and no internal names
 
-SUBCOMMANDS = ["render", "view", "brdfslice", "groundtruth", "train", "evaluate", "bench",
+# mitsuba-render's parser needs no Mitsuba (it is imported when rendering starts): no skip here.
+SUBCOMMANDS = ["render", "view", "brdfslice", "groundtruth", "train", "evaluate", "bench", "mitsuba-render",
                "heightfield generate blazed", "heightfield convert", "heightfield preview", "heightfield"]
-LONG_RUNNING = ["render", "view", "brdfslice", "groundtruth", "train", "evaluate", "bench"]
+LONG_RUNNING = ["render", "view", "brdfslice", "groundtruth", "train", "evaluate", "bench", "mitsuba-render"]
 
 
 def _help(command: str, capsys: pytest.CaptureFixture[str]) -> str:
