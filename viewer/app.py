@@ -47,7 +47,7 @@ import numpy as np
 
 from gratnet.errors import GratNetError
 from viewer.camera import Camera, Light
-from viewer.render_cli import MESHES, RenderConfig, build_mesh, resolve_material, shipped_materials
+from viewer.render_cli import MESHES, RenderConfig, resolve_material, shipped_materials
 
 __all__ = [
     "SLIDERS",
@@ -145,24 +145,6 @@ SLIDERS: dict[str, Slider] = {
 # Resolution policy
 
 
-def _preview_disc() -> Any:
-    from viewer.meshes import compact_disc
-
-    return compact_disc(segments=64, rings=1)
-
-
-def _preview_sphere() -> Any:
-    from viewer.meshes import sphere
-
-    return sphere(segments=32, rings=16)
-
-
-#: Coarser tessellations of the built-in meshes for previews. llvmpipe shades whole pixel blocks per
-#: triangle, so at 1/4–1/8 resolution the 4096-triangle disc costs 2–3× a 128-triangle one; the outline
-#: and the interpolated tangents differ invisibly at preview resolution. Full-resolution pictures always
-#: use ``build_mesh`` (the meshes of ``gratnet render``).
-_PREVIEW_MESHES: dict[str, Callable[[], Any]] = {"cd": _preview_disc, "sphere": _preview_sphere}
-
 #: Cost of a pixel the mesh does not cover, relative to a covered one (the network runs only where covered).
 _UNCOVERED_COST = 0.05
 
@@ -255,7 +237,10 @@ class RenderStats:
     last_preview_s: float | None = None
     last_preview_size: tuple[int, int] = (0, 0)
     last_full_s: float | None = None  # the sum of a completed refinement's renders
-    last_frame_s: float = 0.0  # the window's last frame, all included (set by ViewerWindow)
+    #: The window's last frame from the end of its wait for input to the buffer swap: the work of the
+    #: frame (events, panel, any render, drawing), not the idle wait (set by ViewerWindow).
+    last_frame_s: float = 0.0
+    weights_path: str = ""  # the weights path of the last render
 
 
 @dataclasses.dataclass(frozen=True)
@@ -303,6 +288,10 @@ class ViewerApp:
         extra_meshes: mesh specs offered besides cd, sphere and plane (e.g. an .obj path).
         weights_path: ``auto``, ``texture`` or ``baked``, for every material's
             :class:`~viewer.scene.SceneRenderer` (:func:`viewer.renderer.choose_weights_path`).
+        background: compile shaders and load meshes without blocking (:class:`~viewer.scene_supply.SceneSupply`;
+            the window's mode): until the material's first program is ready :meth:`frame` renders nothing and
+            :attr:`status` says why; with ``auto`` on a CPU rasterizer the texture path shows the first
+            picture and the baked path takes over once compiled. False: load and compile on first use.
 
     Raises:
         GratNetError: the initial material or mesh cannot be loaded.
@@ -310,8 +299,9 @@ class ViewerApp:
 
     def __init__(self, ctx: Any, state: ViewerState | None = None, size: tuple[int, int] = (512, 512),
                  policy: ResolutionPolicy | None = None, clock: Callable[[], float] = time.perf_counter,
-                 extra_meshes: Iterable[str] = (), weights_path: str = "auto") -> None:
+                 extra_meshes: Iterable[str] = (), weights_path: str = "auto", background: bool = False) -> None:
         from viewer.scene import check_size
+        from viewer.scene_supply import SceneSupply
 
         self.ctx = ctx
         self.state = dataclasses.replace(state) if state is not None else ViewerState()
@@ -323,9 +313,8 @@ class ViewerApp:
         self.message = ""  # the last problem (a material or mesh that failed to load), shown in the panel
         self.meshes = list(MESHES) + [spec for spec in extra_meshes if spec not in MESHES]
         self.weights_path = weights_path
-        self._renderer: Any = None
-        self._renderer_material: str | None = None
-        self._mesh_buffers: dict[str, Any] = {}
+        self._supply = SceneSupply(ctx, weights_path, background)
+        self._last_mesh = self.state.mesh  # the last mesh that loaded (restored if a newer one fails)
         # Per material and mesh: measured seconds per "effective pixel" (covered + 5 % of uncovered).
         self._seconds_per_pixel: dict[tuple[Any, ...], float] = {}
         self._coverage = np.ones(1)  # fraction of each row covered, from the last preview (top row first)
@@ -336,7 +325,11 @@ class ViewerApp:
         self._released = False
         #: Whether the state changed less than ``policy.idle_seconds`` before the last :meth:`frame`.
         self.moving = False
-        self._warm_up()  # fails early on a bad material or mesh
+        try:
+            self._warm_up()  # fails early on a bad material or mesh
+        except BaseException:
+            self._supply.release()
+            raise
         if self.state.mesh not in self.meshes:
             self.meshes.append(self.state.mesh)
 
@@ -370,7 +363,7 @@ class ViewerApp:
             new.camera()
             new.light()
             _ior_uniform(new.effective_ior)
-            self._ensure_scene(new)
+            self._supply.check(new)  # cheap checks (and, when not in the background, the loading itself)
         except GratNetError as error:
             self.message = str(error)
             return False
@@ -420,7 +413,9 @@ class ViewerApp:
         window then sleeps until input arrives)."""
         image, key = self.image, self.render_key()
         if image is not None and image.key == key and image.complete:
-            return None
+            return self.POLL_SECONDS if self._supply.pending(self.state) else None
+        if self._supply.scene_ready(self.state) is False:
+            return self.POLL_SECONDS  # waiting for a shader or a mesh: look again soon
         if image is None or image.key != key or key != self._seen_key:
             return 0.0
         now = self.clock() if now is None else float(now)
@@ -434,6 +429,8 @@ class ViewerApp:
         - picture complete and current → nothing.
         """
         now = self.clock() if now is None else float(now)
+        self._supply.poll(self.state)  # background mode: at most one short GL step (a cached link or draw)
+        self._check_background_errors()
         key = self.render_key()
         if key != self._seen_key:
             self._seen_key = key
@@ -442,6 +439,8 @@ class ViewerApp:
         image = self.image
         if image is not None and image.key == key and image.complete:
             return False
+        if self._supply.scene_ready(self.state) is False:
+            return False  # the picture on show stays until the new one can be rendered
         if image is None or image.key != key:
             self._refinement = None
             self._preview(key)
@@ -451,14 +450,41 @@ class ViewerApp:
         self._refine(key)
         return True
 
+    #: How often the window looks at background work in progress (seconds).
+    POLL_SECONDS = 0.1
+
+    @property
+    def status(self) -> str:
+        """What is being compiled or loaded for the state on show ("compiling the shader for cd… 12 s"),
+        or an empty string."""
+        return self._supply.status(self.state)
+
+    def weights_path_in_use(self) -> str | None:
+        """The weights path that renders the current state (``None``: none ready yet)."""
+        return self._supply.weights_path_in_use(self.state)
+
+    def _check_background_errors(self) -> None:
+        failed = self._supply.mesh_error(self.state.mesh)
+        if failed is not None:
+            self.message = failed
+            self.state = dataclasses.replace(self.state, mesh=self._last_mesh)
+        elif not self.state.slice_mode and self._supply.weights_path_in_use(self.state) is not None:
+            self._last_mesh = self.state.mesh
+        worker = self._supply.errors.pop("worker", None)
+        if worker is not None:
+            self.message = worker
+
     def _scene_key(self, state: ViewerState) -> tuple[Any, ...]:
-        return (state.material, "slice" if state.slice_mode else state.mesh)
+        return (state.material, "slice" if state.slice_mode else state.mesh, self._supply.weights_path_in_use(state))
 
     def _timed_render(self, state: ViewerState, size: tuple[int, int], camera: Camera | None = None,
                       preview: bool = False) -> tuple[np.ndarray, np.ndarray]:
         """``(exposed XYZ, coverage)`` of ``state`` at ``size`` (a mesh, or the BRDF slice: coverage 1),
         timed and counted; the time per effective pixel feeds the resolution policy."""
-        renderer, buffers = self._ensure_scene(state, preview)
+        supplied = self._supply.scene(state, preview)
+        if supplied is None:
+            raise GratNetError(f"the shader for {state.material} is still compiling; try again in a moment")
+        renderer, buffers = supplied
         started = time.perf_counter()
         if state.slice_mode:
             xyz = renderer.render_brdf_slice(state.light_theta, state.light_phi, size[0], state.exposure,
@@ -474,6 +500,7 @@ class ViewerApp:
         previous = self._seconds_per_pixel.get(scene)
         self._seconds_per_pixel[scene] = sample if previous is None else 0.5 * (previous + sample)
         self.stats.renders += 1
+        self.stats.weights_path = renderer.network.weights_path
         self.stats.last_render_s = seconds
         self.stats.last_render_size = size
         return xyz, coverage
@@ -591,53 +618,17 @@ class ViewerApp:
         raise GratNetError(f"no free screenshot name in {folder}")
 
     def _warm_up(self) -> None:
-        """Load the scene, and pay the one-off costs before the first timed frame: the driver's shader
-        JIT (a 1×1 render, uncounted) and the import of the display conversion (colour-science, ~1 s)."""
-        from viewer.scene import SceneRenderer
-
-        renderer, buffers = self._ensure_scene(self.state)
-        state = self.state
-        if state.slice_mode:
-            xyz = renderer.render_brdf_slice(state.light_theta, state.light_phi, 1, state.exposure, state.effective_ior)
-        else:
-            xyz = renderer.render(buffers, state.camera(), state.light(), (1, 1), state.exposure, state.effective_ior)
-        SceneRenderer.display_srgb8(xyz)
-
-    # -- GL resources ------------------------------------------------------------------------------
-
-    def _ensure_scene(self, state: ViewerState, preview: bool = False) -> tuple[Any, Any]:
-        """The SceneRenderer of ``state.material`` and the uploaded ``state.mesh`` (loaded on first use;
-        with ``preview``, its coarser preview tessellation where it has one)."""
-        from gratnet.modelfile import load_model
-        from viewer.scene import SceneRenderer
-
-        if self._renderer is None or self._renderer_material != state.material:
-            model = load_model(resolve_material(state.material))
-            renderer = SceneRenderer(self.ctx, model, weights_path=self.weights_path)
-            renderer.program  # noqa: B018 - compile now, not inside the first timed render
-            self._release_scene()
-            self._renderer, self._renderer_material = renderer, state.material
-        if state.slice_mode:
-            return self._renderer, None
-        coarse = preview and state.mesh in _PREVIEW_MESHES
-        key = f"{state.mesh} (preview)" if coarse else state.mesh
-        if key not in self._mesh_buffers:
-            mesh = _PREVIEW_MESHES[state.mesh]() if coarse else build_mesh(state.mesh)
-            self._mesh_buffers[key] = self._renderer.upload(mesh)
-        return self._renderer, self._mesh_buffers[key]
-
-    def _release_scene(self) -> None:
-        for buffers in self._mesh_buffers.values():
-            buffers.release()
-        self._mesh_buffers.clear()
-        if self._renderer is not None:
-            self._renderer.release()
-        self._renderer = self._renderer_material = None
+        """Check the state's material and mesh (GratNetError if unusable). When not in the background, also
+        pay the one-off costs before the first timed frame: loading, the driver's shader JIT (a 1×1 render,
+        uncounted) and the import of the display conversion (colour-science, ~1 s); in the background the
+        child process starts compiling now (:meth:`frame` polls it)."""
+        self._supply.check(self.state)
+        self._supply.poll(self.state)
 
     def release(self) -> None:
-        """Free the GL objects (the context belongs to the caller)."""
+        """Free the GL objects and stop background work (the context belongs to the caller)."""
         if not self._released:
-            self._release_scene()
+            self._supply.release()
             self._released = True
 
 
@@ -694,7 +685,8 @@ class ViewerWindow:
         screenshot_dir: where the Screenshot button writes ``gratnet-view-NNN.png``.
         idle_wait_s: how long a frame with nothing to render waits for input (``wait_events_timeout``);
             0 polls (tests).
-        extra_meshes, weights_path: as :class:`ViewerApp`.
+        extra_meshes, weights_path, background: as :class:`ViewerApp` (here ``background`` is on by
+            default: the window opens, shows its panel and handles input at once, whatever compiles).
         visible: show the window (tests under Xvfb may hide it; rendering is the same).
 
     Raises:
@@ -706,7 +698,7 @@ class ViewerWindow:
     def __init__(self, state: ViewerState | None = None, size: tuple[int, int] = (512, 512),
                  policy: ResolutionPolicy | None = None, clock: Callable[[], float] = time.perf_counter,
                  screenshot_dir: str | Path = ".", idle_wait_s: float = 0.25, extra_meshes: Iterable[str] = (),
-                 weights_path: str = "auto",
+                 weights_path: str = "auto", background: bool = True,
                  visible: bool = True, title: str = "GratNet viewer") -> None:
         from viewer.context import context_from_current
         from viewer.scene import check_size
@@ -725,7 +717,8 @@ class ViewerWindow:
         self._imgui_ready = False
         self._app: ViewerApp | None = None
         self._closed = False
-        self._last_frame_start: float | None = None
+        #: ``time.perf_counter()`` after the swap of the first frame that showed a picture.
+        self.first_picture_at: float | None = None
 
         # A headless renderer's EGL context may be current on this thread: unbind it for the window's
         # lifetime (restored by close()), or making the window's GLX context current kills the process.
@@ -764,7 +757,8 @@ class ViewerWindow:
             imgui.backends.opengl3_init("#version 410 core")
             self._imgui_ready = True
             self._gl = _GLFunctions(glfw)
-            self._app = ViewerApp(self.ctx, state, self._area_pixels(), policy, clock, extra_meshes, weights_path)
+            self._app = ViewerApp(self.ctx, state, self._area_pixels(), policy, clock, extra_meshes, weights_path,
+                                  background)
         except BaseException:
             self.close()
             raise
@@ -810,13 +804,14 @@ class ViewerWindow:
         return self._closed or bool(self._glfw.window_should_close(self._window))
 
     def frame(self, capture: bool = False) -> bool:
-        """Handle input, render what the state needs (:meth:`ViewerApp.frame`), draw the panel and the
-        picture, swap. With ``capture`` the window's pixels are read (glReadPixels) into
+        """Wait for input (or for due work), handle it (the panel's widgets and the mouse change the
+        state), render what the state then needs (:meth:`ViewerApp.frame`: one preview or one band at
+        most, never a compile), draw the panel and the picture, swap: an input is on screen in the frame
+        that handled it. With ``capture`` the window's pixels are read (glReadPixels) into
         :attr:`last_capture` before the swap. Returns False once the window was asked to close."""
         glfw, imgui = self._glfw, self._imgui
         if self.should_close():
             return False
-        started = time.perf_counter()
         app = self.app
         wait = app.next_work_in()
         wait = self.idle_wait_s if wait is None else min(wait, self.idle_wait_s)
@@ -824,19 +819,21 @@ class ViewerWindow:
             glfw.wait_events_timeout(wait)  # sleep until input (or until the preview is due for refinement)
         else:
             glfw.poll_events()
+        started = time.perf_counter()  # the frame's work starts when the wait ends
         if 0 in self._framebuffer_size():  # minimized: nothing to draw into
             if self.idle_wait_s > 0:
                 glfw.wait_events_timeout(self.idle_wait_s)
             return not self.should_close()
         app.set_size(self._area_pixels())
-        app.frame()
-        self._upload()
 
         imgui.backends.opengl3_new_frame()
         imgui.backends.glfw_new_frame()
         imgui.new_frame()
-        self._picture()
+        self._picture_input()
         self._panel()
+        app.frame()
+        self._upload()
+        self._picture()
         imgui.render()
 
         self.ctx.screen.use()
@@ -850,6 +847,8 @@ class ViewerWindow:
         glfw.swap_buffers(self._window)
         self.frames += 1
         app.stats.last_frame_s = time.perf_counter() - started
+        if self.first_picture_at is None and app.image is not None:
+            self.first_picture_at = time.perf_counter()
         return True
 
     def run(self, max_frames: int = 0) -> int:
@@ -879,10 +878,9 @@ class ViewerWindow:
         self._texture.write(np.ascontiguousarray(image.pixels).tobytes(), alignment=1)
         self._texture_version = image.version
 
-    def _picture(self) -> None:
-        """The render area: the picture (stretched from a preview), mouse orbit and wheel zoom."""
+    def _picture_input(self) -> None:
+        """The render area's input: mouse drag (orbit) and wheel (zoom)."""
         imgui, app = self._imgui, self.app
-        scale = self._scale()
         display = imgui.get_io().display_size
         x0 = self.PANEL_WIDTH
         imgui.set_next_window_pos(imgui.ImVec2(x0, 0), imgui.Cond_.always)
@@ -903,13 +901,18 @@ class ViewerWindow:
             wheel = imgui.get_io().mouse_wheel
             if wheel:
                 app.zoom(wheel)
+        imgui.end()
+
+    def _picture(self) -> None:
+        """The picture (stretched from a preview), drawn under the widgets."""
+        imgui, app = self._imgui, self.app
         if self._texture is not None and app.image is not None:
+            scale = self._scale()
             ax, ay, aw, ah = self.render_area()
             p0 = imgui.ImVec2(ax / scale, ay / scale)
             p1 = imgui.ImVec2((ax + aw) / scale, (ay + ah) / scale)
             # The background list: not clipped to the window's inner rectangle (its border would be).
             imgui.get_background_draw_list().add_image(imgui.ImTextureRef(self._texture.glo), p0, p1)
-        imgui.end()
 
     def _panel(self) -> None:
         imgui, app = self._imgui, self.app
@@ -920,6 +923,10 @@ class ViewerWindow:
         imgui.begin("GratNet", None, imgui.WindowFlags_.no_move | imgui.WindowFlags_.no_resize
                     | imgui.WindowFlags_.no_collapse | imgui.WindowFlags_.no_saved_settings)
         imgui.push_item_width(150)
+        status = app.status
+        if status:  # what is compiling or loading, at the top: the reason the picture is old or absent
+            imgui.text_colored(imgui.ImVec4(1.0, 0.8, 0.3, 1.0), status)
+            imgui.separator()
 
         materials = app.materials()
         if state.material not in materials:
@@ -954,7 +961,10 @@ class ViewerWindow:
 
         imgui.separator_text("performance")
         stats, image = app.stats, app.image
-        imgui.text(f"frame {stats.last_frame_s * 1000:.1f} ms")
+        imgui.text(f"frame {stats.last_frame_s * 1000:.1f} ms (work, not idle)")
+        in_use = app.weights_path_in_use()
+        if in_use:
+            imgui.text(f"weights: {in_use} path")
         width, height = stats.last_render_size
         imgui.text(f"render {stats.last_render_s * 1000:.0f} ms at {width}×{height}")
         if stats.last_preview_s is not None:

@@ -170,13 +170,17 @@ class NetworkRenderer:
             ``u_weights``/``u_layers``/activation uniforms) or ``auto`` (:func:`choose_weights_path`: baked
             for nets up to :data:`BAKED_MAX_MACS` multiply-adds on a software rasterizer, else texture).
             Both paths compute the same sums in float32; tests/test_baked.py ties them.
+        baked_source: the baked ``mlp.glsl`` text of ``model`` made earlier (:attr:`baked_source` of another
+            renderer of the same model, e.g. in another process): spares generating it again (~0.3 s for a
+            shipped model) and keeps the program text, hence Mesa's shader-cache key, identical.
 
     Attributes:
         weights_path: the path chosen, ``texture`` or ``baked``.
+        baked_source: the generated ``mlp.glsl`` on the baked path, else ``None``.
     """
 
     def __init__(self, ctx: moderngl.Context, model: ModelFile, shader_root: str | Path | None = None,
-                 weights_path: str = "auto") -> None:
+                 weights_path: str = "auto", baked_source: str | None = None) -> None:
         texture, layout = pack_texture(model)  # validates the model
         self.ctx = ctx
         self.model = model
@@ -185,10 +189,11 @@ class NetworkRenderer:
         self.shader_root = shader_root
         self.weights_path = choose_weights_path(ctx, model, weights_path)
         self._overrides: dict[str, GeneratedSource] = {}
+        self.baked_source: str | None = None
         if self.weights_path == "baked":
             label = f"{'-'.join(map(str, model.layer_sizes))} {model.activation}"
-            self._overrides["mlp.glsl"] = GeneratedSource(f"<baked mlp.glsl: {label}>",
-                                                          baked_mlp_source(model, label))
+            self.baked_source = baked_source if baked_source is not None else baked_mlp_source(model, label)
+            self._overrides["mlp.glsl"] = GeneratedSource(f"<baked mlp.glsl: {label}>", self.baked_source)
             texture = np.zeros((1, 1, 4), dtype=np.float32)  # a placeholder: the baked programs read no texture
         height, width = texture.shape[:2]
         self._weights = ctx.texture((width, height), 4, np.ascontiguousarray(texture).tobytes(), dtype="f4")

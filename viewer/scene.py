@@ -106,12 +106,13 @@ class SceneRenderer:
         shader_root: folder of the GLSL files (default: the repository's ``shaders/``).
         weights_path: ``auto``, ``texture`` or ``baked``: where the shader reads the weights
             (:class:`~viewer.renderer.NetworkRenderer`; the choice is ``self.network.weights_path``).
+        baked_source: as :class:`~viewer.renderer.NetworkRenderer` (a baked ``mlp.glsl`` made earlier).
     """
 
     def __init__(self, ctx: moderngl.Context, model: ModelFile, shader_root: str | Path | None = None,
-                 weights_path: str = "auto") -> None:
+                 weights_path: str = "auto", baked_source: str | None = None) -> None:
         self.ctx = ctx
-        self.network = NetworkRenderer(ctx, model, shader_root, weights_path)
+        self.network = NetworkRenderer(ctx, model, shader_root, weights_path, baked_source)
         self.model = model
 
     @property
