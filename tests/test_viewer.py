@@ -301,7 +301,10 @@ def window(display, tmp_path) -> Iterator[object]:
     from viewer.app import ViewerWindow
 
     clock = FakeClock()
-    with ViewerWindow(PLANE, size=(160, 120), clock=clock, idle_wait_s=0.0, screenshot_dir=tmp_path) as viewer:
+    # Compiling in the window's thread (background=False): these tests count frames and renders; the
+    # background mode, the window's default, is tested with real time in test_window_never_blocks.
+    with ViewerWindow(PLANE, size=(160, 120), clock=clock, idle_wait_s=0.0, screenshot_dir=tmp_path,
+                      background=False) as viewer:
         viewer.clock_control = clock  # type: ignore[attr-defined]
         yield viewer
 

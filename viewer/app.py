@@ -34,8 +34,10 @@ Every pixel comes from :class:`SceneRenderer` (``render`` / ``render_brdf_slice`
 
 from __future__ import annotations
 
+import contextlib
 import ctypes
 import dataclasses
+import gc
 import importlib
 import math
 import time
@@ -292,6 +294,7 @@ class ViewerApp:
             the window's mode): until the material's first program is ready :meth:`frame` renders nothing and
             :attr:`status` says why; with ``auto`` on a CPU rasterizer the texture path shows the first
             picture and the baked path takes over once compiled. False: load and compile on first use.
+        worker: a compile child started earlier for ``state`` (:meth:`SceneSupply.start_worker`), adopted.
 
     Raises:
         GratNetError: the initial material or mesh cannot be loaded.
@@ -299,7 +302,8 @@ class ViewerApp:
 
     def __init__(self, ctx: Any, state: ViewerState | None = None, size: tuple[int, int] = (512, 512),
                  policy: ResolutionPolicy | None = None, clock: Callable[[], float] = time.perf_counter,
-                 extra_meshes: Iterable[str] = (), weights_path: str = "auto", background: bool = False) -> None:
+                 extra_meshes: Iterable[str] = (), weights_path: str = "auto", background: bool = False,
+                 worker: Any = None) -> None:
         from viewer.scene import check_size
         from viewer.scene_supply import SceneSupply
 
@@ -313,7 +317,7 @@ class ViewerApp:
         self.message = ""  # the last problem (a material or mesh that failed to load), shown in the panel
         self.meshes = list(MESHES) + [spec for spec in extra_meshes if spec not in MESHES]
         self.weights_path = weights_path
-        self._supply = SceneSupply(ctx, weights_path, background)
+        self._supply = SceneSupply(ctx, weights_path, background, worker)
         self._last_mesh = self.state.mesh  # the last mesh that loaded (restored if a newer one fails)
         # Per material and mesh: measured seconds per "effective pixel" (covered + 5 % of uncovered).
         self._seconds_per_pixel: dict[tuple[Any, ...], float] = {}
@@ -413,8 +417,12 @@ class ViewerApp:
         window then sleeps until input arrives)."""
         image, key = self.image, self.render_key()
         if image is not None and image.key == key and image.complete:
+            if self._supply.step_due(self.state):
+                return 0.0
             return self.POLL_SECONDS if self._supply.pending(self.state) else None
-        if self._supply.scene_ready(self.state) is False:
+        if self._supply.step_due(self.state):
+            return 0.0  # a warm program to link or draw: the next frame does it
+        if not self._supply.scene_ready(self.state):
             return self.POLL_SECONDS  # waiting for a shader or a mesh: look again soon
         if image is None or image.key != key or key != self._seen_key:
             return 0.0
@@ -429,8 +437,10 @@ class ViewerApp:
         - picture complete and current → nothing.
         """
         now = self.clock() if now is None else float(now)
-        self._supply.poll(self.state)  # background mode: at most one short GL step (a cached link or draw)
+        step = self._supply.poll(self.state)  # background mode: at most one short GL step (cached link or draw)
         self._check_background_errors()
+        if step == "linked":
+            return False  # a link may take 0.14 s (baked): no render in the same frame
         key = self.render_key()
         if key != self._seen_key:
             self._seen_key = key
@@ -439,7 +449,7 @@ class ViewerApp:
         image = self.image
         if image is not None and image.key == key and image.complete:
             return False
-        if self._supply.scene_ready(self.state) is False:
+        if not self._supply.scene_ready(self.state):
             return False  # the picture on show stays until the new one can be rendered
         if image is None or image.key != key:
             self._refinement = None
@@ -458,6 +468,11 @@ class ViewerApp:
         """What is being compiled or loaded for the state on show ("compiling the shader for cd… 12 s"),
         or an empty string."""
         return self._supply.status(self.state)
+
+    def display_ready(self) -> bool:
+        """Whether the display conversion's library (colour-science) is imported (background mode imports
+        it on a thread)."""
+        return self._supply.display_ready()
 
     def weights_path_in_use(self) -> str | None:
         """The weights path that renders the current state (``None``: none ready yet)."""
@@ -478,9 +493,10 @@ class ViewerApp:
         return (state.material, "slice" if state.slice_mode else state.mesh, self._supply.weights_path_in_use(state))
 
     def _timed_render(self, state: ViewerState, size: tuple[int, int], camera: Camera | None = None,
-                      preview: bool = False) -> tuple[np.ndarray, np.ndarray]:
-        """``(exposed XYZ, coverage)`` of ``state`` at ``size`` (a mesh, or the BRDF slice: coverage 1),
-        timed and counted; the time per effective pixel feeds the resolution policy."""
+                      preview: bool = False, rows: tuple[int, int] | None = None) -> tuple[np.ndarray, np.ndarray]:
+        """``(exposed XYZ, coverage)`` of ``state`` at ``size`` (a mesh, or the BRDF slice: coverage 1; with
+        ``rows``, only those rows of the slice), timed and counted; the time per effective pixel feeds the
+        resolution policy."""
         supplied = self._supply.scene(state, preview)
         if supplied is None:
             raise GratNetError(f"the shader for {state.material} is still compiling; try again in a moment")
@@ -488,7 +504,9 @@ class ViewerApp:
         started = time.perf_counter()
         if state.slice_mode:
             xyz = renderer.render_brdf_slice(state.light_theta, state.light_phi, size[0], state.exposure,
-                                             state.effective_ior)
+                                             state.effective_ior, rows=rows)
+            if rows is not None:
+                xyz = xyz[rows[0]:rows[1]]
             coverage = np.ones(xyz.shape[:2], np.float32)
         else:
             rgba = renderer.render_rgba(buffers, camera or state.camera(), state.light(), size, state.exposure,
@@ -541,13 +559,24 @@ class ViewerApp:
             refinement = self._refinement = _Refinement(
                 key, preview if state.slice_mode else _upscale(preview, width, height), next_factor=max(1, factor // 2))
         started = time.perf_counter()
-        if state.slice_mode:  # no bands: double the resolution per frame
+        if state.slice_mode:  # double the resolution per level, each level in bands that fit the budget
             factor = refinement.next_factor
-            size = reduced_size((width, height), factor)
-            refinement.pixels = SceneRenderer.display_srgb8(self._timed_render(state, size)[0])
-            refinement.next_factor = max(1, factor // 2)
-            done, rendered, progress = factor == 1, size, 1.0 / factor**2
-            self.stats.last_kind = f"refine 1/{factor}"
+            side = reduced_size((width, height), factor)[0]
+            if refinement.pixels.shape[0] != side:  # a new level: over the last one, upscaled
+                refinement.pixels = _upscale(refinement.pixels, side, side)
+                refinement.next_row = 0
+            row0 = refinement.next_row
+            seconds_per_pixel = self._seconds_per_pixel.get(self._scene_key(state), 0.0)
+            row1 = min(side, row0 + self.policy.band_rows(np.full(side - row0, seconds_per_pixel * side)))
+            xyz = self._timed_render(state, (side, side), rows=(row0, row1))[0]
+            refinement.pixels[row0:row1] = SceneRenderer.display_srgb8(xyz)
+            refinement.next_row = row1
+            level_done = row1 == side
+            if level_done:
+                refinement.next_factor = max(1, factor // 2)
+            done, rendered = factor == 1 and level_done, (side, side)
+            progress = 1.0 if done else row1 / side / factor**2
+            self.stats.last_kind = f"refine 1/{factor} rows {row0}-{row1}"
         else:  # the next band of rows at full resolution, over the upscaled preview
             row0 = refinement.next_row
             rows = self.policy.band_rows(self._row_seconds(width, height)[row0:])
@@ -702,9 +731,16 @@ class ViewerWindow:
                  visible: bool = True, title: str = "GratNet viewer") -> None:
         from viewer.context import context_from_current
         from viewer.scene import check_size
+        from viewer.scene_supply import SceneSupply, start_display_import
 
-        glfw, imgui = self._glfw, self._imgui = _shell_modules()
         width, height = check_size(size)
+        # The compile child first: its Python start-up and the quick shader overlap the window's set-up.
+        worker = None
+        if background:
+            start_display_import()
+            with contextlib.suppress(GratNetError):  # a bad material is reported by ViewerApp below
+                worker = SceneSupply.start_worker(state or ViewerState(), weights_path)
+        glfw, imgui = self._glfw, self._imgui = _shell_modules()
         self.screenshot_dir = Path(screenshot_dir)
         self.idle_wait_s = float(idle_wait_s)
         self.frames = 0
@@ -713,10 +749,13 @@ class ViewerWindow:
         self.last_screenshot: Path | None = None
         self._texture: Any = None
         self._texture_version = -1
+        self._texture_uv = (1.0, 1.0)  # the picture's corner in the (padded) texture
         self._window: Any = None
         self._imgui_ready = False
         self._app: ViewerApp | None = None
         self._closed = False
+        self._first_frame = False
+        self._gc_paused = False
         #: ``time.perf_counter()`` after the swap of the first frame that showed a picture.
         self.first_picture_at: float | None = None
 
@@ -728,6 +767,8 @@ class ViewerWindow:
         try:
             if not glfw.init():
                 self._egl.restore()
+                if worker is not None:
+                    worker.close()
                 raise GratNetError(
                     f"no display for the viewer window ({_glfw_error(glfw)}); run it on a desktop session, or "
                     "under a virtual X server (xvfb-run gratnet view …), or write images with gratnet render"
@@ -736,15 +777,21 @@ class ViewerWindow:
             glfw.window_hint(glfw.CONTEXT_VERSION_MINOR, 3)
             glfw.window_hint(glfw.OPENGL_PROFILE, glfw.OPENGL_CORE_PROFILE)
             glfw.window_hint(glfw.OPENGL_FORWARD_COMPAT, True)
-            glfw.window_hint(glfw.VISIBLE, bool(visible))
+            glfw.window_hint(glfw.VISIBLE, False)  # shown after the first frame (see below)
             self._window = glfw.create_window(self.PANEL_WIDTH + width, height, title, None, None)
             if not self._window:
                 error = _glfw_error(glfw)
                 glfw.terminate()
                 self._egl.restore()
+                if worker is not None:
+                    worker.close()
                 raise GratNetError(f"cannot open an OpenGL 4.3 core window ({error}); the viewer needs OpenGL 4.3")
         finally:
             glfw.ERROR_REPORTING = reporting
+        # Python's cyclic GC paused 60–380 ms at a time over the objects that imgui and colour-science create
+        # at start (measured under Xvfb): off until they exist, then frozen out of later collections.
+        self._gc_paused = gc.isenabled()
+        gc.disable()
         try:
             glfw.make_context_current(self._window)
             glfw.swap_interval(1)
@@ -757,9 +804,21 @@ class ViewerWindow:
             imgui.backends.opengl3_init("#version 410 core")
             self._imgui_ready = True
             self._gl = _GLFunctions(glfw)
+            self._texture = self._picture_texture(1, 1)  # drawn by the first frame: see there
             self._app = ViewerApp(self.ctx, state, self._area_pixels(), policy, clock, extra_meshes, weights_path,
-                                  background)
+                                  background, worker)
+            worker = None  # the app owns it now
+            # The first frame compiles imgui's own shaders and, drawing the 1×1 picture texture, their variant
+            # for its format (0.3–0.5 s on llvmpipe with an empty shader cache): drawn while the window is
+            # unmapped, no input can wait for it; then the panel appears at once.
+            self._first_frame = True
+            self.frame()
+            self._first_frame = False
+            if visible:
+                glfw.show_window(self._window)
         except BaseException:
+            if worker is not None:
+                worker.close()
             self.close()
             raise
 
@@ -832,6 +891,10 @@ class ViewerWindow:
         self._picture_input()
         self._panel()
         app.frame()
+        if self._gc_paused and app.display_ready():
+            gc.freeze()
+            gc.enable()
+            self._gc_paused = False
         self._upload()
         self._picture()
         imgui.render()
@@ -867,15 +930,16 @@ class ViewerWindow:
         image = self.app.image
         if image is None or image.version == self._texture_version:
             return
-        import moderngl
-
         height, width = image.pixels.shape[:2]
-        if self._texture is None or self._texture.size != (width, height):
+        size = (_power_of_two(width), _power_of_two(height))
+        if self._texture is None or self._texture.size != size:
             if self._texture is not None:
                 self._texture.release()
-            self._texture = self.ctx.texture((width, height), 3, dtype="f1", alignment=1)
-            self._texture.filter = (moderngl.LINEAR, moderngl.LINEAR)
-        self._texture.write(np.ascontiguousarray(image.pixels).tobytes(), alignment=1)
+            self._texture = self._picture_texture(*size)
+        # Edge rows and columns repeated into the padding: linear filtering at the border reads the picture.
+        padded = np.pad(image.pixels, ((0, size[1] - height), (0, size[0] - width), (0, 0)), mode="edge")
+        self._texture.write(np.ascontiguousarray(padded).tobytes(), alignment=1)
+        self._texture_uv = (width / size[0], height / size[1])
         self._texture_version = image.version
 
     def _picture_input(self) -> None:
@@ -903,16 +967,27 @@ class ViewerWindow:
                 app.zoom(wheel)
         imgui.end()
 
+    def _picture_texture(self, width: int, height: int) -> Any:
+        """An RGB8 texture, linear filtering. Power-of-two sizes only: llvmpipe compiles a new variant of
+        imgui's shader for a non-power-of-two texture (~0.15 s, seen as a stalled frame at the first
+        picture); the first frame (hidden) compiles the one variant used."""
+        import moderngl
+
+        texture = self.ctx.texture((width, height), 3, dtype="f1", alignment=1)
+        texture.filter = (moderngl.LINEAR, moderngl.LINEAR)
+        return texture
+
     def _picture(self) -> None:
         """The picture (stretched from a preview), drawn under the widgets."""
         imgui, app = self._imgui, self.app
-        if self._texture is not None and app.image is not None:
+        if self._texture is not None and (app.image is not None or self._first_frame):
             scale = self._scale()
             ax, ay, aw, ah = self.render_area()
             p0 = imgui.ImVec2(ax / scale, ay / scale)
             p1 = imgui.ImVec2((ax + aw) / scale, (ay + ah) / scale)
             # The background list: not clipped to the window's inner rectangle (its border would be).
-            imgui.get_background_draw_list().add_image(imgui.ImTextureRef(self._texture.glo), p0, p1)
+            imgui.get_background_draw_list().add_image(imgui.ImTextureRef(self._texture.glo), p0, p1,
+                                                       imgui.ImVec2(0, 0), imgui.ImVec2(*self._texture_uv))
 
     def _panel(self) -> None:
         imgui, app = self._imgui, self.app
@@ -1013,6 +1088,9 @@ class ViewerWindow:
         if self._closed:
             return
         self._closed = True
+        if self._gc_paused:
+            gc.enable()
+            self._gc_paused = False
         glfw, imgui = self._glfw, self._imgui
         if self._app is not None:
             self._app.release()
@@ -1032,6 +1110,11 @@ class ViewerWindow:
 
     def __exit__(self, *exc_info: object) -> None:
         self.close()
+
+
+def _power_of_two(value: int) -> int:
+    """The smallest power of two ≥ ``value``."""
+    return 1 << max(0, int(value) - 1).bit_length()
 
 
 def _shell_modules() -> tuple[Any, Any]:

@@ -87,7 +87,9 @@ class CompileWorker:
 
     Args:
         model_path: the model file (``.npz``).
-        paths: weights paths to warm, in order (e.g. ``("texture", "baked")``: the quick one first).
+        paths: weights paths to warm, in order (e.g. ``("texture", "baked")``: the quick one first); ``auto``
+            is resolved by the child on its own context (:func:`viewer.renderer.choose_weights_path`), so the
+            child can start before the window has a context.
         groups: program groups to warm for each path, in order (the one on show first).
         label: how status lines name the model.
     """
@@ -103,11 +105,14 @@ class CompileWorker:
         self.ready: set[tuple[str, str]] = set()
         #: Seconds the child took per ``(path, group)``.
         self.seconds: dict[tuple[str, str], float] = {}
+        #: ``time.perf_counter()`` when the window read each report.
+        self.ready_at: dict[tuple[str, str], float] = {}
         #: The child's failure (its last stderr line), once it exited with an error.
         self.error: str | None = None
         self._folder = tempfile.TemporaryDirectory(prefix="gratnet-compile-")
         self._stderr = open(Path(self._folder.name) / "stderr.txt", "w+b")  # noqa: SIM115 - closed in close()
         self._buffer = b""
+        self._exited = False
         self._baked_source: str | None = None
         environment = dict(os.environ)
         environment["PYTHONPATH"] = os.pathsep.join(
@@ -126,8 +131,8 @@ class CompileWorker:
 
     @property
     def finished(self) -> bool:
-        """Everything asked for is warm, or the child failed."""
-        return self.error is not None or len(self.ready) == len(self.paths) * len(self.groups)
+        """The child is done (its reports read), or failed."""
+        return self.error is not None or self._exited
 
     def elapsed(self) -> float:
         """Seconds since the child was started."""
@@ -151,12 +156,20 @@ class CompileWorker:
                 pair = (words[1], words[2])
                 self.ready.add(pair)
                 self.seconds[pair] = float(words[3])
+                self.ready_at[pair] = time.perf_counter()
                 new.add(pair)
         code = process.poll()
-        if code is not None and not self._buffer and not self.finished:
-            self._stderr.seek(0)
-            lines_err = [text for text in self._stderr.read().decode(errors="replace").splitlines() if text.strip()]
-            self.error = lines_err[-1].strip() if lines_err else f"exited with status {code}"
+        if code is not None and not self.finished:
+            with contextlib.suppress(BlockingIOError):
+                rest = process.stdout.read()
+                if rest:  # reports written just before the exit: read at the next poll
+                    self._buffer += rest
+                    return new
+            self._exited = True
+            if code != 0:
+                self._stderr.seek(0)
+                errors = [text for text in self._stderr.read().decode(errors="replace").splitlines() if text.strip()]
+                self.error = errors[-1].strip() if errors else f"exited with status {code}"
         return new
 
     @property
@@ -191,11 +204,17 @@ def _warm(model_path: Path, paths: Sequence[str], groups: Sequence[str], folder:
     from gratnet.atomic import atomic_path
     from gratnet.modelfile import load_model
     from viewer.context import create_headless_context
+    from viewer.renderer import choose_weights_path
     from viewer.scene import SceneRenderer
 
     ctx = create_headless_context()
     model = load_model(model_path)
-    for path in paths:
+    done: set[str] = set()
+    for requested in paths:
+        path = choose_weights_path(ctx, model, requested)
+        if path in done:
+            continue
+        done.add(path)
         started = time.perf_counter()
         scene = SceneRenderer(ctx, model, weights_path=path)
         if scene.network.baked_source is not None:

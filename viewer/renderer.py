@@ -267,9 +267,11 @@ class NetworkRenderer:
             self._weights.use(location=location)
 
     def _draw(self, name: str, framebuffer: moderngl.Framebuffer,
-              textures: tuple[tuple[moderngl.Texture, int], ...] = ()) -> None:
-        """One full-screen triangle into ``framebuffer``, with blending/depth test off and the caller's
-        framebuffer and enable flags restored afterwards (a window may share this context)."""
+              textures: tuple[tuple[moderngl.Texture, int], ...] = (),
+              scissor: tuple[int, int, int, int] | None = None) -> None:
+        """One full-screen triangle into ``framebuffer`` (only inside ``scissor`` = x, y, width, height in GL
+        pixels when given), with blending/depth test off and the caller's framebuffer and enable flags
+        restored afterwards (a window may share this context)."""
         # Textures are bound by hand: moderngl 5.13's scope(textures=...) left the samplers reading 0.
         scope = self.ctx.scope(framebuffer, enable_only=moderngl.NOTHING)
         try:
@@ -278,7 +280,13 @@ class NetworkRenderer:
                 weights = ((self._weights, 0),) if self.weights_path == "texture" else ()
                 for texture, unit in (*weights, *textures):
                     texture.use(location=unit)
-                self._vertex_arrays[name].render(moderngl.TRIANGLES, vertices=3)
+                if scissor is not None:
+                    self.ctx.scissor = scissor
+                try:
+                    self._vertex_arrays[name].render(moderngl.TRIANGLES, vertices=3)
+                finally:
+                    if scissor is not None:
+                        self.ctx.scissor = None
         finally:
             scope.release()
 
@@ -322,7 +330,8 @@ class NetworkRenderer:
         texture = self._skip_bound_texture(threshold)
         _set(program, "u_skip_threshold", threshold)
         _set(program, "u_skip_bound", _SKIP_BOUND_UNIT)
-        matrix = display_skip_matrix()
+        # Read only when skipping (skip.glsl returns first otherwise): no colour-science import (~1 s) then.
+        matrix = display_skip_matrix() if threshold > 0.0 else np.zeros((3, 3))
         _set(program, "u_skip_matrix", np.ascontiguousarray(matrix.T, dtype=np.float32))  # GLSL: column-major
         return texture, _SKIP_BOUND_UNIT
 
@@ -368,6 +377,7 @@ class NetworkRenderer:
     def render_brdf_slice_layers(
         self, theta_deg: float, phi_deg: float, size: int, exposure: float = 1.0, ior: float | None = 1.5,
         skip_threshold: float | None = None, statistics: dict[str, int] | None = None,
+        rows: tuple[int, int] | None = None,
     ) -> tuple[np.ndarray, np.ndarray]:
         """A BRDF slice (docs/physics.md "BRDF slice") and the network's XYZ behind it.
 
@@ -378,6 +388,8 @@ class NetworkRenderer:
                 the exact linear image (EXR, comparisons).
             statistics: a dict to fill with the work counters (:data:`STATISTICS_KEYS`); renders with a
                 counting variant of the program (slower: time renders without it).
+            rows: ``(first, end)``: compute only these rows (from the top; a scissor box, so the time is the
+                band's); the other rows are not written. The viewer refines a slice in such bands between frames.
 
         Returns:
             ``(exposed, network)``, both ``float32`` ``(size, size, 3)`` with row 0 at the top (as
@@ -387,6 +399,8 @@ class NetworkRenderer:
         """
         if isinstance(size, bool) or not isinstance(size, (int, np.integer)) or not 1 <= size <= 16384:
             raise GratNetError(f"slice size must be an integer in 1 … 16384, got {size!r}")
+        if rows is not None and not (0 <= rows[0] < rows[1] <= size):
+            raise GratNetError(f"slice rows must satisfy 0 ≤ first < end ≤ {size}, got {rows!r}")
         if not all(math.isfinite(value) for value in (theta_deg, phi_deg, exposure)):
             raise GratNetError(
                 f"light angles and exposure must be finite, got {theta_deg!r}, {phi_deg!r}, {exposure!r}"
@@ -404,7 +418,8 @@ class NetworkRenderer:
         targets = [self.ctx.texture((size, size), 4, dtype="f4") for _ in range(2)]
         framebuffer = self.ctx.framebuffer(color_attachments=targets)
         try:
-            self._draw(name, framebuffer, ((bound, unit),))
+            scissor = None if rows is None else (0, size - rows[1], size, rows[1] - rows[0])  # GL rows: bottom up
+            self._draw(name, framebuffer, ((bound, unit),), scissor)
             if statistics is not None:
                 self._read_counters(statistics)
             images = [
@@ -422,16 +437,18 @@ class NetworkRenderer:
     def render_brdf_slice(
         self, theta_deg: float, phi_deg: float, size: int, exposure: float = 1.0, ior: float | None = 1.5,
         skip_threshold: float | None = None, statistics: dict[str, int] | None = None,
+        rows: tuple[int, int] | None = None,
     ) -> np.ndarray:
         """Exposed CIE XYZ of a BRDF slice, ``float32`` ``(size, size, 3)``, row 0 at the top.
 
         The light is at polar angle ``theta_deg`` and azimuth ``phi_deg``; pixel ``(i, j)`` holds
         ``exposure · A(ωi, ωo) · XYZ(−(ωi + ωo))`` (eq. 5) for its view direction, 0 outside the disc.
-        ``ior`` is the Fresnel refractive index (``None`` or 0: no Fresnel). ``skip_threshold`` and
-        ``statistics``: see :meth:`render_brdf_slice_layers` (default: no skipping, exact linear values).
+        ``ior`` is the Fresnel refractive index (``None`` or 0: no Fresnel). ``skip_threshold``,
+        ``statistics`` and ``rows``: see :meth:`render_brdf_slice_layers` (default: no skipping, exact linear
+        values, every row).
         """
         return self.render_brdf_slice_layers(theta_deg, phi_deg, size, exposure, ior, skip_threshold,
-                                             statistics)[0]
+                                             statistics, rows)[0]
 
     def render_brdf_slice_srgb8(
         self, theta_deg: float, phi_deg: float, size: int, exposure: float = 1.0, ior: float | None = 1.5,

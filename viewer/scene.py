@@ -277,9 +277,10 @@ class SceneRenderer:
 
     def render_brdf_slice(self, theta_deg: float, phi_deg: float, size: int, exposure: float = 1.0,
                           ior: float | None = 1.5, skip_threshold: float | None = None,
-                          statistics: dict[str, int] | None = None) -> np.ndarray:
+                          statistics: dict[str, int] | None = None, rows: tuple[int, int] | None = None) -> np.ndarray:
         """The network's BRDF slice (``NetworkRenderer.render_brdf_slice``): exposed XYZ ``(size, size, 3)``."""
-        return self.network.render_brdf_slice(theta_deg, phi_deg, size, exposure, ior, skip_threshold, statistics)
+        return self.network.render_brdf_slice(theta_deg, phi_deg, size, exposure, ior, skip_threshold, statistics,
+                                              rows)
 
     # ---------------------------------------------------------------------------------------------
     # Display (gratnet.display: the same numbers as every other PNG GratNet writes)

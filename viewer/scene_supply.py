@@ -21,6 +21,7 @@ from __future__ import annotations
 
 import importlib
 import threading
+import time
 from collections.abc import Callable
 from concurrent.futures import Future, ThreadPoolExecutor
 from pathlib import Path
@@ -30,7 +31,7 @@ from gratnet.errors import GratNetError
 from viewer.compile_worker import GROUPS, CompileWorker, shader_cache_enabled, warm_group
 from viewer.render_cli import MESHES, build_mesh, resolve_material
 
-__all__ = ["PREVIEW_MESHES", "SceneSupply"]
+__all__ = ["PREVIEW_MESHES", "SceneSupply", "check_mesh_spec", "start_display_import"]
 
 
 def _preview_disc() -> Any:
@@ -55,6 +56,20 @@ PREVIEW_MESHES: dict[str, Callable[[], Any]] = {"cd": _preview_disc, "sphere": _
 _SPEED_ORDER = ("texture", "baked")
 
 
+_display_import: threading.Thread | None = None
+
+
+def start_display_import() -> threading.Thread:
+    """Import colour-science (the display conversion's library) on a thread, once per process; the
+    thread is returned (finished when the import is done). The window starts it first thing."""
+    global _display_import
+    if _display_import is None:
+        _display_import = threading.Thread(target=importlib.import_module, args=("colour",), daemon=True,
+                                           name="gratnet-import-colour")
+        _display_import.start()
+    return _display_import
+
+
 def check_mesh_spec(spec: str) -> None:
     """The cheap checks of ``build_mesh`` (a built-in name, or an existing .obj file), without building it."""
     if spec in MESHES:
@@ -73,9 +88,13 @@ class SceneSupply:
         ctx: the window's (or a headless) OpenGL ≥ 4.3 context; every GL call is made on its thread.
         weights_path: ``auto``, ``texture`` or ``baked`` (:func:`viewer.renderer.choose_weights_path`).
         background: compile and load off the caller's thread (see the module docstring).
+        worker: a child already warming the first material's programs (:meth:`start_worker`, called
+            before the window and its context exist, so that the compile starts at once); adopted when the
+            first material selected is its model, else stopped.
     """
 
-    def __init__(self, ctx: Any, weights_path: str = "auto", background: bool = False) -> None:
+    def __init__(self, ctx: Any, weights_path: str = "auto", background: bool = False,
+                 worker: CompileWorker | None = None) -> None:
         from viewer.renderer import WEIGHTS_PATHS
 
         if weights_path not in WEIGHTS_PATHS:
@@ -92,16 +111,27 @@ class SceneSupply:
         self._linked: set[tuple[str, str]] = set()  # (path, group) linked in this context
         self._active: set[tuple[str, str]] = set()  # ... and drawn once: ready to render
         self._worker: CompileWorker | None = None
+        self._prestarted = worker
+        #: ``time.perf_counter()`` when the colour-science import was first seen finished.
+        self.display_ready_at: float | None = None
         self._meshes: dict[str, Any] = {}  # mesh key -> Mesh, or Future of one
         self._buffers: dict[tuple[str, str], Any] = {}  # (path, mesh key) -> MeshBuffers
         self._executor = ThreadPoolExecutor(1, thread_name_prefix="gratnet-mesh") if background else None
         self._display_import: threading.Thread | None = None
-        if background:  # colour-science takes ~1 s to import: not on the window's thread
-            self._display_import = threading.Thread(target=importlib.import_module, args=("colour",), daemon=True,
-                                                    name="gratnet-import-colour")
-            self._display_import.start()
+        if background:  # colour-science takes 1.7–2.5 s to import (it imports matplotlib): not on this thread
+            self._display_import = start_display_import()
         else:
             importlib.import_module("colour")
+
+    @staticmethod
+    def start_worker(state: Any, weights_path: str = "auto") -> CompileWorker | None:
+        """A child warming ``state``'s material (``None`` when Mesa's shader cache is off), started before
+        any context exists: the quick texture path first, then what ``weights_path`` picks there."""
+        if not shader_cache_enabled():
+            return None
+        paths = ("texture", weights_path) if weights_path == "auto" else (weights_path,)
+        groups = ("slice", "surface") if state.slice_mode else GROUPS
+        return CompileWorker(resolve_material(state.material), paths, groups, state.material)
 
     # -- checks (cheap, on the caller's thread) ----------------------------------------------------
 
@@ -137,10 +167,17 @@ class SceneSupply:
         self._paths = ("texture", target) if quick_first else (target,)
         if not self.background:
             return
+        prestarted, self._prestarted = self._prestarted, None
         if shader_cache_enabled():
-            groups = ("slice", "surface") if state.slice_mode else GROUPS
-            self._worker = CompileWorker(resolve_material(state.material), self._paths, groups, state.material)
-        else:  # a child's compile would not spare ours: the first path only, compiled here
+            model_path = resolve_material(state.material)
+            if prestarted is not None and prestarted.model_path == model_path:
+                self._worker, prestarted = prestarted, None
+            else:
+                groups = ("slice", "surface") if state.slice_mode else GROUPS
+                self._worker = CompileWorker(model_path, self._paths, groups, state.material)
+        if prestarted is not None:
+            prestarted.close()
+        if self._worker is None:  # a child's compile would not spare ours: the first path only, compiled here
             self._paths = self._paths[:1]
 
     def _ready(self, path: str, group: str) -> bool:
@@ -151,12 +188,13 @@ class SceneSupply:
             return path == self._paths[0]
         return (path, group) in self._worker.ready
 
-    def poll(self, state: Any) -> bool:
-        """Advance the background work by at most one GL step (a link or a first 1×1 draw, each a cache
-        hit). Returns True when a faster weights path became ready for ``state``'s group."""
+    def poll(self, state: Any) -> str | None:
+        """Advance the background work by one GL step if one is due, each a cache hit: ``"linked"`` (a
+        program linked; the baked one takes ~0.14 s), ``"drawn"`` (its first 1×1 draw) or ``"took over"``
+        (that, and a faster path now renders ``state``); ``None``: nothing was due."""
         self._select(state)
         if not self.background:
-            return False
+            return None
         worker = self._worker
         if worker is not None:
             worker.poll()
@@ -165,9 +203,14 @@ class SceneSupply:
                 self._worker = None  # fall back: the first path, compiled here
                 self._paths = self._paths[:1]
                 worker.close()
+            elif worker.finished and not worker.running:  # its context chose otherwise: keep what it made
+                made = tuple(path for path in self._paths if any((path, g) in worker.ready for g in GROUPS))
+                self._paths = made or self._paths[:1]
         self._collect_meshes()
-        if self._display_import is not None and self._display_import.is_alive():
-            return False
+        if not self.display_ready():
+            return None
+        if self.display_ready_at is None:
+            self.display_ready_at = time.perf_counter()
         group = _group(state)
         best = self._best_active(group)
         for path in reversed(self._paths):
@@ -177,9 +220,23 @@ class SceneSupply:
                 continue
             if (path, group) not in self._linked:
                 self._link(path, group)
-                return False
+                return "linked"
             self._first_draw(path, group)
-            return best is not None
+            return "took over" if best is not None else "drawn"
+        return None
+
+    def step_due(self, state: Any) -> bool:
+        """Whether :meth:`poll` has a GL step to do for ``state`` right now."""
+        if not self.background or state.material != self._material or not self.display_ready():
+            return False
+        if self._worker is not None:
+            self._worker.poll()
+        best = self._best_active(_group(state))
+        for path in reversed(self._paths):
+            if best is not None and _SPEED_ORDER.index(path) <= _SPEED_ORDER.index(best):
+                return False
+            if self._ready(path, _group(state)):
+                return True
         return False
 
     def pending(self, state: Any) -> bool:
@@ -209,6 +266,10 @@ class SceneSupply:
         if not state.slice_mode and isinstance(self._meshes.get(_mesh_key(state.mesh, False)), Future):
             return f"loading the mesh {state.mesh}…"
         return ""
+
+    def display_ready(self) -> bool:
+        """Whether colour-science is imported (the thread that imports it has finished)."""
+        return self._display_import is None or not self._display_import.is_alive()
 
     def weights_path_in_use(self, state: Any) -> str | None:
         """The weights path that renders ``state`` now (``None``: nothing ready yet)."""
@@ -335,6 +396,9 @@ class SceneSupply:
     def release(self) -> None:
         """Stop the worker and free the GL objects (the context belongs to the caller)."""
         self._release_scenes()
+        if self._prestarted is not None:
+            self._prestarted.close()
+            self._prestarted = None
         if self._executor is not None:
             self._executor.shutdown(wait=False, cancel_futures=True)
 
