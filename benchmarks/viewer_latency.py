@@ -213,8 +213,7 @@ def main(argv: list[str] | None = None) -> int:
             lambda: app.image is not None and app.image.key[0] == arguments.switch_to, arguments.timeout_s)
         if arguments.takeover:
             report["takeover_s"] = session.run_until(lambda: app.weights_path_in_use() == "baked"
-                                                     and app.stats.weights_path == "baked"
-                                                     and app.next_work_in() is None, arguments.timeout_s)
+                                                     and app.stats.weights_path == "baked", arguments.timeout_s)
 
         session.phase = "slice switch"
         app.set(slice_mode=True)

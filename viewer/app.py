@@ -13,6 +13,18 @@ Two layers, so that the logic can be tested without a display:
   and only when a window is made (``imgui_bundle`` first: glfw then loads imgui_bundle's GLFW library,
   so both sides share one GLFW).
 
+Never blocking (issue 11; measured in docs/benchmarks.md "Viewer: a window that never blocks"): the window
+never compiles a shader that has not been compiled already. :class:`~viewer.scene_supply.SceneSupply`
+(background mode, the window's default) has a child process (:mod:`viewer.compile_worker`) compile each
+material's programs on its own EGL context, which fills Mesa's disk shader cache; the window then links
+the same program text as a cache hit, one short step per frame. The quick texture path (about a second
+to compile) gives the first picture; on a CPU rasterizer the faster baked program (25–60 s to compile)
+takes over when its compile is done. Until then the panel's status line says what is compiling
+("compiling the shader for cd… 12 s") and the picture on show stays. Meshes are built on a thread,
+colour-science is imported on a thread, and the first frame (imgui's own shaders) is drawn before the
+window is shown. Each frame's work, the figure the panel shows as "frame", is its events, panel, at most
+one preview or band, and drawing; the idle wait for input is not counted.
+
 Staying responsive on a CPU rasterizer (Mesa llvmpipe: a full 320×240 CD-disc picture takes 1–3 s):
 
 - While the state keeps changing (a slider or the mouse moving, and for ``idle_seconds`` after the last
@@ -24,7 +36,8 @@ Staying responsive on a CPU rasterizer (Mesa llvmpipe: a full 320×240 CD-disc p
   camera with clip space cropped to the band's rows: the same pixel centres as one full render), one
   band per frame sized to ``refine_budget_s``; the window keeps handling input between bands, the
   preview stays on show under the bands not yet done, and any change abandons the refinement.
-  (BRDF-slice mode has no bands: its refinement doubles the resolution per frame up to full.)
+  (BRDF-slice mode doubles the resolution per level up to full, each level in bands of rows that fit
+  ``refine_budget_s``: a scissor box limits the slice render to the band's rows.)
 - When the picture is complete and nothing changes, nothing is rendered, and the window sleeps in
   ``glfw.wait_events_timeout`` instead of spinning.
 
