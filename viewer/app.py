@@ -518,9 +518,9 @@ class ViewerApp:
         if state.slice_mode:
             xyz = renderer.render_brdf_slice(state.light_theta, state.light_phi, size[0], state.exposure,
                                              state.effective_ior, rows=rows)
+            coverage = _disc_coverage(size[0], rows)  # the network runs inside the unit disc only
             if rows is not None:
                 xyz = xyz[rows[0]:rows[1]]
-            coverage = np.ones(xyz.shape[:2], np.float32)
         else:
             rgba = renderer.render_rgba(buffers, camera or state.camera(), state.light(), size, state.exposure,
                                         state.effective_ior)
@@ -529,7 +529,9 @@ class ViewerApp:
         scene = self._scene_key(state)
         sample = seconds / max(1.0, _effective_pixels(coverage))
         previous = self._seconds_per_pixel.get(scene)
-        self._seconds_per_pixel[scene] = sample if previous is None else 0.5 * (previous + sample)
+        # Quick to grow, slow to shrink: a render slower than predicted (a busy CPU) shrinks the next band
+        # at once, so that one misprediction does not make several long frames.
+        self._seconds_per_pixel[scene] = sample if previous is None else max(sample, 0.5 * (previous + sample))
         self.stats.renders += 1
         self.stats.weights_path = renderer.network.weights_path
         self.stats.last_render_s = seconds
@@ -580,7 +582,8 @@ class ViewerApp:
                 refinement.next_row = 0
             row0 = refinement.next_row
             seconds_per_pixel = self._seconds_per_pixel.get(self._scene_key(state), 0.0)
-            row1 = min(side, row0 + self.policy.band_rows(np.full(side - row0, seconds_per_pixel * side)))
+            row_pixels = _effective_pixels_per_row(_disc_coverage(side, (row0, side)))
+            row1 = min(side, row0 + self.policy.band_rows(seconds_per_pixel * row_pixels))
             xyz = self._timed_render(state, (side, side), rows=(row0, row1))[0]
             refinement.pixels[row0:row1] = SceneRenderer.display_srgb8(xyz)
             refinement.next_row = row1
@@ -679,6 +682,19 @@ def _effective_pixels(coverage: np.ndarray) -> float:
     return covered + _UNCOVERED_COST * (coverage.size - covered)
 
 
+def _effective_pixels_per_row(coverage: np.ndarray) -> np.ndarray:
+    return np.sum(np.where(coverage > 0.5, 1.0, _UNCOVERED_COST), axis=1)
+
+
+def _disc_coverage(side: int, rows: tuple[int, int] | None = None) -> np.ndarray:
+    """1 where a ``side``² BRDF slice's pixel centre lies inside the unit disc (where the network runs), else
+    0; only ``rows`` (first, end) when given."""
+    first, end = (0, side) if rows is None else rows
+    centres = (np.arange(side) + 0.5) / side * 2.0 - 1.0
+    y = centres[first:end, None]
+    return (centres[None, :] ** 2 + y**2 <= 1.0).astype(np.float32)
+
+
 def _wrap(degrees: float) -> float:
     """An angle in [−180, 180)."""
     return (degrees + 180.0) % 360.0 - 180.0
@@ -768,7 +784,6 @@ class ViewerWindow:
         self._app: ViewerApp | None = None
         self._closed = False
         self._first_frame = False
-        self._gc_paused = False
         #: ``time.perf_counter()`` after the swap of the first frame that showed a picture.
         self.first_picture_at: float | None = None
 
@@ -801,10 +816,6 @@ class ViewerWindow:
                 raise GratNetError(f"cannot open an OpenGL 4.3 core window ({error}); the viewer needs OpenGL 4.3")
         finally:
             glfw.ERROR_REPORTING = reporting
-        # Python's cyclic GC paused 60–380 ms at a time over the objects that imgui and colour-science create
-        # at start (measured under Xvfb): off until they exist, then frozen out of later collections.
-        self._gc_paused = gc.isenabled()
-        gc.disable()
         try:
             glfw.make_context_current(self._window)
             glfw.swap_interval(1)
@@ -827,6 +838,14 @@ class ViewerWindow:
             self._first_frame = True
             self.frame()
             self._first_frame = False
+            # colour-science (the display conversion) imports on a thread from the start, 1.7–2.5 s (it imports
+            # matplotlib); while it runs, C calls of the import hold the GIL for up to ~70 ms at a time, which
+            # stretched frames to 145 ms: the window is shown once it is done (the compile child runs on).
+            if background:
+                start_display_import().join()
+            # Python's cyclic GC then paused 60–380 ms at a time over the ~1e6 objects imgui and colour-science
+            # made: frozen out of every later collection.
+            gc.freeze()
             if visible:
                 glfw.show_window(self._window)
         except BaseException:
@@ -904,10 +923,6 @@ class ViewerWindow:
         self._picture_input()
         self._panel()
         app.frame()
-        if self._gc_paused and app.display_ready():
-            gc.freeze()
-            gc.enable()
-            self._gc_paused = False
         self._upload()
         self._picture()
         imgui.render()
@@ -1101,9 +1116,6 @@ class ViewerWindow:
         if self._closed:
             return
         self._closed = True
-        if self._gc_paused:
-            gc.enable()
-            self._gc_paused = False
         glfw, imgui = self._glfw, self._imgui
         if self._app is not None:
             self._app.release()
