@@ -90,6 +90,7 @@ class Session:
         self.injected: list[tuple[float, float]] = []  # (time, total dx) per motion
         self.injector: subprocess.Popen[str] | None = None
         self._pending = ""
+        self.baked_at: float | None = None  # when the baked program first rendered the state on show
         original = self.app.orbit
 
         def orbit(dx: float, dy: float, *args: Any, **kwargs: Any) -> bool:
@@ -106,6 +107,8 @@ class Session:
                             "orbit_dx": self.orbit_dx, "renders": self.app.stats.renders,
                             "kind": self.app.stats.last_kind, "render_s": self.app.stats.last_render_s})
         self._read_injector()
+        if self.baked_at is None and self.app.weights_path_in_use() == "baked":
+            self.baked_at = swapped
 
     def run_until(self, condition: Any, timeout: float) -> float | None:
         """Frames until ``condition()``; the seconds it took (None: timed out)."""
@@ -221,12 +224,16 @@ def main(argv: list[str] | None = None) -> int:
             lambda: app.image is not None and app.image.key[11] is True, arguments.timeout_s)
         session.run_until(lambda: False, 1.0)
         session.stop_injector()
-        session.run_until(lambda: False, 0.3)
+        session.run_until(lambda: app.image is not None and app.image.complete, arguments.timeout_s)
+        session.run_until(lambda: False, 0.5)
+        report["frame_figure_at_rest_s"] = app.stats.last_frame_s  # what the panel shows as "frame"
     finally:
         if session.injector is not None and session.injector.poll() is None:
             session.injector.kill()
         report["gl_errors"] = list(window.gl_errors)
-        window.close()
+        closing = time.perf_counter()
+        window.close()  # the baked compile still runs in the child: closing stops it
+        report["close_s"] = time.perf_counter() - closing
 
     phases: dict[str, Any] = {}
     for record in session.frames:
@@ -234,6 +241,7 @@ def main(argv: list[str] | None = None) -> int:
         entry["frames"] += 1
         entry["max_frame_s"] = max(entry["max_frame_s"], record["work_s"])
     report["phases"] = phases
+    report["baked_takes_over_at_s"] = None if session.baked_at is None else session.baked_at - arguments.launched_at
     report["slowest_frames"] = [  # the five slowest: when (seconds after launch), how long, what ran
         {"at_s": round(f["swapped"] - arguments.launched_at, 3), "work_s": round(f["work_s"], 4), "phase": f["phase"],
          "rendered": f["kind"] if f["renders"] > (session.frames[k - 1]["renders"] if k else 0) else "",

@@ -182,7 +182,8 @@ def test_slice_mode_refines_by_doubling_the_resolution(ctx):
         sizes = []
         while viewer.next_work_in() is not None:
             viewer.frame()
-            sizes.append(viewer.image.rendered_size)
+            if not sizes or sizes[-1] != viewer.image.rendered_size:  # a level may take several bands
+                sizes.append(viewer.image.rendered_size)
         assert sizes == [(24, 24), (48, 48)] and viewer.image.complete
         assert np.count_nonzero(viewer.image.pixels.max(axis=2) > 16) > 5
     finally:

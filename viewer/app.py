@@ -452,8 +452,8 @@ class ViewerApp:
         now = self.clock() if now is None else float(now)
         step = self._supply.poll(self.state)  # background mode: at most one short GL step (cached link or draw)
         self._check_background_errors()
-        if step == "linked":
-            return False  # a link may take 0.14 s (baked): no render in the same frame
+        if step is not None:
+            return False  # a link (0.15 s for a baked one) or a first draw: no render in the same frame
         key = self.render_key()
         if key != self._seen_key:
             self._seen_key = key
