@@ -844,9 +844,9 @@ class ViewerWindow:
             self._first_frame = True
             self.frame()
             self._first_frame = False
-            # colour-science (the display conversion) imports on a thread from the start, 1.7–2.5 s (it imports
-            # matplotlib); while it runs, C calls of the import hold the GIL for up to ~70 ms at a time, which
-            # stretched frames to 145 ms: the window is shown once it is done (the compile child runs on).
+            # colour-science (the display conversion) imports on a thread from the start (scene_supply:
+            # 0.5–0.7 s without its plotting); C calls of an import hold the GIL for up to ~70 ms at a time,
+            # which stretched frames to 145 ms: the window is shown once it is done (the compile child runs on).
             if background:
                 start_display_import().join()
             # Python's cyclic GC then paused 60–380 ms at a time over the ~1e6 objects imgui and colour-science
