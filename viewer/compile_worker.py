@@ -200,34 +200,42 @@ class CompileWorker:
 
 
 def _warm(model_path: Path, paths: Sequence[str], groups: Sequence[str], folder: Path) -> None:
-    """The child: warm every group of every path, reporting each on stdout as it is done."""
+    """The child: warm every group of every path, reporting each on stdout once it is on disk."""
     from gratnet.atomic import atomic_path
     from gratnet.modelfile import load_model
-    from viewer.context import create_headless_context
+    from viewer.context import create_headless_context, release_headless_context
     from viewer.renderer import choose_weights_path
     from viewer.scene import SceneRenderer
 
-    ctx = create_headless_context()
     model = load_model(model_path)
+    ctx = None
     done: set[str] = set()
     for requested in paths:
+        ctx = ctx or create_headless_context()
         path = choose_weights_path(ctx, model, requested)
         if path in done:
             continue
         done.add(path)
-        started = time.perf_counter()
-        scene = SceneRenderer(ctx, model, weights_path=path)
-        if scene.network.baked_source is not None:
-            with atomic_path(folder / _BAKED_SOURCE) as temporary:
-                Path(temporary).write_text(scene.network.baked_source, encoding="utf-8")
-            with contextlib.suppress(OSError):
-                os.nice(_BAKED_NICENESS)
+        source = None
         for group in groups:
-            warm_group(scene, group)
-            print(f"ready {path} {group} {time.perf_counter() - started:.3f}", flush=True)
             started = time.perf_counter()
-        scene.release()
-    ctx.release()
+            ctx = ctx or create_headless_context()
+            scene = SceneRenderer(ctx, model, weights_path=path, baked_source=source)
+            if source is None and scene.network.baked_source is not None:
+                source = scene.network.baked_source
+                with atomic_path(folder / _BAKED_SOURCE) as temporary:
+                    Path(temporary).write_text(source, encoding="utf-8")
+                with contextlib.suppress(OSError):
+                    os.nice(_BAKED_NICENESS)
+            warm_group(scene, group)
+            scene.release()
+            # Mesa writes the cache entries on a thread: reported only once they are on disk (the window's
+            # compile would otherwise miss them and take the full compile time).
+            release_headless_context(ctx)
+            ctx = None
+            print(f"ready {path} {group} {time.perf_counter() - started:.3f}", flush=True)
+    if ctx is not None:
+        release_headless_context(ctx)
 
 
 def main(argv: Sequence[str] | None = None) -> int:
