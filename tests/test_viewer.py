@@ -539,7 +539,8 @@ def test_setup_installs_xvfb():
 
 
 def test_rendering_modules_never_import_glfw_or_imgui():
-    code = ("import sys, viewer.app, viewer.scene, viewer.renderer, viewer.context, viewer.view_cli; "
+    code = ("import sys, viewer.app, viewer.scene, viewer.renderer, viewer.context, viewer.view_cli, "
+            "viewer.scene_supply, viewer.compile_worker; "
             "print(sorted(m for m in ('glfw', 'imgui_bundle') if m in sys.modules))")
     result = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
                             cwd=Path(__file__).resolve().parents[1], check=True)

@@ -92,10 +92,12 @@ class CompileWorker:
             child can start before the window has a context.
         groups: program groups to warm for each path, in order (the one on show first).
         label: how status lines name the model.
+        niceness: added to the child's niceness at its start (the baked compiles add ``_BAKED_NICENESS``
+            more): a child started while the window is on screen yields the CPU to it.
     """
 
     def __init__(self, model_path: str | os.PathLike[str], paths: Sequence[str], groups: Sequence[str],
-                 label: str = "") -> None:
+                 label: str = "", niceness: int = 0) -> None:
         self.model_path = Path(model_path)
         self.paths = tuple(paths)
         self.groups = tuple(groups)
@@ -118,7 +120,7 @@ class CompileWorker:
         environment["PYTHONPATH"] = os.pathsep.join(
             [str(_REPOSITORY), *filter(None, environment.get("PYTHONPATH", "").split(os.pathsep))])
         command = [sys.executable, "-m", "viewer.compile_worker", str(self.model_path), "--paths", ",".join(self.paths),
-                   "--groups", ",".join(self.groups), "--folder", self._folder.name]
+                   "--groups", ",".join(self.groups), "--folder", self._folder.name, "--nice", str(int(niceness))]
         self._process: subprocess.Popen[bytes] | None = subprocess.Popen(
             command, stdin=subprocess.DEVNULL, stdout=subprocess.PIPE, stderr=self._stderr, env=environment,
             cwd=str(_REPOSITORY))
@@ -245,7 +247,11 @@ def main(argv: Sequence[str] | None = None) -> int:
     parser.add_argument("--paths", default="texture")
     parser.add_argument("--groups", default=",".join(GROUPS))
     parser.add_argument("--folder", required=True, help="where to write the baked mlp.glsl")
+    parser.add_argument("--nice", type=int, default=0, help="niceness to add at start")
     arguments = parser.parse_args(argv)
+    if arguments.nice > 0:
+        with contextlib.suppress(OSError):
+            os.nice(arguments.nice)
     try:
         _warm(Path(arguments.model), arguments.paths.split(","), arguments.groups.split(","), Path(arguments.folder))
     except GratNetError as error:

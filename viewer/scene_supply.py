@@ -191,7 +191,9 @@ class SceneSupply:
                 self._worker, prestarted = prestarted, None
             else:
                 groups = ("slice", "surface") if state.slice_mode else GROUPS
-                self._worker = CompileWorker(model_path, self._paths, groups, state.material)
+                # The window is on screen: the child yields the CPU to it (the first child, started before
+                # the window shows, runs at full priority).
+                self._worker = CompileWorker(model_path, self._paths, groups, state.material, niceness=5)
         if prestarted is not None:
             prestarted.close()
         if self._worker is None:  # a child's compile would not spare ours: the first path only, compiled here
