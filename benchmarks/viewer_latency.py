@@ -40,7 +40,10 @@ from typing import Any  # noqa: E402
 
 def _injector(x0: int, y0: int, interval: float, seed: int) -> int:
     """Child mode: press the left button at (x0, y0) (screen pixels), then move right by 2 pixels every
-    ~``interval`` seconds, printing ``TIME TOTAL_DX`` after each motion is flushed; release on stdin EOF."""
+    ~``interval`` seconds (after every 20th a pause of 0.5 s, the button held: a hand that stops), printing
+    ``TIME TOTAL_DX`` after each motion is flushed; every 100 motions the
+    button is released, the pointer goes back to (x0, y0) and the drag starts again (the screen's edge);
+    release on stdin EOF."""
     import select
 
     x11 = ctypes.CDLL("libX11.so.6")
@@ -62,13 +65,24 @@ def _injector(x0: int, y0: int, interval: float, seed: int) -> int:
     xtst.XTestFakeButtonEvent(display, 1, 1, 0)
     x11.XFlush(display)
     print("pressed", flush=True)
-    dx = 0
+    dx = offset = 0
     while True:
-        ready, _, _ = select.select([sys.stdin], [], [], interval * rng.uniform(0.5, 1.5))
+        pause = 0.5 if dx and dx % 40 == 0 else 0.0
+        ready, _, _ = select.select([sys.stdin], [], [], pause + interval * rng.uniform(0.5, 1.5))
         if ready and not sys.stdin.readline():
             break
+        if offset == 200:  # back to the start, as a new drag (uncounted moves: the button is up)
+            xtst.XTestFakeButtonEvent(display, 1, 0, 0)
+            xtst.XTestFakeMotionEvent(display, -1, x0, y0, 0)
+            x11.XFlush(display)
+            time.sleep(interval)
+            xtst.XTestFakeButtonEvent(display, 1, 1, 0)
+            x11.XFlush(display)
+            time.sleep(interval)
+            offset = 0
         dx += 2
-        xtst.XTestFakeMotionEvent(display, -1, x0 + dx, y0, 0)
+        offset += 2
+        xtst.XTestFakeMotionEvent(display, -1, x0 + offset, y0, 0)
         x11.XFlush(display)
         print(f"{time.perf_counter():.6f} {dx}", flush=True)
     xtst.XTestFakeButtonEvent(display, 1, 0, 0)

@@ -430,10 +430,10 @@ class ViewerApp:
         window then sleeps until input arrives)."""
         image, key = self.image, self.render_key()
         if image is not None and image.key == key and image.complete:
-            if self._supply.step_due(self.state):
+            if self._supply.step_due(self.state, self._idle()):
                 return 0.0
             return self.POLL_SECONDS if self._supply.pending(self.state) else None
-        if self._supply.step_due(self.state):
+        if self._supply.step_due(self.state, self._idle()):
             return 0.0  # a warm program to link or draw: the next frame does it
         if not self._supply.scene_ready(self.state):
             return self.POLL_SECONDS  # waiting for a shader or a mesh: look again soon
@@ -450,7 +450,7 @@ class ViewerApp:
         - picture complete and current → nothing.
         """
         now = self.clock() if now is None else float(now)
-        step = self._supply.poll(self.state)  # background mode: at most one short GL step (cached link or draw)
+        step = self._supply.poll(self.state, self._idle(now))  # background: at most one GL step (a cache hit)
         self._check_background_errors()
         if step is not None:
             return False  # a link (0.15 s for a baked one) or a first draw: no render in the same frame
@@ -475,6 +475,11 @@ class ViewerApp:
 
     #: How often the window looks at background work in progress (seconds).
     POLL_SECONDS = 0.1
+
+    def _idle(self, now: float | None = None) -> bool:
+        """No state change for ``policy.idle_seconds`` (the moment for a faster program to take over)."""
+        now = self.clock() if now is None else float(now)
+        return self.render_key() == self._seen_key and now - self._changed_at >= self.policy.idle_seconds
 
     @property
     def status(self) -> str:

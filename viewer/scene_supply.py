@@ -207,10 +207,12 @@ class SceneSupply:
             return path == self._paths[0]
         return (path, group) in self._worker.ready
 
-    def poll(self, state: Any) -> str | None:
+    def poll(self, state: Any, idle: bool = True) -> str | None:
         """Advance the background work by one GL step if one is due, each a cache hit: ``"linked"`` (a
-        program linked; the baked one takes ~0.14 s), ``"drawn"`` (its first 1×1 draw) or ``"took over"``
-        (that, and a faster path now renders ``state``); ``None``: nothing was due."""
+        program linked; the baked one takes 0.11–0.15 s), ``"drawn"`` (its first 1×1 draw) or ``"took
+        over"`` (that, and a faster path now renders ``state``); ``None``: nothing was due. Steps towards a
+        faster path while a picture is already on show wait for ``idle`` (no input lately): an input that
+        arrives during such a link is then unlikely."""
         self._select(state)
         if not self.background:
             return None
@@ -233,7 +235,7 @@ class SceneSupply:
         group = _group(state)
         best = self._best_active(group)
         for path in reversed(self._paths):
-            if best is not None and _SPEED_ORDER.index(path) <= _SPEED_ORDER.index(best):
+            if best is not None and (not idle or _SPEED_ORDER.index(path) <= _SPEED_ORDER.index(best)):
                 break
             if not self._ready(path, group):
                 continue
@@ -244,15 +246,15 @@ class SceneSupply:
             return "took over" if best is not None else "drawn"
         return None
 
-    def step_due(self, state: Any) -> bool:
-        """Whether :meth:`poll` has a GL step to do for ``state`` right now."""
+    def step_due(self, state: Any, idle: bool = True) -> bool:
+        """Whether :meth:`poll` (with the same ``idle``) has a GL step to do for ``state`` right now."""
         if not self.background or state.material != self._material or not self.display_ready():
             return False
         if self._worker is not None:
             self._worker.poll()
         best = self._best_active(_group(state))
         for path in reversed(self._paths):
-            if best is not None and _SPEED_ORDER.index(path) <= _SPEED_ORDER.index(best):
+            if best is not None and (not idle or _SPEED_ORDER.index(path) <= _SPEED_ORDER.index(best)):
                 return False
             if self._ready(path, _group(state)):
                 return True
