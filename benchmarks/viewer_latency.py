@@ -39,11 +39,11 @@ from typing import Any  # noqa: E402
 
 
 def _injector(x0: int, y0: int, interval: float, seed: int) -> int:
-    """Child mode: press the left button at (x0, y0) (screen pixels), then move right by 2 pixels every
-    ~``interval`` seconds (after every 20th a pause of 0.5 s, the button held: a hand that stops), printing
-    ``TIME TOTAL_DX`` after each motion is flushed; every 100 motions the
-    button is released, the pointer goes back to (x0, y0) and the drag starts again (the screen's edge);
-    release on stdin EOF."""
+    """Child mode: press the left button at (x0, y0) (screen pixels), then move by 2 pixels every
+    ~``interval`` seconds, right for 100 motions, then left for 100, and so on (the screen has an edge);
+    after every 20th motion a pause of 0.5 s, the button held (a hand that stops; the turns fall in these
+    pauses, so no frame sees a motion and its reverse). Prints ``TIME TOTAL`` after each motion is
+    flushed, TOTAL the pixels moved so far; releases the button on stdin EOF."""
     import select
 
     x11 = ctypes.CDLL("libX11.so.6")
@@ -65,26 +65,17 @@ def _injector(x0: int, y0: int, interval: float, seed: int) -> int:
     xtst.XTestFakeButtonEvent(display, 1, 1, 0)
     x11.XFlush(display)
     print("pressed", flush=True)
-    dx = offset = 0
+    moved = offset = 0
     while True:
-        pause = 0.5 if dx and dx % 40 == 0 else 0.0
+        pause = 0.5 if moved and moved % 40 == 0 else 0.0
         ready, _, _ = select.select([sys.stdin], [], [], pause + interval * rng.uniform(0.5, 1.5))
         if ready and not sys.stdin.readline():
             break
-        if offset == 200:  # back to the start, as a new drag (uncounted moves: the button is up)
-            xtst.XTestFakeButtonEvent(display, 1, 0, 0)
-            xtst.XTestFakeMotionEvent(display, -1, x0, y0, 0)
-            x11.XFlush(display)
-            time.sleep(interval)
-            xtst.XTestFakeButtonEvent(display, 1, 1, 0)
-            x11.XFlush(display)
-            time.sleep(interval)
-            offset = 0
-        dx += 2
-        offset += 2
+        offset += 2 if (moved // 200) % 2 == 0 else -2
+        moved += 2
         xtst.XTestFakeMotionEvent(display, -1, x0 + offset, y0, 0)
         x11.XFlush(display)
-        print(f"{time.perf_counter():.6f} {dx}", flush=True)
+        print(f"{time.perf_counter():.6f} {moved}", flush=True)
     xtst.XTestFakeButtonEvent(display, 1, 0, 0)
     x11.XFlush(display)
     x11.XCloseDisplay(display)
@@ -100,7 +91,7 @@ class Session:
         self.launched_at = launched_at
         self.phase = "launch"
         self.frames: list[dict[str, Any]] = []
-        self.orbit_dx = 0.0  # pixels of drag the app has applied
+        self.orbit_dx = 0.0  # pixels of drag the app has applied (|dx| summed: the drag turns)
         self.injected: list[tuple[float, float]] = []  # (time, total dx) per motion
         self.injector: subprocess.Popen[str] | None = None
         self._pending = ""
@@ -108,7 +99,7 @@ class Session:
         original = self.app.orbit
 
         def orbit(dx: float, dy: float, *args: Any, **kwargs: Any) -> bool:
-            self.orbit_dx += dx
+            self.orbit_dx += abs(dx)
             return original(dx, dy, *args, **kwargs)
 
         self.app.orbit = orbit  # counts the drag the app receives (the work itself is unchanged)
