@@ -447,6 +447,7 @@ def _tiny_model_file(path: Path) -> Path:
     return path
 
 
+@pytest.mark.timing
 def test_window_never_blocks(display, tmp_path):
     """Issue 11's targets on the real window (background compile, the default) under Xvfb, with an EMPTY
     Mesa shader cache (a fresh MESA_SHADER_CACHE_DIR for the viewer process and its compile child):
@@ -464,6 +465,10 @@ def test_window_never_blocks(display, tmp_path):
     """
     import ctypes.util
 
+    if int(os.environ.get("PYTEST_XDIST_WORKER_COUNT", "1")) > 1:
+        # Measured: beside another worker's GL tests on 2 cores, frames reached 0.16–0.32 s and the first
+        # picture 4–6.7 s (the CPU, not the viewer): scripts/test.sh runs the timing tests alone.
+        pytest.skip("wall-clock targets: run alone (pytest -m timing -n 0), not beside other xdist workers")
     repository = Path(__file__).resolve().parents[1]
     inject = ctypes.util.find_library("Xtst") is not None
     environment = {**os.environ, "DISPLAY": display, "MESA_SHADER_CACHE_DIR": str(tmp_path / "mesa-cache"),
