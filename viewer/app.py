@@ -488,11 +488,6 @@ class ViewerApp:
         or an empty string."""
         return self._supply.status(self.state)
 
-    def display_ready(self) -> bool:
-        """Whether the display conversion's library (colour-science) is imported (background mode imports
-        it on a thread)."""
-        return self._supply.display_ready()
-
     def weights_path_in_use(self) -> str | None:
         """The weights path that renders the current state (``None``: none ready yet)."""
         return self._supply.weights_path_in_use(self.state)

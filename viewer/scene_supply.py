@@ -272,7 +272,7 @@ class SceneSupply:
         group = _group(state)
         return state.material != self._material or self._best_active(group) != self._paths[-1]
 
-    def status(self, state: Any, now: float | None = None) -> str:
+    def status(self, state: Any) -> str:
         """A line for the panel: what is being compiled or loaded for ``state`` (empty when nothing is)."""
         if not self.background or state.material != self._material:
             return ""
