@@ -440,6 +440,8 @@ class ViewerApp:
             return self.POLL_SECONDS  # waiting for a shader or a mesh: look again soon
         if image is None or image.key != key or key != self._seen_key:
             return 0.0
+        if not self._supply.scene_ready(self.state, preview=False):
+            return self.POLL_SECONDS  # the refinement waits for the full-resolution mesh
         now = self.clock() if now is None else float(now)
         return max(0.0, self._changed_at + self.policy.idle_seconds - now)
 
@@ -469,7 +471,7 @@ class ViewerApp:
             self._refinement = None
             self._preview(key)
             return True
-        if self.moving:
+        if self.moving or not self._supply.scene_ready(self.state, preview=False):
             return False
         self._refine(key)
         return True
@@ -1035,7 +1037,9 @@ class ViewerWindow:
         imgui.push_item_width(150)
         status = app.status
         if status:  # what is compiling or loading, at the top: the reason the picture is old or absent
-            imgui.text_colored(imgui.ImVec4(1.0, 0.8, 0.3, 1.0), status)
+            imgui.push_style_color(imgui.Col_.text, imgui.ImVec4(1.0, 0.8, 0.3, 1.0))
+            imgui.text_wrapped(status)
+            imgui.pop_style_color()
             imgui.separator()
 
         materials = app.materials()

@@ -273,7 +273,8 @@ class SceneSupply:
         return state.material != self._material or self._best_active(group) != self._paths[-1]
 
     def status(self, state: Any) -> str:
-        """A line for the panel: what is being compiled or loaded for ``state`` (empty when nothing is)."""
+        """A line for the panel: what is being compiled or loaded for ``state`` (empty when nothing is).
+        Three dots, not an ellipsis: imgui's default font has no U+2026."""
         if not self.background or state.material != self._material:
             return ""
         worker = self._worker
@@ -281,11 +282,12 @@ class SceneSupply:
         group = _group(state)
         best = self._best_active(group)
         if best is None:
-            return f"compiling the shader for {state.material}… {elapsed}".rstrip()
+            return f"compiling the shader for {state.material}... {elapsed}".rstrip()
         if best != self._paths[-1]:
-            return f"showing the {best} path; compiling the faster {self._paths[-1]} shader… {elapsed}".rstrip()
+            faster = self._paths[-1]
+            return f"compiling the faster ({faster}) shader for {state.material}... {elapsed} (showing the {best} path)"
         if not state.slice_mode and isinstance(self._meshes.get(_mesh_key(state.mesh, False)), Future):
-            return f"loading the mesh {state.mesh}…"
+            return f"loading the mesh {state.mesh}..."
         return ""
 
     def display_ready(self) -> bool:
@@ -355,15 +357,17 @@ class SceneSupply:
             self._buffers[(path, key)] = scene.upload(mesh)
         return scene, self._buffers[(path, key)]
 
-    def scene_ready(self, state: Any) -> bool:
-        """Whether :meth:`scene` has something for ``state`` now (always, when not in the background)."""
+    def scene_ready(self, state: Any, preview: bool = True) -> bool:
+        """Whether :meth:`scene` (with ``preview``) has something for ``state`` now (always, when not in
+        the background). Asks for both tessellations of the mesh, so that the full one is built meanwhile."""
         if not self.background:
             return True
         if state.material != self._material or self._best_active(_group(state)) is None:
             return False
         if state.slice_mode:
             return True
-        return any(self._mesh(key) is not None for key in (_mesh_key(state.mesh, True), state.mesh))
+        full = self._mesh(state.mesh) is not None
+        return full or (preview and self._mesh(_mesh_key(state.mesh, True)) is not None)
 
     def _mesh(self, key: str) -> Any:
         """The CPU mesh for ``key`` (built now in blocking mode; on the thread in background mode)."""
