@@ -15,10 +15,12 @@ from __future__ import annotations
 
 import ctypes
 import json
+import os
 import shutil
 import subprocess
 import sys
 import time
+import warnings
 from collections.abc import Iterator
 from pathlib import Path
 
@@ -180,7 +182,8 @@ def test_slice_mode_refines_by_doubling_the_resolution(ctx):
         sizes = []
         while viewer.next_work_in() is not None:
             viewer.frame()
-            sizes.append(viewer.image.rendered_size)
+            if not sizes or sizes[-1] != viewer.image.rendered_size:  # a level may take several bands
+                sizes.append(viewer.image.rendered_size)
         assert sizes == [(24, 24), (48, 48)] and viewer.image.complete
         assert np.count_nonzero(viewer.image.pixels.max(axis=2) > 16) > 5
     finally:
@@ -301,7 +304,10 @@ def window(display, tmp_path) -> Iterator[object]:
     from viewer.app import ViewerWindow
 
     clock = FakeClock()
-    with ViewerWindow(PLANE, size=(160, 120), clock=clock, idle_wait_s=0.0, screenshot_dir=tmp_path) as viewer:
+    # Compiling in the window's thread (background=False): these tests count frames and renders; the
+    # background mode, the window's default, is tested with real time in test_window_never_blocks.
+    with ViewerWindow(PLANE, size=(160, 120), clock=clock, idle_wait_s=0.0, screenshot_dir=tmp_path,
+                      background=False) as viewer:
         viewer.clock_control = clock  # type: ignore[attr-defined]
         yield viewer
 
@@ -424,6 +430,76 @@ def test_a_headless_context_and_a_window_in_one_process(display):
         headless.release()
 
 
+def _tiny_model_file(path: Path) -> Path:
+    """A random 73-16-12-3 SiLU net: its baked program compiles in seconds, so the test sees it take over."""
+    from gratnet.encoding import EncodingSpec, RangeSpec
+    from gratnet.modelfile import ModelFile, save_model
+
+    spec = EncodingSpec.for_grid(65, 5, frequencies=6, t_frequencies=2)
+    sizes = [spec.features, 16, 12, 3]
+    rng = np.random.default_rng(3)
+    pairs = zip(sizes[:-1], sizes[1:], strict=True)
+    weights = [rng.normal(0.0, np.sqrt(2.0 / a), (b, a)).astype(np.float32) for a, b in pairs]
+    biases = [rng.normal(0.0, 0.3, b).astype(np.float32) for b in sizes[1:]]
+    save_model(path, ModelFile(layer_sizes=sizes, weights=weights, biases=biases, activation="silu",
+                               output_activation="clamp", encoding=spec, range=RangeSpec(), scheme="simple-max",
+                               metadata={"volume": {"resolution": 65, "slices": 5}}))
+    return path
+
+
+@pytest.mark.timing
+def test_window_never_blocks(display, tmp_path):
+    """Issue 11's targets on the real window (background compile, the default) under Xvfb, with an EMPTY
+    Mesa shader cache (a fresh MESA_SHADER_CACHE_DIR for the viewer process and its compile child):
+
+    - the first picture is on screen ≤ 5 s after the process was started (imports included);
+    - no frame's work (from the end of the wait for input to the swap: events, panel, render, draw) takes
+      more than 150 ms: while the baked shader compiles, across a material switch, while the faster baked
+      program takes over, and across the switch to the BRDF slice;
+    - real pointer events (XTest: a left-button drag over the picture, one motion every ~0.15 s, from
+      another process with its own time stamps) are each applied in a frame swapped ≤ 150 ms later.
+
+    benchmarks/viewer_latency.py drives the session (also the measurement in docs/benchmarks.md). It
+    launches on the shipped blazed model (28k MACs: its baked compile takes 25 s+, and runs on) and
+    switches to a tiny net whose baked program compiles in seconds, so that its takeover is seen too.
+    """
+    import ctypes.util
+
+    if int(os.environ.get("PYTEST_XDIST_WORKER_COUNT", "1")) > 1:
+        # Measured: beside another worker's GL tests on 2 cores, frames reached 0.16–0.32 s and the first
+        # picture 4–6.7 s (the CPU, not the viewer): scripts/test.sh runs the timing tests alone.
+        pytest.skip("wall-clock targets: run alone (pytest -m timing -n 0), not beside other xdist workers")
+    repository = Path(__file__).resolve().parents[1]
+    inject = ctypes.util.find_library("Xtst") is not None
+    environment = {**os.environ, "DISPLAY": display, "MESA_SHADER_CACHE_DIR": str(tmp_path / "mesa-cache"),
+                   "PYTHONPATH": os.pathsep.join([str(repository), os.environ.get("PYTHONPATH", "")])}
+    for name in ("MESA_SHADER_CACHE_DISABLE", "MESA_GLSL_CACHE_DISABLE", "WAYLAND_DISPLAY"):
+        environment.pop(name, None)
+    command = [sys.executable, str(repository / "benchmarks" / "viewer_latency.py"), "--material", "blazed",
+               "--mesh", "plane", "--switch-to", str(_tiny_model_file(tmp_path / "tiny.npz")), "--takeover",
+               "--timeout-s", "120", *(["--inject"] if inject else [])]
+    launched = time.perf_counter()  # CLOCK_MONOTONIC: the same clock in the child
+    result = subprocess.run([*command, "--launched-at", repr(launched)], env=environment, capture_output=True,
+                            text=True, timeout=600, cwd=tmp_path)
+    assert result.returncode == 0, result.stderr[-2000:]
+    report = json.loads(result.stdout.strip().splitlines()[-1])
+    summary = json.dumps({k: v for k, v in report.items() if k != "input_latency_s"})
+    assert report["gl_errors"] == [], summary
+    assert report["first_picture_s"] is not None and report["first_picture_s"] <= 5.0, summary
+    assert report["weights_path_first"] == "texture", summary  # the quick path shows the first picture
+    assert report["switch_picture_s"] is not None and report["takeover_s"] is not None, summary
+    assert report["slice_picture_s"] is not None, summary
+    assert set(report["phases"]) == {"launch", "interact", "material switch", "slice switch"}, summary
+    assert report["max_frame_s"] <= 0.150, summary
+    if inject:
+        latencies = report["input_latency_s"]
+        assert len(latencies) >= 20 and None not in latencies, summary
+        assert max(latencies) <= 0.150, summary
+    else:
+        warnings.warn("libXtst is missing (apt-get install libxtst6): real pointer events were not injected",
+                      stacklevel=1)
+
+
 def test_gratnet_view_runs_frames_and_exits(display, tmp_path):
     assert main(["view", "--mesh", "sphere", "--size", "64,48", "--max-frames", "3",
                  "--screenshot-dir", str(tmp_path)]) == 0
@@ -468,7 +544,8 @@ def test_setup_installs_xvfb():
 
 
 def test_rendering_modules_never_import_glfw_or_imgui():
-    code = ("import sys, viewer.app, viewer.scene, viewer.renderer, viewer.context, viewer.view_cli; "
+    code = ("import sys, viewer.app, viewer.scene, viewer.renderer, viewer.context, viewer.view_cli, "
+            "viewer.scene_supply, viewer.compile_worker; "
             "print(sorted(m for m in ('glfw', 'imgui_bundle') if m in sys.modules))")
     result = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
                             cwd=Path(__file__).resolve().parents[1], check=True)

@@ -13,6 +13,18 @@ Two layers, so that the logic can be tested without a display:
   and only when a window is made (``imgui_bundle`` first: glfw then loads imgui_bundle's GLFW library,
   so both sides share one GLFW).
 
+Never blocking (issue 11; measured in docs/benchmarks.md "Viewer: a window that never blocks"): the window
+never compiles a shader that has not been compiled already. :class:`~viewer.scene_supply.SceneSupply`
+(background mode, the window's default) has a child process (:mod:`viewer.compile_worker`) compile each
+material's programs on its own EGL context, which fills Mesa's disk shader cache; the window then links
+the same program text as a cache hit, one short step per frame. The quick texture path (about a second
+to compile) gives the first picture; on a CPU rasterizer the faster baked program (25–60 s to compile)
+takes over when its compile is done. Until then the panel's status line says what is compiling
+("compiling the shader for cd… 12 s") and the picture on show stays. Meshes are built on a thread,
+colour-science is imported on a thread, and the first frame (imgui's own shaders) is drawn before the
+window is shown. Each frame's work, the figure the panel shows as "frame", is its events, panel, at most
+one preview or band, and drawing; the idle wait for input is not counted.
+
 Staying responsive on a CPU rasterizer (Mesa llvmpipe: a full 320×240 CD-disc picture takes 1–3 s):
 
 - While the state keeps changing (a slider or the mouse moving, and for ``idle_seconds`` after the last
@@ -24,7 +36,8 @@ Staying responsive on a CPU rasterizer (Mesa llvmpipe: a full 320×240 CD-disc p
   camera with clip space cropped to the band's rows: the same pixel centres as one full render), one
   band per frame sized to ``refine_budget_s``; the window keeps handling input between bands, the
   preview stays on show under the bands not yet done, and any change abandons the refinement.
-  (BRDF-slice mode has no bands: its refinement doubles the resolution per frame up to full.)
+  (BRDF-slice mode doubles the resolution per level up to full, each level in bands of rows that fit
+  ``refine_budget_s``: a scissor box limits the slice render to the band's rows.)
 - When the picture is complete and nothing changes, nothing is rendered, and the window sleeps in
   ``glfw.wait_events_timeout`` instead of spinning.
 
@@ -34,8 +47,10 @@ Every pixel comes from :class:`SceneRenderer` (``render`` / ``render_brdf_slice`
 
 from __future__ import annotations
 
+import contextlib
 import ctypes
 import dataclasses
+import gc
 import importlib
 import math
 import time
@@ -48,7 +63,7 @@ import numpy as np
 from gratnet.errors import GratNetError
 from viewer.camera import Camera, Light
 from viewer.defaults import FALLBACK, FOV_DEGREES
-from viewer.render_cli import MESHES, RenderConfig, build_mesh, resolve_material, shipped_materials
+from viewer.render_cli import MESHES, RenderConfig, resolve_material, shipped_materials
 
 __all__ = [
     "SLIDERS",
@@ -148,24 +163,6 @@ SLIDERS: dict[str, Slider] = {
 # Resolution policy
 
 
-def _preview_disc() -> Any:
-    from viewer.meshes import compact_disc
-
-    return compact_disc(segments=64, rings=1)
-
-
-def _preview_sphere() -> Any:
-    from viewer.meshes import sphere
-
-    return sphere(segments=32, rings=16)
-
-
-#: Coarser tessellations of the built-in meshes for previews. llvmpipe shades whole pixel blocks per
-#: triangle, so at 1/4–1/8 resolution the 4096-triangle disc costs 2–3× a 128-triangle one; the outline
-#: and the interpolated tangents differ invisibly at preview resolution. Full-resolution pictures always
-#: use ``build_mesh`` (the meshes of ``gratnet render``).
-_PREVIEW_MESHES: dict[str, Callable[[], Any]] = {"cd": _preview_disc, "sphere": _preview_sphere}
-
 #: Cost of a pixel the mesh does not cover, relative to a covered one (the network runs only where covered).
 _UNCOVERED_COST = 0.05
 
@@ -177,7 +174,8 @@ class ResolutionPolicy:
     Attributes:
         idle_seconds: the state is "moving" until it has not changed for this long.
         interactive_budget_s: target time of one reduced-resolution render while moving.
-        refine_budget_s: target time of the refinement work done in one frame (one band).
+        refine_budget_s: target time of the refinement work done in one frame (one band). Predictions
+            were seen 1.7–2x short on a busy CPU, and a frame must stay under 150 ms (issue 11).
         factors: the allowed reductions (divisors of width and height), smallest first.
         default_factor: used before anything has been measured for a material and mesh.
         band_multiple: band heights are multiples of this (llvmpipe shades 4×4 pixel blocks, so a band of
@@ -186,7 +184,7 @@ class ResolutionPolicy:
 
     idle_seconds: float = 0.25
     interactive_budget_s: float = 0.05
-    refine_budget_s: float = 0.08
+    refine_budget_s: float = 0.05  # with the frame's other work, a 3x margin to the 150 ms target
     factors: tuple[int, ...] = (2, 4, 8)
     default_factor: int = 4
     band_multiple: int = 4
@@ -258,7 +256,10 @@ class RenderStats:
     last_preview_s: float | None = None
     last_preview_size: tuple[int, int] = (0, 0)
     last_full_s: float | None = None  # the sum of a completed refinement's renders
-    last_frame_s: float = 0.0  # the window's last frame, all included (set by ViewerWindow)
+    #: The window's last frame from the end of its wait for input to the buffer swap: the work of the
+    #: frame (events, panel, any render, drawing), not the idle wait (set by ViewerWindow).
+    last_frame_s: float = 0.0
+    weights_path: str = ""  # the weights path of the last render
 
 
 @dataclasses.dataclass(frozen=True)
@@ -306,6 +307,11 @@ class ViewerApp:
         extra_meshes: mesh specs offered besides cd, sphere and plane (e.g. an .obj path).
         weights_path: ``auto``, ``texture`` or ``baked``, for every material's
             :class:`~viewer.scene.SceneRenderer` (:func:`viewer.renderer.choose_weights_path`).
+        background: compile shaders and load meshes without blocking (:class:`~viewer.scene_supply.SceneSupply`;
+            the window's mode): until the material's first program is ready :meth:`frame` renders nothing and
+            :attr:`status` says why; with ``auto`` on a CPU rasterizer the texture path shows the first
+            picture and the baked path takes over once compiled. False: load and compile on first use.
+        worker: a compile child started earlier for ``state`` (:meth:`SceneSupply.start_worker`), adopted.
 
     Raises:
         GratNetError: the initial material or mesh cannot be loaded.
@@ -313,8 +319,10 @@ class ViewerApp:
 
     def __init__(self, ctx: Any, state: ViewerState | None = None, size: tuple[int, int] = (512, 512),
                  policy: ResolutionPolicy | None = None, clock: Callable[[], float] = time.perf_counter,
-                 extra_meshes: Iterable[str] = (), weights_path: str = "auto") -> None:
+                 extra_meshes: Iterable[str] = (), weights_path: str = "auto", background: bool = False,
+                 worker: Any = None) -> None:
         from viewer.scene import check_size
+        from viewer.scene_supply import SceneSupply
 
         self.ctx = ctx
         self.state = dataclasses.replace(state) if state is not None else ViewerState()
@@ -326,9 +334,8 @@ class ViewerApp:
         self.message = ""  # the last problem (a material or mesh that failed to load), shown in the panel
         self.meshes = list(MESHES) + [spec for spec in extra_meshes if spec not in MESHES]
         self.weights_path = weights_path
-        self._renderer: Any = None
-        self._renderer_material: str | None = None
-        self._mesh_buffers: dict[str, Any] = {}
+        self._supply = SceneSupply(ctx, weights_path, background, worker)
+        self._last_mesh = self.state.mesh  # the last mesh that loaded (restored if a newer one fails)
         # Per material and mesh: measured seconds per "effective pixel" (covered + 5 % of uncovered).
         self._seconds_per_pixel: dict[tuple[Any, ...], float] = {}
         self._coverage = np.ones(1)  # fraction of each row covered, from the last preview (top row first)
@@ -339,7 +346,11 @@ class ViewerApp:
         self._released = False
         #: Whether the state changed less than ``policy.idle_seconds`` before the last :meth:`frame`.
         self.moving = False
-        self._warm_up()  # fails early on a bad material or mesh
+        try:
+            self._warm_up()  # fails early on a bad material or mesh
+        except BaseException:
+            self._supply.release()
+            raise
         if self.state.mesh not in self.meshes:
             self.meshes.append(self.state.mesh)
 
@@ -373,7 +384,7 @@ class ViewerApp:
             new.camera()
             new.light()
             _ior_uniform(new.effective_ior)
-            self._ensure_scene(new)
+            self._supply.check(new)  # cheap checks (and, when not in the background, the loading itself)
         except GratNetError as error:
             self.message = str(error)
             return False
@@ -423,9 +434,17 @@ class ViewerApp:
         window then sleeps until input arrives)."""
         image, key = self.image, self.render_key()
         if image is not None and image.key == key and image.complete:
-            return None
+            if self._supply.step_due(self.state, self._idle()):
+                return 0.0
+            return self.POLL_SECONDS if self._supply.pending(self.state) else None
+        if self._supply.step_due(self.state, self._idle()):
+            return 0.0  # a warm program to link or draw: the next frame does it
+        if not self._supply.scene_ready(self.state):
+            return self.POLL_SECONDS  # waiting for a shader or a mesh: look again soon
         if image is None or image.key != key or key != self._seen_key:
             return 0.0
+        if not self._supply.scene_ready(self.state, preview=False):
+            return self.POLL_SECONDS  # the refinement waits for the full-resolution mesh
         now = self.clock() if now is None else float(now)
         return max(0.0, self._changed_at + self.policy.idle_seconds - now)
 
@@ -437,6 +456,10 @@ class ViewerApp:
         - picture complete and current → nothing.
         """
         now = self.clock() if now is None else float(now)
+        step = self._supply.poll(self.state, self._idle(now))  # background: at most one GL step (a cache hit)
+        self._check_background_errors()
+        if step is not None:
+            return False  # a link (0.15 s for a baked one) or a first draw: no render in the same frame
         key = self.render_key()
         if key != self._seen_key:
             self._seen_key = key
@@ -445,28 +468,65 @@ class ViewerApp:
         image = self.image
         if image is not None and image.key == key and image.complete:
             return False
+        if not self._supply.scene_ready(self.state):
+            return False  # the picture on show stays until the new one can be rendered
         if image is None or image.key != key:
             self._refinement = None
             self._preview(key)
             return True
-        if self.moving:
+        if self.moving or not self._supply.scene_ready(self.state, preview=False):
             return False
         self._refine(key)
         return True
 
+    #: How often the window looks at background work in progress (seconds).
+    POLL_SECONDS = 0.1
+
+    def _idle(self, now: float | None = None) -> bool:
+        """No state change for ``policy.idle_seconds`` (the moment for a faster program to take over)."""
+        now = self.clock() if now is None else float(now)
+        return self.render_key() == self._seen_key and now - self._changed_at >= self.policy.idle_seconds
+
+    @property
+    def status(self) -> str:
+        """What is being compiled or loaded for the state on show ("compiling the shader for cd… 12 s"),
+        or an empty string."""
+        return self._supply.status(self.state)
+
+    def weights_path_in_use(self) -> str | None:
+        """The weights path that renders the current state (``None``: none ready yet)."""
+        return self._supply.weights_path_in_use(self.state)
+
+    def _check_background_errors(self) -> None:
+        failed = self._supply.mesh_error(self.state.mesh)
+        if failed is not None:
+            self.message = failed
+            self.state = dataclasses.replace(self.state, mesh=self._last_mesh)
+        elif not self.state.slice_mode and self._supply.weights_path_in_use(self.state) is not None:
+            self._last_mesh = self.state.mesh
+        worker = self._supply.errors.pop("worker", None)
+        if worker is not None:
+            self.message = worker
+
     def _scene_key(self, state: ViewerState) -> tuple[Any, ...]:
-        return (state.material, "slice" if state.slice_mode else state.mesh)
+        return (state.material, "slice" if state.slice_mode else state.mesh, self._supply.weights_path_in_use(state))
 
     def _timed_render(self, state: ViewerState, size: tuple[int, int], camera: Camera | None = None,
-                      preview: bool = False) -> tuple[np.ndarray, np.ndarray]:
-        """``(exposed XYZ, coverage)`` of ``state`` at ``size`` (a mesh, or the BRDF slice: coverage 1),
-        timed and counted; the time per effective pixel feeds the resolution policy."""
-        renderer, buffers = self._ensure_scene(state, preview)
+                      preview: bool = False, rows: tuple[int, int] | None = None) -> tuple[np.ndarray, np.ndarray]:
+        """``(exposed XYZ, coverage)`` of ``state`` at ``size`` (a mesh, or the BRDF slice: coverage 1; with
+        ``rows``, only those rows of the slice), timed and counted; the time per effective pixel feeds the
+        resolution policy."""
+        supplied = self._supply.scene(state, preview)
+        if supplied is None:
+            raise GratNetError(f"the shader for {state.material} is still compiling; try again in a moment")
+        renderer, buffers = supplied
         started = time.perf_counter()
         if state.slice_mode:
             xyz = renderer.render_brdf_slice(state.light_theta, state.light_phi, size[0], state.exposure,
-                                             state.effective_ior)
-            coverage = np.ones(xyz.shape[:2], np.float32)
+                                             state.effective_ior, rows=rows)
+            coverage = _disc_coverage(size[0], rows)  # the network runs inside the unit disc only
+            if rows is not None:
+                xyz = xyz[rows[0]:rows[1]]
         else:
             rgba = renderer.render_rgba(buffers, camera or state.camera(), state.light(), size, state.exposure,
                                         state.effective_ior)
@@ -475,8 +535,11 @@ class ViewerApp:
         scene = self._scene_key(state)
         sample = seconds / max(1.0, _effective_pixels(coverage))
         previous = self._seconds_per_pixel.get(scene)
-        self._seconds_per_pixel[scene] = sample if previous is None else 0.5 * (previous + sample)
+        # Quick to grow, slow to shrink: a render slower than predicted (a busy CPU) shrinks the next band
+        # at once, so that one misprediction does not make several long frames.
+        self._seconds_per_pixel[scene] = sample if previous is None else max(sample, 0.5 * (previous + sample))
         self.stats.renders += 1
+        self.stats.weights_path = renderer.network.weights_path
         self.stats.last_render_s = seconds
         self.stats.last_render_size = size
         return xyz, coverage
@@ -517,16 +580,28 @@ class ViewerApp:
             refinement = self._refinement = _Refinement(
                 key, preview if state.slice_mode else _upscale(preview, width, height), next_factor=max(1, factor // 2))
         started = time.perf_counter()
-        if state.slice_mode:  # no bands: double the resolution per frame
+        if state.slice_mode:  # double the resolution per level, each level in bands that fit the budget
             factor = refinement.next_factor
-            size = reduced_size((width, height), factor)
-            refinement.pixels = SceneRenderer.display_srgb8(self._timed_render(state, size)[0])
-            refinement.next_factor = max(1, factor // 2)
-            done, rendered, progress = factor == 1, size, 1.0 / factor**2
-            self.stats.last_kind = f"refine 1/{factor}"
+            side = reduced_size((width, height), factor)[0]
+            if refinement.pixels.shape[0] != side:  # a new level: over the last one, upscaled
+                refinement.pixels = _upscale(refinement.pixels, side, side)
+                refinement.next_row = 0
+            row0 = refinement.next_row
+            seconds_per_pixel = self._seconds_per_pixel.get(self._scene_key(state), 0.0)
+            row_pixels = _effective_pixels_per_row(_disc_coverage(side, (row0, side)))
+            row1 = min(side, row0 + self.policy.band_rows(seconds_per_pixel * row_pixels * _first_band_margin(row0)))
+            xyz = self._timed_render(state, (side, side), rows=(row0, row1))[0]
+            refinement.pixels[row0:row1] = SceneRenderer.display_srgb8(xyz)
+            refinement.next_row = row1
+            level_done = row1 == side
+            if level_done:
+                refinement.next_factor = max(1, factor // 2)
+            done, rendered = factor == 1 and level_done, (side, side)
+            progress = 1.0 if done else row1 / side / factor**2
+            self.stats.last_kind = f"refine 1/{factor} rows {row0}-{row1}"
         else:  # the next band of rows at full resolution, over the upscaled preview
             row0 = refinement.next_row
-            rows = self.policy.band_rows(self._row_seconds(width, height)[row0:])
+            rows = self.policy.band_rows(self._row_seconds(width, height)[row0:] * _first_band_margin(row0))
             row1 = min(height, row0 + rows)
             camera = state.camera()
             band = _BandCamera(camera.distance, camera.azimuth_deg, camera.elevation_deg, camera.target,
@@ -594,59 +669,42 @@ class ViewerApp:
         raise GratNetError(f"no free screenshot name in {folder}")
 
     def _warm_up(self) -> None:
-        """Load the scene, and pay the one-off costs before the first timed frame: the driver's shader
-        JIT (a 1×1 render, uncounted) and the import of the display conversion (colour-science, ~1 s)."""
-        from viewer.scene import SceneRenderer
-
-        renderer, buffers = self._ensure_scene(self.state)
-        state = self.state
-        if state.slice_mode:
-            xyz = renderer.render_brdf_slice(state.light_theta, state.light_phi, 1, state.exposure, state.effective_ior)
-        else:
-            xyz = renderer.render(buffers, state.camera(), state.light(), (1, 1), state.exposure, state.effective_ior)
-        SceneRenderer.display_srgb8(xyz)
-
-    # -- GL resources ------------------------------------------------------------------------------
-
-    def _ensure_scene(self, state: ViewerState, preview: bool = False) -> tuple[Any, Any]:
-        """The SceneRenderer of ``state.material`` and the uploaded ``state.mesh`` (loaded on first use;
-        with ``preview``, its coarser preview tessellation where it has one)."""
-        from gratnet.modelfile import load_model
-        from viewer.scene import SceneRenderer
-
-        if self._renderer is None or self._renderer_material != state.material:
-            model = load_model(resolve_material(state.material))
-            renderer = SceneRenderer(self.ctx, model, weights_path=self.weights_path)
-            renderer.program  # noqa: B018 - compile now, not inside the first timed render
-            self._release_scene()
-            self._renderer, self._renderer_material = renderer, state.material
-        if state.slice_mode:
-            return self._renderer, None
-        coarse = preview and state.mesh in _PREVIEW_MESHES
-        key = f"{state.mesh} (preview)" if coarse else state.mesh
-        if key not in self._mesh_buffers:
-            mesh = _PREVIEW_MESHES[state.mesh]() if coarse else build_mesh(state.mesh)
-            self._mesh_buffers[key] = self._renderer.upload(mesh)
-        return self._renderer, self._mesh_buffers[key]
-
-    def _release_scene(self) -> None:
-        for buffers in self._mesh_buffers.values():
-            buffers.release()
-        self._mesh_buffers.clear()
-        if self._renderer is not None:
-            self._renderer.release()
-        self._renderer = self._renderer_material = None
+        """Check the state's material and mesh (GratNetError if unusable). When not in the background, also
+        pay the one-off costs before the first timed frame: loading, the driver's shader JIT (a 1×1 render,
+        uncounted) and the import of the display conversion (colour-science, ~1 s); in the background the
+        child process starts compiling now (:meth:`frame` polls it)."""
+        self._supply.check(self.state)
+        self._supply.poll(self.state)
 
     def release(self) -> None:
-        """Free the GL objects (the context belongs to the caller)."""
+        """Free the GL objects and stop background work (the context belongs to the caller)."""
         if not self._released:
-            self._release_scene()
+            self._supply.release()
             self._released = True
 
 
 def _effective_pixels(coverage: np.ndarray) -> float:
     covered = float(np.count_nonzero(coverage > 0.5))
     return covered + _UNCOVERED_COST * (coverage.size - covered)
+
+
+def _first_band_margin(row0: int) -> float:
+    """Prediction factor for a band: 2 for a refinement's (or a slice level's) first band, whose prediction
+    comes from renders at a lower resolution only (1.7× too short once, measured on a busy machine)."""
+    return 2.0 if row0 == 0 else 1.0
+
+
+def _effective_pixels_per_row(coverage: np.ndarray) -> np.ndarray:
+    return np.sum(np.where(coverage > 0.5, 1.0, _UNCOVERED_COST), axis=1)
+
+
+def _disc_coverage(side: int, rows: tuple[int, int] | None = None) -> np.ndarray:
+    """1 where a ``side``² BRDF slice's pixel centre lies inside the unit disc (where the network runs), else
+    0; only ``rows`` (first, end) when given."""
+    first, end = (0, side) if rows is None else rows
+    centres = (np.arange(side) + 0.5) / side * 2.0 - 1.0
+    y = centres[first:end, None]
+    return (centres[None, :] ** 2 + y**2 <= 1.0).astype(np.float32)
 
 
 def _wrap(degrees: float) -> float:
@@ -697,7 +755,8 @@ class ViewerWindow:
         screenshot_dir: where the Screenshot button writes ``gratnet-view-NNN.png``.
         idle_wait_s: how long a frame with nothing to render waits for input (``wait_events_timeout``);
             0 polls (tests).
-        extra_meshes, weights_path: as :class:`ViewerApp`.
+        extra_meshes, weights_path, background: as :class:`ViewerApp` (here ``background`` is on by
+            default: the window opens, shows its panel and handles input at once, whatever compiles).
         visible: show the window (tests under Xvfb may hide it; rendering is the same).
 
     Raises:
@@ -709,13 +768,20 @@ class ViewerWindow:
     def __init__(self, state: ViewerState | None = None, size: tuple[int, int] = (512, 512),
                  policy: ResolutionPolicy | None = None, clock: Callable[[], float] = time.perf_counter,
                  screenshot_dir: str | Path = ".", idle_wait_s: float = 0.25, extra_meshes: Iterable[str] = (),
-                 weights_path: str = "auto",
+                 weights_path: str = "auto", background: bool = True,
                  visible: bool = True, title: str = "GratNet viewer") -> None:
         from viewer.context import context_from_current
         from viewer.scene import check_size
+        from viewer.scene_supply import SceneSupply, start_display_import
 
-        glfw, imgui = self._glfw, self._imgui = _shell_modules()
         width, height = check_size(size)
+        # The compile child first: its Python start-up and the quick shader overlap the window's set-up.
+        worker = None
+        if background:
+            start_display_import()
+            with contextlib.suppress(GratNetError):  # a bad material is reported by ViewerApp below
+                worker = SceneSupply.start_worker(state or ViewerState(), weights_path)
+        glfw, imgui = self._glfw, self._imgui = _shell_modules()
         self.screenshot_dir = Path(screenshot_dir)
         self.idle_wait_s = float(idle_wait_s)
         self.frames = 0
@@ -724,11 +790,14 @@ class ViewerWindow:
         self.last_screenshot: Path | None = None
         self._texture: Any = None
         self._texture_version = -1
+        self._texture_uv = (1.0, 1.0)  # the picture's corner in the (padded) texture
         self._window: Any = None
         self._imgui_ready = False
         self._app: ViewerApp | None = None
         self._closed = False
-        self._last_frame_start: float | None = None
+        self._first_frame = False
+        #: ``time.perf_counter()`` after the swap of the first frame that showed a picture.
+        self.first_picture_at: float | None = None
 
         # A headless renderer's EGL context may be current on this thread: unbind it for the window's
         # lifetime (restored by close()), or making the window's GLX context current kills the process.
@@ -738,6 +807,8 @@ class ViewerWindow:
         try:
             if not glfw.init():
                 self._egl.restore()
+                if worker is not None:
+                    worker.close()
                 raise GratNetError(
                     f"no display for the viewer window ({_glfw_error(glfw)}); run it on a desktop session, or "
                     "under a virtual X server (xvfb-run gratnet view …), or write images with gratnet render"
@@ -746,12 +817,14 @@ class ViewerWindow:
             glfw.window_hint(glfw.CONTEXT_VERSION_MINOR, 3)
             glfw.window_hint(glfw.OPENGL_PROFILE, glfw.OPENGL_CORE_PROFILE)
             glfw.window_hint(glfw.OPENGL_FORWARD_COMPAT, True)
-            glfw.window_hint(glfw.VISIBLE, bool(visible))
+            glfw.window_hint(glfw.VISIBLE, False)  # shown after the first frame (see below)
             self._window = glfw.create_window(self.PANEL_WIDTH + width, height, title, None, None)
             if not self._window:
                 error = _glfw_error(glfw)
                 glfw.terminate()
                 self._egl.restore()
+                if worker is not None:
+                    worker.close()
                 raise GratNetError(f"cannot open an OpenGL 4.3 core window ({error}); the viewer needs OpenGL 4.3")
         finally:
             glfw.ERROR_REPORTING = reporting
@@ -767,8 +840,29 @@ class ViewerWindow:
             imgui.backends.opengl3_init("#version 410 core")
             self._imgui_ready = True
             self._gl = _GLFunctions(glfw)
-            self._app = ViewerApp(self.ctx, state, self._area_pixels(), policy, clock, extra_meshes, weights_path)
+            self._texture = self._picture_texture(1, 1)  # drawn by the first frame: see there
+            self._app = ViewerApp(self.ctx, state, self._area_pixels(), policy, clock, extra_meshes, weights_path,
+                                  background, worker)
+            worker = None  # the app owns it now
+            # The first frame compiles imgui's own shaders and, drawing the 1×1 picture texture, their variant
+            # for its format (0.3–0.5 s on llvmpipe with an empty shader cache): drawn while the window is
+            # unmapped, no input can wait for it; then the panel appears at once.
+            self._first_frame = True
+            self.frame()
+            self._first_frame = False
+            # colour-science (the display conversion) imports on a thread from the start (scene_supply:
+            # 0.5–0.7 s without its plotting); C calls of an import hold the GIL for up to ~70 ms at a time,
+            # which stretched frames to 145 ms: the window is shown once it is done (the compile child runs on).
+            if background:
+                start_display_import().join()
+            # Python's cyclic GC then paused 60–380 ms at a time over the ~1e6 objects imgui and colour-science
+            # made: frozen out of every later collection.
+            gc.freeze()
+            if visible:
+                glfw.show_window(self._window)
         except BaseException:
+            if worker is not None:
+                worker.close()
             self.close()
             raise
 
@@ -813,13 +907,14 @@ class ViewerWindow:
         return self._closed or bool(self._glfw.window_should_close(self._window))
 
     def frame(self, capture: bool = False) -> bool:
-        """Handle input, render what the state needs (:meth:`ViewerApp.frame`), draw the panel and the
-        picture, swap. With ``capture`` the window's pixels are read (glReadPixels) into
+        """Wait for input (or for due work), handle it (the panel's widgets and the mouse change the
+        state), render what the state then needs (:meth:`ViewerApp.frame`: one preview or one band at
+        most, never a compile), draw the panel and the picture, swap: an input is on screen in the frame
+        that handled it. With ``capture`` the window's pixels are read (glReadPixels) into
         :attr:`last_capture` before the swap. Returns False once the window was asked to close."""
         glfw, imgui = self._glfw, self._imgui
         if self.should_close():
             return False
-        started = time.perf_counter()
         app = self.app
         wait = app.next_work_in()
         wait = self.idle_wait_s if wait is None else min(wait, self.idle_wait_s)
@@ -827,19 +922,21 @@ class ViewerWindow:
             glfw.wait_events_timeout(wait)  # sleep until input (or until the preview is due for refinement)
         else:
             glfw.poll_events()
+        started = time.perf_counter()  # the frame's work starts when the wait ends
         if 0 in self._framebuffer_size():  # minimized: nothing to draw into
             if self.idle_wait_s > 0:
                 glfw.wait_events_timeout(self.idle_wait_s)
             return not self.should_close()
         app.set_size(self._area_pixels())
-        app.frame()
-        self._upload()
 
         imgui.backends.opengl3_new_frame()
         imgui.backends.glfw_new_frame()
         imgui.new_frame()
-        self._picture()
+        self._picture_input()
         self._panel()
+        app.frame()
+        self._upload()
+        self._picture()
         imgui.render()
 
         self.ctx.screen.use()
@@ -853,6 +950,8 @@ class ViewerWindow:
         glfw.swap_buffers(self._window)
         self.frames += 1
         app.stats.last_frame_s = time.perf_counter() - started
+        if self.first_picture_at is None and app.image is not None:
+            self.first_picture_at = time.perf_counter()
         return True
 
     def run(self, max_frames: int = 0) -> int:
@@ -871,21 +970,21 @@ class ViewerWindow:
         image = self.app.image
         if image is None or image.version == self._texture_version:
             return
-        import moderngl
-
         height, width = image.pixels.shape[:2]
-        if self._texture is None or self._texture.size != (width, height):
+        size = (_power_of_two(width), _power_of_two(height))
+        if self._texture is None or self._texture.size != size:
             if self._texture is not None:
                 self._texture.release()
-            self._texture = self.ctx.texture((width, height), 3, dtype="f1", alignment=1)
-            self._texture.filter = (moderngl.LINEAR, moderngl.LINEAR)
-        self._texture.write(np.ascontiguousarray(image.pixels).tobytes(), alignment=1)
+            self._texture = self._picture_texture(*size)
+        # Edge rows and columns repeated into the padding: linear filtering at the border reads the picture.
+        padded = np.pad(image.pixels, ((0, size[1] - height), (0, size[0] - width), (0, 0)), mode="edge")
+        self._texture.write(np.ascontiguousarray(padded).tobytes(), alignment=1)
+        self._texture_uv = (width / size[0], height / size[1])
         self._texture_version = image.version
 
-    def _picture(self) -> None:
-        """The render area: the picture (stretched from a preview), mouse orbit and wheel zoom."""
+    def _picture_input(self) -> None:
+        """The render area's input: mouse drag (orbit) and wheel (zoom)."""
         imgui, app = self._imgui, self.app
-        scale = self._scale()
         display = imgui.get_io().display_size
         x0 = self.PANEL_WIDTH
         imgui.set_next_window_pos(imgui.ImVec2(x0, 0), imgui.Cond_.always)
@@ -906,13 +1005,29 @@ class ViewerWindow:
             wheel = imgui.get_io().mouse_wheel
             if wheel:
                 app.zoom(wheel)
-        if self._texture is not None and app.image is not None:
+        imgui.end()
+
+    def _picture_texture(self, width: int, height: int) -> Any:
+        """An RGB8 texture, linear filtering. Power-of-two sizes only: llvmpipe compiles a new variant of
+        imgui's shader for a non-power-of-two texture (~0.15 s, seen as a stalled frame at the first
+        picture); the first frame (hidden) compiles the one variant used."""
+        import moderngl
+
+        texture = self.ctx.texture((width, height), 3, dtype="f1", alignment=1)
+        texture.filter = (moderngl.LINEAR, moderngl.LINEAR)
+        return texture
+
+    def _picture(self) -> None:
+        """The picture (stretched from a preview), drawn under the widgets."""
+        imgui, app = self._imgui, self.app
+        if self._texture is not None and (app.image is not None or self._first_frame):
+            scale = self._scale()
             ax, ay, aw, ah = self.render_area()
             p0 = imgui.ImVec2(ax / scale, ay / scale)
             p1 = imgui.ImVec2((ax + aw) / scale, (ay + ah) / scale)
             # The background list: not clipped to the window's inner rectangle (its border would be).
-            imgui.get_background_draw_list().add_image(imgui.ImTextureRef(self._texture.glo), p0, p1)
-        imgui.end()
+            imgui.get_background_draw_list().add_image(imgui.ImTextureRef(self._texture.glo), p0, p1,
+                                                       imgui.ImVec2(0, 0), imgui.ImVec2(*self._texture_uv))
 
     def _panel(self) -> None:
         imgui, app = self._imgui, self.app
@@ -923,6 +1038,12 @@ class ViewerWindow:
         imgui.begin("GratNet", None, imgui.WindowFlags_.no_move | imgui.WindowFlags_.no_resize
                     | imgui.WindowFlags_.no_collapse | imgui.WindowFlags_.no_saved_settings)
         imgui.push_item_width(150)
+        status = app.status
+        if status:  # what is compiling or loading, at the top: the reason the picture is old or absent
+            imgui.push_style_color(imgui.Col_.text, imgui.ImVec4(1.0, 0.8, 0.3, 1.0))
+            imgui.text_wrapped(status)
+            imgui.pop_style_color()
+            imgui.separator()
 
         materials = app.materials()
         if state.material not in materials:
@@ -957,7 +1078,10 @@ class ViewerWindow:
 
         imgui.separator_text("performance")
         stats, image = app.stats, app.image
-        imgui.text(f"frame {stats.last_frame_s * 1000:.1f} ms")
+        imgui.text(f"frame {stats.last_frame_s * 1000:.1f} ms (work, not idle)")
+        in_use = app.weights_path_in_use()
+        if in_use:
+            imgui.text(f"weights: {in_use} path")
         width, height = stats.last_render_size
         imgui.text(f"render {stats.last_render_s * 1000:.0f} ms at {width}×{height}")
         if stats.last_preview_s is not None:
@@ -1025,6 +1149,11 @@ class ViewerWindow:
 
     def __exit__(self, *exc_info: object) -> None:
         self.close()
+
+
+def _power_of_two(value: int) -> int:
+    """The smallest power of two ≥ ``value``."""
+    return 1 << max(0, int(value) - 1).bit_length()
 
 
 def _shell_modules() -> tuple[Any, Any]:

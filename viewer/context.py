@@ -12,7 +12,8 @@ import moderngl
 
 from gratnet.errors import GratNetError
 
-__all__ = ["GL_REQUIRE", "MESA_PACKAGES", "context_from_current", "create_headless_context"]
+__all__ = ["GL_REQUIRE", "MESA_PACKAGES", "context_from_current", "create_headless_context",
+           "release_headless_context"]
 
 #: OpenGL version the shaders need, in moderngl's encoding (4.3 → 430).
 GL_REQUIRE = 430
@@ -39,6 +40,26 @@ def create_headless_context() -> moderngl.Context:
             f"cannot create a headless OpenGL 4.3 context through EGL ({_one_line(error)}); "
             f"install EGL and Mesa: apt-get install {MESA_PACKAGES}"
         ) from error
+
+
+def release_headless_context(ctx: moderngl.Context) -> None:
+    """Release a :func:`create_headless_context` context and terminate its EGL display (for the whole
+    process): Mesa writes its disk shader cache entries on a background thread, and only the display's
+    termination waits for them (seen: the last entry of a program landed after the draw that made it had
+    returned). A later :func:`create_headless_context` initialises the display again."""
+    import ctypes
+
+    egl = ctypes.CDLL("libEGL.so.1")
+    egl.eglGetCurrentDisplay.restype = ctypes.c_void_p
+    egl.eglMakeCurrent.argtypes = [ctypes.c_void_p] * 4
+    egl.eglMakeCurrent.restype = ctypes.c_uint
+    egl.eglTerminate.argtypes = [ctypes.c_void_p]
+    egl.eglTerminate.restype = ctypes.c_uint
+    display = egl.eglGetCurrentDisplay()
+    ctx.release()
+    if display:
+        egl.eglMakeCurrent(display, None, None, None)
+        egl.eglTerminate(display)
 
 
 def context_from_current() -> moderngl.Context:

@@ -169,13 +169,17 @@ class NetworkRenderer:
             ``u_weights``/``u_layers``/activation uniforms) or ``auto`` (:func:`choose_weights_path`: baked
             for nets up to :data:`BAKED_MAX_MACS` multiply-adds on a software rasterizer, else texture).
             Both paths compute the same sums in float32; tests/test_baked.py ties them.
+        baked_source: the baked ``mlp.glsl`` text of ``model`` made earlier (:attr:`baked_source` of another
+            renderer of the same model, e.g. in another process): spares generating it again (~0.3 s for a
+            shipped model) and keeps the program text, hence Mesa's shader-cache key, identical.
 
     Attributes:
         weights_path: the path chosen, ``texture`` or ``baked``.
+        baked_source: the generated ``mlp.glsl`` on the baked path, else ``None``.
     """
 
     def __init__(self, ctx: moderngl.Context, model: ModelFile, shader_root: str | Path | None = None,
-                 weights_path: str = "auto") -> None:
+                 weights_path: str = "auto", baked_source: str | None = None) -> None:
         texture, layout = pack_texture(model)  # validates the model
         self.ctx = ctx
         self.model = model
@@ -184,10 +188,11 @@ class NetworkRenderer:
         self.shader_root = shader_root
         self.weights_path = choose_weights_path(ctx, model, weights_path)
         self._overrides: dict[str, GeneratedSource] = {}
+        self.baked_source: str | None = None
         if self.weights_path == "baked":
             label = f"{'-'.join(map(str, model.layer_sizes))} {model.activation}"
-            self._overrides["mlp.glsl"] = GeneratedSource(f"<baked mlp.glsl: {label}>",
-                                                          baked_mlp_source(model, label))
+            self.baked_source = baked_source if baked_source is not None else baked_mlp_source(model, label)
+            self._overrides["mlp.glsl"] = GeneratedSource(f"<baked mlp.glsl: {label}>", self.baked_source)
             texture = np.zeros((1, 1, 4), dtype=np.float32)  # a placeholder: the baked programs read no texture
         height, width = texture.shape[:2]
         self._weights = ctx.texture((width, height), 4, np.ascontiguousarray(texture).tobytes(), dtype="f4")
@@ -261,9 +266,11 @@ class NetworkRenderer:
             self._weights.use(location=location)
 
     def _draw(self, name: str, framebuffer: moderngl.Framebuffer,
-              textures: tuple[tuple[moderngl.Texture, int], ...] = ()) -> None:
-        """One full-screen triangle into ``framebuffer``, with blending/depth test off and the caller's
-        framebuffer and enable flags restored afterwards (a window may share this context)."""
+              textures: tuple[tuple[moderngl.Texture, int], ...] = (),
+              scissor: tuple[int, int, int, int] | None = None) -> None:
+        """One full-screen triangle into ``framebuffer`` (only inside ``scissor`` = x, y, width, height in GL
+        pixels when given), with blending/depth test off and the caller's framebuffer and enable flags
+        restored afterwards (a window may share this context)."""
         # Textures are bound by hand: moderngl 5.13's scope(textures=...) left the samplers reading 0.
         scope = self.ctx.scope(framebuffer, enable_only=moderngl.NOTHING)
         try:
@@ -272,7 +279,13 @@ class NetworkRenderer:
                 weights = ((self._weights, 0),) if self.weights_path == "texture" else ()
                 for texture, unit in (*weights, *textures):
                     texture.use(location=unit)
-                self._vertex_arrays[name].render(moderngl.TRIANGLES, vertices=3)
+                if scissor is not None:
+                    self.ctx.scissor = scissor
+                try:
+                    self._vertex_arrays[name].render(moderngl.TRIANGLES, vertices=3)
+                finally:
+                    if scissor is not None:
+                        self.ctx.scissor = None
         finally:
             scope.release()
 
@@ -316,7 +329,8 @@ class NetworkRenderer:
         texture = self._skip_bound_texture(threshold)
         _set(program, "u_skip_threshold", threshold)
         _set(program, "u_skip_bound", _SKIP_BOUND_UNIT)
-        matrix = display_skip_matrix()
+        # Read only when skipping (skip.glsl returns first otherwise): no colour-science import (~1 s) then.
+        matrix = display_skip_matrix() if threshold > 0.0 else np.zeros((3, 3))
         _set(program, "u_skip_matrix", np.ascontiguousarray(matrix.T, dtype=np.float32))  # GLSL: column-major
         return texture, _SKIP_BOUND_UNIT
 
@@ -362,6 +376,7 @@ class NetworkRenderer:
     def render_brdf_slice_layers(
         self, theta_deg: float, phi_deg: float, size: int, exposure: float = 1.0, ior: float | None = 1.5,
         skip_threshold: float | None = None, statistics: dict[str, int] | None = None,
+        rows: tuple[int, int] | None = None,
     ) -> tuple[np.ndarray, np.ndarray]:
         """A BRDF slice (docs/physics.md "BRDF slice") and the network's XYZ behind it.
 
@@ -372,6 +387,8 @@ class NetworkRenderer:
                 the exact linear image (EXR, comparisons).
             statistics: a dict to fill with the work counters (:data:`STATISTICS_KEYS`); renders with a
                 counting variant of the program (slower: time renders without it).
+            rows: ``(first, end)``: compute only these rows (from the top; a scissor box, so the time is the
+                band's); the other rows are not written. The viewer refines a slice in such bands between frames.
 
         Returns:
             ``(exposed, network)``, both ``float32`` ``(size, size, 3)`` with row 0 at the top (as
@@ -381,6 +398,8 @@ class NetworkRenderer:
         """
         if isinstance(size, bool) or not isinstance(size, (int, np.integer)) or not 1 <= size <= 16384:
             raise GratNetError(f"slice size must be an integer in 1 … 16384, got {size!r}")
+        if rows is not None and not (0 <= rows[0] < rows[1] <= size):
+            raise GratNetError(f"slice rows must satisfy 0 ≤ first < end ≤ {size}, got {rows!r}")
         if not all(math.isfinite(value) for value in (theta_deg, phi_deg, exposure)):
             raise GratNetError(
                 f"light angles and exposure must be finite, got {theta_deg!r}, {phi_deg!r}, {exposure!r}"
@@ -398,7 +417,8 @@ class NetworkRenderer:
         targets = [self.ctx.texture((size, size), 4, dtype="f4") for _ in range(2)]
         framebuffer = self.ctx.framebuffer(color_attachments=targets)
         try:
-            self._draw(name, framebuffer, ((bound, unit),))
+            scissor = None if rows is None else (0, size - rows[1], size, rows[1] - rows[0])  # GL rows: bottom up
+            self._draw(name, framebuffer, ((bound, unit),), scissor)
             if statistics is not None:
                 self._read_counters(statistics)
             images = [
@@ -416,16 +436,18 @@ class NetworkRenderer:
     def render_brdf_slice(
         self, theta_deg: float, phi_deg: float, size: int, exposure: float = 1.0, ior: float | None = 1.5,
         skip_threshold: float | None = None, statistics: dict[str, int] | None = None,
+        rows: tuple[int, int] | None = None,
     ) -> np.ndarray:
         """Exposed CIE XYZ of a BRDF slice, ``float32`` ``(size, size, 3)``, row 0 at the top.
 
         The light is at polar angle ``theta_deg`` and azimuth ``phi_deg``; pixel ``(i, j)`` holds
         ``exposure · A(ωi, ωo) · XYZ(−(ωi + ωo))`` (eq. 5) for its view direction, 0 outside the disc.
-        ``ior`` is the Fresnel refractive index (``None`` or 0: no Fresnel). ``skip_threshold`` and
-        ``statistics``: see :meth:`render_brdf_slice_layers` (default: no skipping, exact linear values).
+        ``ior`` is the Fresnel refractive index (``None`` or 0: no Fresnel). ``skip_threshold``,
+        ``statistics`` and ``rows``: see :meth:`render_brdf_slice_layers` (default: no skipping, exact linear
+        values, every row).
         """
         return self.render_brdf_slice_layers(theta_deg, phi_deg, size, exposure, ior, skip_threshold,
-                                             statistics)[0]
+                                             statistics, rows)[0]
 
     def render_brdf_slice_srgb8(
         self, theta_deg: float, phi_deg: float, size: int, exposure: float = 1.0, ior: float | None = 1.5,

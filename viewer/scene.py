@@ -106,12 +106,13 @@ class SceneRenderer:
         shader_root: folder of the GLSL files (default: the repository's ``shaders/``).
         weights_path: ``auto``, ``texture`` or ``baked``: where the shader reads the weights
             (:class:`~viewer.renderer.NetworkRenderer`; the choice is ``self.network.weights_path``).
+        baked_source: as :class:`~viewer.renderer.NetworkRenderer` (a baked ``mlp.glsl`` made earlier).
     """
 
     def __init__(self, ctx: moderngl.Context, model: ModelFile, shader_root: str | Path | None = None,
-                 weights_path: str = "auto") -> None:
+                 weights_path: str = "auto", baked_source: str | None = None) -> None:
         self.ctx = ctx
-        self.network = NetworkRenderer(ctx, model, shader_root, weights_path)
+        self.network = NetworkRenderer(ctx, model, shader_root, weights_path, baked_source)
         self.model = model
 
     @property
@@ -276,9 +277,10 @@ class SceneRenderer:
 
     def render_brdf_slice(self, theta_deg: float, phi_deg: float, size: int, exposure: float = 1.0,
                           ior: float | None = 1.5, skip_threshold: float | None = None,
-                          statistics: dict[str, int] | None = None) -> np.ndarray:
+                          statistics: dict[str, int] | None = None, rows: tuple[int, int] | None = None) -> np.ndarray:
         """The network's BRDF slice (``NetworkRenderer.render_brdf_slice``): exposed XYZ ``(size, size, 3)``."""
-        return self.network.render_brdf_slice(theta_deg, phi_deg, size, exposure, ior, skip_threshold, statistics)
+        return self.network.render_brdf_slice(theta_deg, phi_deg, size, exposure, ior, skip_threshold, statistics,
+                                              rows)
 
     # ---------------------------------------------------------------------------------------------
     # Display (gratnet.display: the same numbers as every other PNG GratNet writes)

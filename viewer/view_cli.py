@@ -15,6 +15,12 @@ Mouse: drag over the picture to orbit (in BRDF-slice mode: to move the light), w
 Screenshot button writes ``gratnet-view-NNN.png`` (display sRGB, full resolution) and its
 ``.config.json`` (the ``gratnet render`` settings) into ``--screenshot-dir``.
 
+The window and its panel appear at once and answer input while shaders compile: a child process
+compiles them (viewer.compile_worker), the panel's status line says so ("compiling the shader for cd…
+12 s"), the quick texture path shows the first picture within seconds and, on a CPU rasterizer, the
+faster baked program takes over once compiled (25–60 s the first time per material; Mesa's disk shader
+cache makes later starts quick).
+
 Needs a display (X11 or Wayland) and OpenGL 4.3; without one it exits with status 2 and one line.
 """
 

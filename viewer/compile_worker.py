@@ -1,0 +1,264 @@
+"""Shader programs compiled off the viewer's thread: a child process warms Mesa's disk shader cache.
+
+The viewer never compiles a program it has not seen compiled already. :class:`CompileWorker` starts
+``python -m viewer.compile_worker MODEL --paths texture,baked --groups surface,slice``: the child makes its
+own headless EGL context, builds a :class:`~viewer.scene.SceneRenderer` per weights path and draws each
+program group once at 1×1 pixel with exactly the draws the viewer makes (:func:`warm_group`). Mesa keeps
+the linked programs and llvmpipe's JIT-compiled draw code in its disk shader cache (``MESA_SHADER_CACHE_DIR``
+or ``~/.cache/mesa_shader_cache``; the child inherits the window's environment, hence its cache), so the
+window's own compile of the same program text afterwards is a cache hit. The child prints one line per
+group, ``ready PATH GROUP SECONDS``, as soon as it is warm; the window polls those lines without blocking.
+The baked ``mlp.glsl`` text the child generated is written to a file that the window reads back
+(:attr:`CompileWorker.baked_source`): the same text, so the same cache key, without generating it again.
+
+Why a child process and not a thread (measured on Mesa 22.3 llvmpipe, 2 cores; docs/benchmarks.md
+"Viewer: a window that never blocks"): moderngl holds the GIL through glLinkProgram and the draw that
+JIT-compiles the program (its extension never releases the GIL), so a baked compile in a thread stopped
+the main thread for 25.5 s. In the child the same compile takes 4 s (link) + 21–27 s (first draw), and
+the window's compile afterwards takes 0.1 s (link) + tens of ms (first draw).
+
+Groups: ``surface`` (the ``surface`` program and its depth pre-pass program, drawn as
+:meth:`SceneRenderer.render` draws them) and ``slice`` (``brdf_slice``). Rendering only: no glfw, no imgui.
+"""
+
+from __future__ import annotations
+
+import argparse
+import contextlib
+import os
+import subprocess
+import sys
+import tempfile
+import time
+from collections.abc import Sequence
+from pathlib import Path
+from typing import Any
+
+from gratnet.errors import GratNetError
+
+__all__ = ["GROUPS", "CompileWorker", "shader_cache_enabled", "warm_group"]
+
+#: Program groups, each warmed and reported as one.
+GROUPS = ("surface", "slice")
+#: Niceness the child adds before the long (baked) compiles: on a 2-core machine the window's thread
+#: then wins the CPU whenever both want it.
+_BAKED_NICENESS = 10
+_BAKED_SOURCE = "baked-mlp.glsl"
+_REPOSITORY = Path(__file__).resolve().parents[1]
+
+
+def shader_cache_enabled(environment: dict[str, str] | None = None) -> bool:
+    """Whether Mesa's disk shader cache is on (``MESA_SHADER_CACHE_DISABLE`` / ``MESA_GLSL_CACHE_DISABLE``
+    unset or false): without it a child's compile cannot spare the window its own."""
+    environment = os.environ if environment is None else environment
+    for name in ("MESA_SHADER_CACHE_DISABLE", "MESA_GLSL_CACHE_DISABLE"):
+        if environment.get(name, "").strip().lower() in ("1", "true", "yes", "y"):
+            return False
+    return True
+
+
+def warm_group(scene: Any, group: str, buffers: Any = None) -> None:
+    """Compile ``group``'s programs on ``scene`` (a :class:`~viewer.scene.SceneRenderer`) and draw them once
+    at 1×1 pixel, as the viewer draws them (llvmpipe compiles a program's draw code at its first draw).
+    ``buffers``: an uploaded mesh for the surface draw (default: a plane, uploaded and freed here)."""
+    from viewer.camera import Camera, Light
+
+    if group == "slice":
+        scene.render_brdf_slice(20.0, 90.0, 1, 1.0, 1.5)
+    elif group == "surface":
+        uploaded = buffers
+        if uploaded is None:
+            from viewer.meshes import plane
+
+            uploaded = scene.upload(plane())
+        try:
+            scene.render_rgba(uploaded, Camera(0.18, -90.0, 50.0), Light.directional(20.0, 90.0), (1, 1), 1.0, 1.5)
+        finally:
+            if buffers is None:
+                uploaded.release()
+    else:
+        raise GratNetError(f"unknown program group {group!r}: choose {', '.join(GROUPS)}")
+    scene.ctx.finish()
+
+
+class CompileWorker:
+    """The parent's handle on one child process that warms the programs of one model (see the module
+    docstring). Never blocks: :meth:`poll` reads what the child has reported so far.
+
+    Args:
+        model_path: the model file (``.npz``).
+        paths: weights paths to warm, in order (e.g. ``("texture", "baked")``: the quick one first); ``auto``
+            is resolved by the child on its own context (:func:`viewer.renderer.choose_weights_path`), so the
+            child can start before the window has a context.
+        groups: program groups to warm for each path, in order (the one on show first).
+        label: how status lines name the model.
+        niceness: added to the child's niceness at its start (the baked compiles add ``_BAKED_NICENESS``
+            more): a child started while the window is on screen yields the CPU to it.
+    """
+
+    def __init__(self, model_path: str | os.PathLike[str], paths: Sequence[str], groups: Sequence[str],
+                 label: str = "", niceness: int = 0) -> None:
+        self.model_path = Path(model_path)
+        self.paths = tuple(paths)
+        self.groups = tuple(groups)
+        self.label = label or self.model_path.stem
+        self.started = time.perf_counter()
+        #: ``(path, group)`` pairs the child has warmed (cache hits for the window from now on).
+        self.ready: set[tuple[str, str]] = set()
+        #: Seconds the child took per ``(path, group)``.
+        self.seconds: dict[tuple[str, str], float] = {}
+        #: ``time.perf_counter()`` when the window read each report.
+        self.ready_at: dict[tuple[str, str], float] = {}
+        #: The child's failure (its last stderr line), once it exited with an error.
+        self.error: str | None = None
+        self._folder = tempfile.TemporaryDirectory(prefix="gratnet-compile-")
+        self._stderr = open(Path(self._folder.name) / "stderr.txt", "w+b")  # noqa: SIM115 - closed in close()
+        self._buffer = b""
+        self._exited = False
+        self._baked_source: str | None = None
+        environment = dict(os.environ)
+        environment["PYTHONPATH"] = os.pathsep.join(
+            [str(_REPOSITORY), *filter(None, environment.get("PYTHONPATH", "").split(os.pathsep))])
+        command = [sys.executable, "-m", "viewer.compile_worker", str(self.model_path), "--paths", ",".join(self.paths),
+                   "--groups", ",".join(self.groups), "--folder", self._folder.name, "--nice", str(int(niceness))]
+        self._process: subprocess.Popen[bytes] | None = subprocess.Popen(
+            command, stdin=subprocess.DEVNULL, stdout=subprocess.PIPE, stderr=self._stderr, env=environment,
+            cwd=str(_REPOSITORY))
+        assert self._process.stdout is not None
+        os.set_blocking(self._process.stdout.fileno(), False)
+
+    @property
+    def running(self) -> bool:
+        return self._process is not None and self._process.poll() is None
+
+    @property
+    def finished(self) -> bool:
+        """The child is done (its reports read), or failed."""
+        return self.error is not None or self._exited
+
+    def elapsed(self) -> float:
+        """Seconds since the child was started."""
+        return time.perf_counter() - self.started
+
+    def poll(self) -> set[tuple[str, str]]:
+        """Read the child's reports without waiting; returns the pairs that became ready now."""
+        process = self._process
+        if process is None:
+            return set()
+        new: set[tuple[str, str]] = set()
+        assert process.stdout is not None
+        with contextlib.suppress(BlockingIOError):
+            chunk = process.stdout.read()
+            if chunk:
+                self._buffer += chunk
+        *lines, self._buffer = self._buffer.split(b"\n")
+        for line in lines:
+            words = line.decode(errors="replace").split()
+            if len(words) == 4 and words[0] == "ready":
+                pair = (words[1], words[2])
+                self.ready.add(pair)
+                self.seconds[pair] = float(words[3])
+                self.ready_at[pair] = time.perf_counter()
+                new.add(pair)
+        code = process.poll()
+        if code is not None and not self.finished:
+            with contextlib.suppress(BlockingIOError):
+                rest = process.stdout.read()
+                if rest:  # reports written just before the exit: read at the next poll
+                    self._buffer += rest
+                    return new
+            self._exited = True
+            if code != 0:
+                self._stderr.seek(0)
+                errors = [text for text in self._stderr.read().decode(errors="replace").splitlines() if text.strip()]
+                self.error = errors[-1].strip() if errors else f"exited with status {code}"
+        return new
+
+    @property
+    def baked_source(self) -> str | None:
+        """The baked ``mlp.glsl`` the child generated (``None`` until it wrote it)."""
+        if self._baked_source is None:
+            path = Path(self._folder.name) / _BAKED_SOURCE
+            if path.is_file():
+                self._baked_source = path.read_text(encoding="utf-8")
+        return self._baked_source
+
+    def close(self) -> None:
+        """Stop the child (if still running) and remove its files."""
+        process, self._process = self._process, None
+        if process is not None:
+            if process.poll() is None:
+                process.kill()
+            process.wait()
+            if process.stdout is not None:
+                process.stdout.close()
+        if not self._stderr.closed:
+            self._stderr.close()
+        self._folder.cleanup()
+
+    def __del__(self) -> None:
+        with contextlib.suppress(Exception):
+            self.close()
+
+
+def _warm(model_path: Path, paths: Sequence[str], groups: Sequence[str], folder: Path) -> None:
+    """The child: warm every group of every path, reporting each on stdout once it is on disk."""
+    from gratnet.atomic import atomic_path
+    from gratnet.modelfile import load_model
+    from viewer.context import create_headless_context, release_headless_context
+    from viewer.renderer import choose_weights_path
+    from viewer.scene import SceneRenderer
+
+    model = load_model(model_path)
+    ctx = None
+    done: set[str] = set()
+    for requested in paths:
+        ctx = ctx or create_headless_context()
+        path = choose_weights_path(ctx, model, requested)
+        if path in done:
+            continue
+        done.add(path)
+        source = None
+        for group in groups:
+            started = time.perf_counter()
+            ctx = ctx or create_headless_context()
+            scene = SceneRenderer(ctx, model, weights_path=path, baked_source=source)
+            if source is None and scene.network.baked_source is not None:
+                source = scene.network.baked_source
+                with atomic_path(folder / _BAKED_SOURCE) as temporary:
+                    Path(temporary).write_text(source, encoding="utf-8")
+                with contextlib.suppress(OSError):
+                    os.nice(_BAKED_NICENESS)
+            warm_group(scene, group)
+            scene.release()
+            # Mesa writes the cache entries on a thread: reported only once they are on disk (the window's
+            # compile would otherwise miss them and take the full compile time).
+            release_headless_context(ctx)
+            ctx = None
+            print(f"ready {path} {group} {time.perf_counter() - started:.3f}", flush=True)
+    if ctx is not None:
+        release_headless_context(ctx)
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(prog="python -m viewer.compile_worker",
+                                     description="Warm Mesa's shader cache with a model's viewer programs.")
+    parser.add_argument("model")
+    parser.add_argument("--paths", default="texture")
+    parser.add_argument("--groups", default=",".join(GROUPS))
+    parser.add_argument("--folder", required=True, help="where to write the baked mlp.glsl")
+    parser.add_argument("--nice", type=int, default=0, help="niceness to add at start")
+    arguments = parser.parse_args(argv)
+    if arguments.nice > 0:
+        with contextlib.suppress(OSError):
+            os.nice(arguments.nice)
+    try:
+        _warm(Path(arguments.model), arguments.paths.split(","), arguments.groups.split(","), Path(arguments.folder))
+    except GratNetError as error:
+        print(f"compile worker: {error}", file=sys.stderr)
+        return 2
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,442 @@
+"""The viewer's renderers and meshes for the material on show: ready at once, or later without blocking.
+
+:class:`SceneSupply` hands :class:`~viewer.app.ViewerApp` a :class:`~viewer.scene.SceneRenderer` and the
+uploaded mesh for a :class:`~viewer.app.ViewerState`, in one of two modes:
+
+- blocking (``background=False``; scripts and headless tests): everything is loaded and compiled when
+  first asked for, as ``gratnet render`` does.
+- background (``background=True``; the window): nothing slow runs on the caller's thread.
+  :class:`~viewer.compile_worker.CompileWorker` compiles the material's programs in a child process
+  (warming Mesa's disk shader cache), the quick texture path first and, where ``auto`` picks the baked
+  path, the baked one after it; :meth:`poll` then links each warm program in the window's context (a
+  cache hit, one step per call) and the faster path takes over as soon as it is linked. Meshes are built
+  on a thread, and colour-science (~1 s to import, needed by the display conversion and the renderer's
+  skip uniforms) is imported on a thread at start. Until a renderer is ready :meth:`scene` returns
+  ``None`` and :meth:`status` says what is being waited for ("compiling the shader for cd… 12 s").
+
+Rendering only: no glfw, no imgui.
+"""
+
+from __future__ import annotations
+
+import importlib
+import sys
+import threading
+import time
+import types
+from collections.abc import Callable
+from concurrent.futures import Future, ThreadPoolExecutor
+from pathlib import Path
+from typing import Any
+
+from gratnet.errors import GratNetError
+from viewer.compile_worker import GROUPS, CompileWorker, shader_cache_enabled, warm_group
+from viewer.render_cli import MESHES, build_mesh, resolve_material
+
+__all__ = ["PREVIEW_MESHES", "SceneSupply", "check_mesh_spec", "start_display_import"]
+
+
+def _preview_disc() -> Any:
+    from viewer.meshes import compact_disc
+
+    return compact_disc(segments=64, rings=1)
+
+
+def _preview_sphere() -> Any:
+    from viewer.meshes import sphere
+
+    return sphere(segments=32, rings=16)
+
+
+#: Coarser tessellations of the built-in meshes for previews. llvmpipe shades whole pixel blocks per
+#: triangle, so at 1/4–1/8 resolution the 4096-triangle disc costs 2–3× a 128-triangle one; the outline
+#: and the interpolated tangents differ invisibly at preview resolution. Full-resolution pictures always
+#: use ``build_mesh`` (the meshes of ``gratnet render``).
+PREVIEW_MESHES: dict[str, Callable[[], Any]] = {"cd": _preview_disc, "sphere": _preview_sphere}
+
+#: Weights paths from slowest to fastest to draw on a CPU rasterizer (the later one takes over).
+_SPEED_ORDER = ("texture", "baked")
+
+
+_display_import: threading.Thread | None = None
+
+
+def start_display_import() -> threading.Thread:
+    """Import colour-science (the display conversion's library) on a thread, once per process; the
+    thread is returned (finished when the import is done). The window starts it first thing."""
+    global _display_import
+    if _display_import is None:
+        _display_import = threading.Thread(target=_import_colour, daemon=True, name="gratnet-import-colour")
+        _display_import.start()
+    return _display_import
+
+
+def _import_colour() -> None:
+    """``import colour`` without its plotting subpackage: the package's ``__init__`` imports
+    ``colour.plotting`` and with it matplotlib, 1.5 s of the 1.7 s import on this machine, on the way to the
+    first picture; the viewer never plots. A placeholder module stands in for ``colour.plotting`` during
+    the import only (a later ``import colour.plotting`` imports the real one)."""
+    if "colour" in sys.modules:
+        return
+    placeholder = types.ModuleType("colour.plotting")
+    sys.modules.setdefault("colour.plotting", placeholder)
+    try:
+        importlib.import_module("colour")
+    finally:
+        if sys.modules.get("colour.plotting") is placeholder:
+            del sys.modules["colour.plotting"]
+
+
+def check_mesh_spec(spec: str) -> None:
+    """The cheap checks of ``build_mesh`` (a built-in name, or an existing .obj file), without building it."""
+    if spec in MESHES:
+        return
+    path = Path(spec).expanduser()
+    if path.suffix.lower() != ".obj":
+        raise GratNetError(f"unknown mesh {spec!r}: choose {', '.join(MESHES)} or the path of a Wavefront .obj file")
+    if not path.is_file():
+        raise GratNetError(f"mesh file {spec} does not exist")
+
+
+class SceneSupply:
+    """Renderers and meshes for the viewer (see the module docstring).
+
+    Args:
+        ctx: the window's (or a headless) OpenGL ≥ 4.3 context; every GL call is made on its thread.
+        weights_path: ``auto``, ``texture`` or ``baked`` (:func:`viewer.renderer.choose_weights_path`).
+        background: compile and load off the caller's thread (see the module docstring).
+        worker: a child already warming the first material's programs (:meth:`start_worker`, called
+            before the window and its context exist, so that the compile starts at once); adopted when the
+            first material selected is its model, else stopped.
+    """
+
+    def __init__(self, ctx: Any, weights_path: str = "auto", background: bool = False,
+                 worker: CompileWorker | None = None) -> None:
+        from viewer.renderer import WEIGHTS_PATHS
+
+        if weights_path not in WEIGHTS_PATHS:
+            raise GratNetError(f"weights path must be one of {', '.join(WEIGHTS_PATHS)}, got {weights_path!r}")
+        self.ctx = ctx
+        self.weights_path = weights_path
+        self.background = background
+        #: Problems found in the background (a mesh that failed to load, a failed child), for the panel.
+        self.errors: dict[str, str] = {}
+        self._models: dict[str, Any] = {}
+        self._material: str | None = None
+        self._paths: tuple[str, ...] = ()  # the material's weights paths, slowest first
+        self._scenes: dict[str, Any] = {}  # weights path -> SceneRenderer of _material
+        self._linked: set[tuple[str, str]] = set()  # (path, group) linked in this context
+        self._active: set[tuple[str, str]] = set()  # ... and drawn once: ready to render
+        self._worker: CompileWorker | None = None
+        self._prestarted = worker
+        #: ``time.perf_counter()`` when the colour-science import was first seen finished.
+        self.display_ready_at: float | None = None
+        self._meshes: dict[str, Any] = {}  # mesh key -> Mesh, or Future of one
+        self._buffers: dict[tuple[str, str], Any] = {}  # (path, mesh key) -> MeshBuffers
+        self._executor = ThreadPoolExecutor(1, thread_name_prefix="gratnet-mesh") if background else None
+        self._display_import: threading.Thread | None = None
+        if background:  # colour-science takes ~0.5 s to import even without plotting: not on this thread
+            self._display_import = start_display_import()
+        else:
+            importlib.import_module("colour")
+
+    @staticmethod
+    def start_worker(state: Any, weights_path: str = "auto") -> CompileWorker | None:
+        """A child warming ``state``'s material (``None`` when Mesa's shader cache is off), started before
+        any context exists: the quick texture path first, then what ``weights_path`` picks there."""
+        if not shader_cache_enabled():
+            return None
+        paths = ("texture", weights_path) if weights_path == "auto" else (weights_path,)
+        groups = ("slice", "surface") if state.slice_mode else GROUPS
+        return CompileWorker(resolve_material(state.material), paths, groups, state.material)
+
+    # -- checks (cheap, on the caller's thread) ----------------------------------------------------
+
+    def model(self, material: str) -> Any:
+        """The material's model (loaded once; ~10 ms for a shipped one)."""
+        from gratnet.modelfile import load_model
+
+        if material not in self._models:
+            self._models[material] = load_model(resolve_material(material))
+        return self._models[material]
+
+    def check(self, state: Any) -> None:
+        """Raise GratNetError if ``state``'s material or mesh cannot be used; in blocking mode also load
+        and compile everything it needs now."""
+        self.model(state.material)
+        check_mesh_spec(state.mesh)
+        if not self.background:
+            self.scene(state)
+
+    # -- progress (never blocks in background mode) ------------------------------------------------
+
+    def _select(self, state: Any) -> None:
+        """Hold the scenes of ``state.material`` (dropping another material's) and start its worker."""
+        if state.material == self._material:
+            return
+        self._release_scenes()
+        self._material = state.material
+        model = self.model(state.material)
+        from viewer.renderer import choose_weights_path
+
+        target = choose_weights_path(self.ctx, model, self.weights_path)
+        quick_first = self.background and self.weights_path == "auto" and target != "texture"
+        self._paths = ("texture", target) if quick_first else (target,)
+        if not self.background:
+            return
+        prestarted, self._prestarted = self._prestarted, None
+        if shader_cache_enabled():
+            model_path = resolve_material(state.material)
+            if prestarted is not None and prestarted.model_path == model_path:
+                self._worker, prestarted = prestarted, None
+            else:
+                groups = ("slice", "surface") if state.slice_mode else GROUPS
+                # The window is on screen: the child yields the CPU to it (the first child, started before
+                # the window shows, runs at full priority).
+                self._worker = CompileWorker(model_path, self._paths, groups, state.material, niceness=5)
+        if prestarted is not None:
+            prestarted.close()
+        if self._worker is None:  # a child's compile would not spare ours: the first path only, compiled here
+            self._paths = self._paths[:1]
+
+    def _ready(self, path: str, group: str) -> bool:
+        """Whether the program group can be linked here without a long compile."""
+        if not self.background:
+            return True
+        if self._worker is None:  # no disk cache, or the child failed: the first path, compiled here
+            return path == self._paths[0]
+        return (path, group) in self._worker.ready
+
+    def poll(self, state: Any, idle: bool = True) -> str | None:
+        """Advance the background work by one GL step if one is due, each a cache hit: ``"linked"`` (a
+        program linked; the baked one takes 0.11–0.15 s), ``"drawn"`` (its first 1×1 draw) or ``"took
+        over"`` (that, and a faster path now renders ``state``); ``None``: nothing was due. Steps towards a
+        faster path while a picture is already on show wait for ``idle`` (no input lately): an input that
+        arrives during such a link is then unlikely."""
+        self._select(state)
+        if not self.background:
+            return None
+        worker = self._worker
+        if worker is not None:
+            worker.poll()
+            if worker.error is not None and "worker" not in self.errors:
+                self.errors["worker"] = f"the background compile failed ({worker.error}); compiling in the window"
+                self._worker = None  # fall back: the first path, compiled here
+                self._paths = self._paths[:1]
+                worker.close()
+            elif worker.finished and not worker.running:  # its context chose otherwise: keep what it made
+                made = tuple(path for path in self._paths if any((path, g) in worker.ready for g in GROUPS))
+                self._paths = made or self._paths[:1]
+        self._collect_meshes()
+        if not self.display_ready():
+            return None
+        if self.display_ready_at is None:
+            self.display_ready_at = time.perf_counter()
+        group = _group(state)
+        best = self._best_active(group)
+        for path in reversed(self._paths):
+            if best is not None and (not idle or _SPEED_ORDER.index(path) <= _SPEED_ORDER.index(best)):
+                break
+            if not self._ready(path, group):
+                continue
+            if (path, group) not in self._linked:
+                self._link(path, group)
+                return "linked"
+            self._first_draw(path, group)
+            return "took over" if best is not None else "drawn"
+        return None
+
+    def step_due(self, state: Any, idle: bool = True) -> bool:
+        """Whether :meth:`poll` (with the same ``idle``) has a GL step to do for ``state`` right now."""
+        if not self.background or state.material != self._material or not self.display_ready():
+            return False
+        if self._worker is not None:
+            self._worker.poll()
+        best = self._best_active(_group(state))
+        for path in reversed(self._paths):
+            if best is not None and (not idle or _SPEED_ORDER.index(path) <= _SPEED_ORDER.index(best)):
+                return False
+            if self._ready(path, _group(state)):
+                return True
+        return False
+
+    def pending(self, state: Any) -> bool:
+        """Whether something is still on its way for ``state`` (so the caller should poll again soon)."""
+        if not self.background:
+            return False
+        if self._display_import is not None and self._display_import.is_alive():
+            return True
+        key = _mesh_key(state.mesh, False)
+        if not state.slice_mode and isinstance(self._meshes.get(key), Future):
+            return True
+        group = _group(state)
+        return state.material != self._material or self._best_active(group) != self._paths[-1]
+
+    def status(self, state: Any) -> str:
+        """A line for the panel: what is being compiled or loaded for ``state`` (empty when nothing is).
+        Three dots, not an ellipsis: imgui's default font has no U+2026."""
+        if not self.background or state.material != self._material:
+            return ""
+        worker = self._worker
+        elapsed = f"{worker.elapsed():.0f} s" if worker is not None else ""
+        group = _group(state)
+        best = self._best_active(group)
+        if best is None:
+            return f"compiling the shader for {state.material}... {elapsed}".rstrip()
+        if best != self._paths[-1]:
+            faster = self._paths[-1]
+            return f"compiling the faster ({faster}) shader for {state.material}... {elapsed} (showing the {best} path)"
+        if not state.slice_mode and isinstance(self._meshes.get(_mesh_key(state.mesh, False)), Future):
+            return f"loading the mesh {state.mesh}..."
+        return ""
+
+    def display_ready(self) -> bool:
+        """Whether colour-science is imported (the thread that imports it has finished)."""
+        return self._display_import is None or not self._display_import.is_alive()
+
+    def weights_path_in_use(self, state: Any) -> str | None:
+        """The weights path that renders ``state`` now (``None``: nothing ready yet)."""
+        if state.material != self._material:
+            return None
+        return self._best_active(_group(state))
+
+    def _best_active(self, group: str) -> str | None:
+        for path in reversed(self._paths):
+            if (path, group) in self._active:
+                return path
+        return None
+
+    def _scene_for(self, path: str) -> Any:
+        from viewer.scene import SceneRenderer
+
+        if path not in self._scenes:
+            source = self._worker.baked_source if (self._worker is not None and path == "baked") else None
+            self._scenes[path] = SceneRenderer(self.ctx, self.model(self._material or ""), weights_path=path,
+                                               baked_source=source)
+        return self._scenes[path]
+
+    def _link(self, path: str, group: str) -> None:
+        network = self._scene_for(path).network
+        if group == "slice":
+            network.program("brdf_slice")
+        else:
+            network.program("surface")
+            network.depth_only_program("surface")
+        self._linked.add((path, group))
+
+    def _first_draw(self, path: str, group: str) -> None:
+        warm_group(self._scenes[path], group)  # llvmpipe compiles (here: loads) the draw code at the first draw
+        self._active.add((path, group))
+
+    # -- what renders ------------------------------------------------------------------------------
+
+    def scene(self, state: Any, preview: bool = False) -> tuple[Any, Any] | None:
+        """``(SceneRenderer, MeshBuffers or None in slice mode)`` for ``state`` (with ``preview``: the mesh's
+        coarser preview tessellation where it has one), or ``None`` while they are not ready (background)."""
+        self._select(state)
+        group = _group(state)
+        if not self.background and (self._paths[-1], group) not in self._active:
+            self._link(self._paths[-1], group)
+            self._first_draw(self._paths[-1], group)
+        path = self._best_active(group)
+        if path is None:
+            return None
+        scene = self._scenes[path]
+        if state.slice_mode:
+            return scene, None
+        key = _mesh_key(state.mesh, preview)
+        mesh = self._mesh(key)
+        if mesh is None:
+            if not preview:
+                return None
+            key = _mesh_key(state.mesh, False)  # no preview tessellation yet: the full mesh will do
+            mesh = self._mesh(key)
+            if mesh is None:
+                return None
+        if (path, key) not in self._buffers:
+            self._buffers[(path, key)] = scene.upload(mesh)
+        return scene, self._buffers[(path, key)]
+
+    def scene_ready(self, state: Any, preview: bool = True) -> bool:
+        """Whether :meth:`scene` (with ``preview``) has something for ``state`` now (always, when not in
+        the background). Asks for both tessellations of the mesh, so that the full one is built meanwhile."""
+        if not self.background:
+            return True
+        if state.material != self._material or self._best_active(_group(state)) is None:
+            return False
+        if state.slice_mode:
+            return True
+        full = self._mesh(state.mesh) is not None
+        return full or (preview and self._mesh(_mesh_key(state.mesh, True)) is not None)
+
+    def _mesh(self, key: str) -> Any:
+        """The CPU mesh for ``key`` (built now in blocking mode; on the thread in background mode)."""
+        entry = self._meshes.get(key)
+        if entry is None:
+            build = _mesh_builder(key)
+            if self._executor is None:
+                entry = self._meshes[key] = build()
+            else:
+                entry = self._meshes[key] = self._executor.submit(build)
+        if isinstance(entry, Future):
+            if not entry.done():
+                return None
+            entry = self._collect(key, entry)
+        return entry
+
+    def _collect(self, key: str, future: Future) -> Any:
+        try:
+            mesh = self._meshes[key] = future.result()
+        except GratNetError as error:
+            del self._meshes[key]
+            self.errors[f"mesh {key}"] = str(error)
+            return None
+        return mesh
+
+    def _collect_meshes(self) -> None:
+        for key, entry in list(self._meshes.items()):
+            if isinstance(entry, Future) and entry.done():
+                self._collect(key, entry)
+
+    def mesh_error(self, spec: str) -> str | None:
+        """The error of a mesh that failed to load in the background (taken: reported once)."""
+        return self.errors.pop(f"mesh {spec}", None) or self.errors.pop(f"mesh {spec} (preview)", None)
+
+    # -- teardown ----------------------------------------------------------------------------------
+
+    def _release_scenes(self) -> None:
+        if self._worker is not None:
+            self._worker.close()
+            self._worker = None
+        for buffers in self._buffers.values():
+            buffers.release()
+        self._buffers.clear()
+        for scene in self._scenes.values():
+            scene.release()
+        self._scenes.clear()
+        self._linked.clear()
+        self._active.clear()
+        self._material = None
+
+    def release(self) -> None:
+        """Stop the worker and free the GL objects (the context belongs to the caller)."""
+        self._release_scenes()
+        if self._prestarted is not None:
+            self._prestarted.close()
+            self._prestarted = None
+        if self._executor is not None:
+            self._executor.shutdown(wait=False, cancel_futures=True)
+
+
+def _group(state: Any) -> str:
+    return "slice" if state.slice_mode else "surface"
+
+
+def _mesh_key(spec: str, preview: bool) -> str:
+    return f"{spec} (preview)" if preview and spec in PREVIEW_MESHES else spec
+
+
+def _mesh_builder(key: str) -> Callable[[], Any]:
+    if key.endswith(" (preview)"):
+        return PREVIEW_MESHES[key.removesuffix(" (preview)")]
+    return lambda: build_mesh(key)
