@@ -10,7 +10,8 @@ set -euo pipefail
 cd "$(dirname "$0")/.."
 
 # libllvm19: Dr.Jit (Mitsuba 3's llvm variants) aborts on Debian 12's default LLVM 14/15 ("Cannot select: fmaximum").
-debian_packages=(libegl1 libegl-mesa0 libgbm1 libgl1 libgl1-mesa-dri xvfb libllvm19)
+# libxtst6: the viewer's latency test moves the real X pointer (XTest).
+debian_packages=(libegl1 libegl-mesa0 libgbm1 libgl1 libgl1-mesa-dri xvfb libxtst6 libllvm19)
 if command -v apt-get >/dev/null 2>&1 && [ "$(id -u)" = 0 ]; then
     missing=()
     for package in "${debian_packages[@]}"; do
