@@ -7,8 +7,8 @@ session and prints one JSON object:
    caller's ``time.perf_counter()`` just before it started this process; default: this script's start)
    to the swap of the first frame that shows a picture;
 2. ``--interact-s`` seconds of frames while the background compile runs;
-3. a material switch to ``--switch-to`` (as the panel's combo does: ``app.set``), frames until its picture
-   is on show and, with ``--takeover``, until the faster (baked) path renders it;
+3. a material switch to ``--switch-to`` (as the panel's combo does: ``app.switch``, which also brings that
+   material's default view), frames until its picture is on show and, with ``--takeover``, until the faster (baked) path renders it;
 4. a switch to the BRDF slice, frames until the slice is on show.
 
 Every frame's work (``stats.last_frame_s``: from the end of the wait for input to the buffer swap) is
@@ -216,7 +216,7 @@ def main(argv: list[str] | None = None) -> int:
         session.run_until(lambda: False, arguments.interact_s)
 
         session.phase = "material switch"
-        app.set(material=arguments.switch_to)
+        app.switch(material=arguments.switch_to)
         report["switch_picture_s"] = session.run_until(
             lambda: app.image is not None and app.image.key[0] == arguments.switch_to, arguments.timeout_s)
         if arguments.takeover:
@@ -224,7 +224,7 @@ def main(argv: list[str] | None = None) -> int:
                                                      and app.stats.weights_path == "baked", arguments.timeout_s)
 
         session.phase = "slice switch"
-        app.set(slice_mode=True)
+        app.switch(slice_mode=True)
         report["slice_picture_s"] = session.run_until(
             lambda: app.image is not None and app.image.key[11] is True, arguments.timeout_s)
         session.run_until(lambda: False, 1.0)

@@ -208,6 +208,46 @@ def test_state_changes_are_checked_and_clamped(app):
     assert app.state.light_theta == pytest.approx(SLIDERS["light_theta"].maximum - 4.0)
 
 
+def test_a_switch_brings_the_default_view_of_the_new_material_and_mesh(app):
+    """The panel's material / mesh / slice choices go through switch(): the new pair's default view, the
+    one gratnet view and gratnet render start with (viewer.defaults.state_defaults)."""
+    from viewer.defaults import VIEW_FIELDS, state_defaults
+
+    assert app.switch(material="cd", mesh="sphere")
+    wanted = state_defaults("cd", "sphere", False, app.state.fov, app.state.effective_ior)
+    assert {name: getattr(app.state, name) for name in VIEW_FIELDS} == pytest.approx(
+        {name: SLIDERS[name].clamp(value) for name, value in wanted.items()})
+    app.set(exposure=app.state.exposure * 3.0)
+    assert app.switch() is False  # "default view": the same pair's defaults again
+    assert app.state.exposure == pytest.approx(SLIDERS["exposure"].clamp(wanted["exposure"]))
+    assert app.switch(material="no-such-material") is False and "unknown material" in app.message
+    with pytest.raises(GratNetError, match="switch"):
+        app.switch(exposure=1.0)
+
+
+def test_a_default_view_worked_out_in_the_background_yields_to_the_user():
+    """In the window's background mode the defaults come from a thread; a user who moves the light,
+    camera or exposure (or switches again) before they arrive keeps their choice."""
+    from viewer.defaults import DefaultViewRequests, state_defaults
+
+    requests = DefaultViewRequests(background=True)
+    try:
+        state = ViewerState(material="blazed", mesh="plane")
+        requests.request(state)
+        deadline = time.monotonic() + 60.0
+        while requests.pending and time.monotonic() < deadline:
+            time.sleep(0.01)
+        assert requests.take(state) == state_defaults("blazed", "plane", False, state.fov, state.effective_ior)
+        assert requests.take(state) is None  # handed over once
+        requests.request(state)
+        moved = ViewerState(material="blazed", mesh="plane", light_theta=state.light_theta + 5.0)
+        while requests.pending and time.monotonic() < deadline:
+            time.sleep(0.01)
+        assert requests.take(moved) is None
+    finally:
+        requests.release()
+
+
 def test_screenshot_is_full_resolution_png_with_its_render_config(app, tmp_path):
     app.frame()  # only a preview so far: the screenshot renders the full picture itself
     path = app.save_screenshot(app.next_screenshot_path(tmp_path))

@@ -62,7 +62,7 @@ import numpy as np
 
 from gratnet.errors import GratNetError
 from viewer.camera import Camera, Light
-from viewer.defaults import FALLBACK, FOV_DEGREES
+from viewer.defaults import FALLBACK, FOV_DEGREES, DefaultViewRequests
 from viewer.render_cli import MESHES, RenderConfig, resolve_material, shipped_materials
 
 __all__ = [
@@ -335,6 +335,9 @@ class ViewerApp:
         self.meshes = list(MESHES) + [spec for spec in extra_meshes if spec not in MESHES]
         self.weights_path = weights_path
         self._supply = SceneSupply(ctx, weights_path, background, worker)
+        # A switch of material, mesh or mode brings that pair's default view (viewer.defaults), worked out off
+        # the window's thread in the background mode.
+        self._defaults = DefaultViewRequests(background)
         self._last_mesh = self.state.mesh  # the last mesh that loaded (restored if a newer one fails)
         # Per material and mesh: measured seconds per "effective pixel" (covered + 5 % of uncovered).
         self._seconds_per_pixel: dict[tuple[Any, ...], float] = {}
@@ -394,6 +397,21 @@ class ViewerApp:
         self.state = new
         return True
 
+    def switch(self, **changes: Any) -> bool:
+        """The panel's material, mesh and BRDF-slice choices: :meth:`set` them, then bring the new pair's
+        default view (light, camera, exposure: what ``gratnet view`` and ``gratnet render`` start with) as
+        soon as it is worked out, unless the user moves those first. With no arguments: the default view
+        of what is on show. Returns whether the material, mesh or mode changed."""
+        unknown = set(changes) - {"material", "mesh", "slice_mode"}
+        if unknown:
+            raise GratNetError(f"switch() takes material, mesh and slice_mode, not {', '.join(sorted(unknown))}")
+        changed = self.set(**changes) if changes else False
+        if changed or not changes:
+            self._defaults.request(self.state)
+            if (ready := self._defaults.take(self.state)) is not None:  # computed at once (blocking mode)
+                self.set(**ready)
+        return changed
+
     def set_size(self, size: tuple[int, int]) -> bool:
         """Change the full render size (the window's render area); returns whether it changed."""
         from viewer.scene import check_size
@@ -436,7 +454,7 @@ class ViewerApp:
         if image is not None and image.key == key and image.complete:
             if self._supply.step_due(self.state, self._idle()):
                 return 0.0
-            return self.POLL_SECONDS if self._supply.pending(self.state) else None
+            return self.POLL_SECONDS if self._supply.pending(self.state) or self._defaults.pending else None
         if self._supply.step_due(self.state, self._idle()):
             return 0.0  # a warm program to link or draw: the next frame does it
         if not self._supply.scene_ready(self.state):
@@ -456,6 +474,8 @@ class ViewerApp:
         - picture complete and current → nothing.
         """
         now = self.clock() if now is None else float(now)
+        if (ready := self._defaults.take(self.state)) is not None:  # a default view asked for by switch()
+            self.set(**ready)
         step = self._supply.poll(self.state, self._idle(now))  # background: at most one GL step (a cache hit)
         self._check_background_errors()
         if step is not None:
@@ -491,7 +511,11 @@ class ViewerApp:
     def status(self) -> str:
         """What is being compiled or loaded for the state on show ("compiling the shader for cd… 12 s"),
         or an empty string."""
-        return self._supply.status(self.state)
+        status = self._supply.status(self.state)
+        if self._defaults.pending:
+            choosing = f"choosing a view that shows {self.state.material}..."
+            status = f"{choosing} {status}" if status else choosing
+        return status
 
     def weights_path_in_use(self) -> str | None:
         """The weights path that renders the current state (``None``: none ready yet)."""
@@ -679,6 +703,7 @@ class ViewerApp:
     def release(self) -> None:
         """Free the GL objects and stop background work (the context belongs to the caller)."""
         if not self._released:
+            self._defaults.release()
             self._supply.release()
             self._released = True
 
@@ -1050,13 +1075,16 @@ class ViewerWindow:
             materials.append(state.material)
         changed, index = imgui.combo("material", materials.index(state.material), materials)
         if changed:
-            app.set(material=materials[index])
+            app.switch(material=materials[index])
         changed, index = imgui.combo("mesh", app.meshes.index(state.mesh), app.meshes)
         if changed:
-            app.set(mesh=app.meshes[index])
+            app.switch(mesh=app.meshes[index])
         changed, value = imgui.checkbox("BRDF slice", state.slice_mode)
         if changed:
-            app.set(slice_mode=value)
+            app.switch(slice_mode=value)
+        imgui.same_line()
+        if imgui.button("default view"):  # the light, camera and exposure that show this material's diffraction
+            app.switch()
 
         imgui.separator_text("light")
         self._slider("light_theta")

@@ -64,6 +64,8 @@ if TYPE_CHECKING:  # the heavy imports wait until a default is computed: `gratne
 __all__ = [
     "CAMERA_AZIMUTH_DEGREES",
     "FALLBACK",
+    "VIEW_FIELDS",
+    "DefaultViewRequests",
     "FOV_DEGREES",
     "SceneDefaults",
     "black_picture_hint",
@@ -528,6 +530,74 @@ def switch_changes(state: Any, material: str | None = None, mesh: str | None = N
     except GratNetError:
         pass
     return changes
+
+
+#: The viewer fields a default view sets (ViewerState names).
+VIEW_FIELDS = ("light_theta", "light_phi", "camera_distance", "camera_azimuth", "camera_elevation", "exposure")
+
+
+class DefaultViewRequests:
+    """The viewer's default view for its material, mesh and mode, worked out off the window's thread.
+
+    :func:`state_defaults` costs about 0.5 s of numpy the first time for a pair (cached after), far over a
+    frame's budget; with ``background`` it runs on one worker thread and :meth:`take` hands the result
+    over once it is ready. A result is dropped when the user has moved the light, camera or exposure,
+    or switched again, since it was asked for: their choice wins.
+    """
+
+    def __init__(self, background: bool) -> None:
+        from concurrent.futures import ThreadPoolExecutor
+
+        self._executor = ThreadPoolExecutor(1, thread_name_prefix="gratnet-defaults") if background else None
+        self._pending: tuple[Any, tuple[Any, ...], Any] | None = None  # (future or result, asked-for key, view)
+
+    @staticmethod
+    def _key(state: Any) -> tuple[Any, ...]:
+        return state.material, state.mesh, state.slice_mode, state.fov, state.effective_ior
+
+    @staticmethod
+    def _view(state: Any) -> tuple[float, ...]:
+        return tuple(getattr(state, name) for name in VIEW_FIELDS)
+
+    def request(self, state: Any) -> None:
+        """Ask for the default view of ``state``'s material, mesh and mode (replaces an earlier request)."""
+        key = self._key(state)
+        if self._executor is None:
+            try:
+                result: Any = state_defaults(*key)
+            except GratNetError:
+                result = None
+        else:
+            result = self._executor.submit(state_defaults, *key)
+        self._pending = (result, key, self._view(state))
+
+    @property
+    def pending(self) -> bool:
+        """Whether a request is still being worked out."""
+        return self._pending is not None and hasattr(self._pending[0], "done") and not self._pending[0].done()
+
+    def take(self, state: Any) -> dict[str, float] | None:
+        """The ``ViewerApp.set(**changes)`` for the last request once it is ready and still wanted, else ``None``."""
+        if self._pending is None:
+            return None
+        result, key, view = self._pending
+        if hasattr(result, "done"):
+            if not result.done():
+                return None
+            try:
+                result = result.result()
+            except GratNetError:
+                result = None  # the viewer reports an unusable material or mesh itself
+        self._pending = None
+        if result is None or self._key(state) != key or self._view(state) != view:
+            return None
+        return result
+
+    def release(self) -> None:
+        """Stop the worker thread (a computation under way finishes in the background and is dropped)."""
+        if self._executor is not None:
+            self._executor.shutdown(wait=False, cancel_futures=True)
+        self._pending = None
 
 
 def black_picture_hint(xyz_exposed: Any, exposure: float) -> tuple[str, float | None] | None:
