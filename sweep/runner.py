@@ -129,7 +129,8 @@ def run_sweep(spec: SweepSpec, address: str | None = None, workers: int | None =
     write_text_atomic(out / "sweep.config.json", json.dumps(spec.to_dict(), indent=1) + "\n")
     if progress:
         print(f"gratnet sweep: {plan.summary()}", file=sys.stderr)
-    owned = not ray.is_initialized()
+    nothing_left = all(state == "done" for state in plan.runs.values())
+    owned = not ray.is_initialized() and not nothing_left
     if owned:
         options: dict[str, Any] = {"include_dashboard": False, "log_to_driver": False, "configure_logging": False}
         if address:
@@ -146,7 +147,7 @@ def run_sweep(spec: SweepSpec, address: str | None = None, workers: int | None =
             raise GratNetError(f"cannot join the Ray cluster at {address}: {error}") from None
     failures: list[str] = []
     try:
-        labels = _submit(ray, spec, plan, out)
+        labels = {} if nothing_left else _submit(ray, spec, plan, out)
         bar = tqdm(total=len(labels), desc="sweep", unit="task", disable=not progress, dynamic_ncols=True)
         pending = list(labels)
         causes: set[str] = set()
