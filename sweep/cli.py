@@ -56,7 +56,12 @@ def run(arguments: argparse.Namespace) -> int:
             print(f"  {plan.runs[run.name]:6s} {run.name}")
         return 0
     import_ray()  # before any work: one line when Ray is missing
-    rows, failures = run_sweep(spec, arguments.address, arguments.workers, progress=not arguments.quiet)
+    try:
+        rows, failures = run_sweep(spec, arguments.address, arguments.workers, progress=not arguments.quiet)
+    except KeyboardInterrupt:
+        print("gratnet sweep: interrupted; finished volumes and runs are kept, and the same command resumes the "
+              "rest (trainings from their last checkpoint)", file=sys.stderr)
+        return 130
     for failure in failures:
         print(f"gratnet sweep: failed: {failure}", file=sys.stderr)
     if rows:

@@ -68,8 +68,12 @@ def plan_sweep(spec: SweepSpec) -> Plan:
 def _submit(ray: Any, spec: SweepSpec, plan: Plan, out: Path) -> dict[Any, str]:
     """Submit every task that is left; returns their refs with a label each."""
     resources = spec.resources
-    gt_options = {"num_cpus": resources.groundtruth_cpus, "num_gpus": resources.groundtruth_gpus}
-    train_options = {"num_cpus": resources.train_cpus, "num_gpus": resources.train_gpus}
+    gt_options: dict[str, Any] = {"num_cpus": resources.groundtruth_cpus}
+    train_options: dict[str, Any] = {"num_cpus": resources.train_cpus, "num_gpus": resources.train_gpus}
+    for options, gigabytes in ((gt_options, resources.groundtruth_memory_gb),
+                               (train_options, resources.train_memory_gb)):
+        if gigabytes > 0:
+            options["memory"] = int(gigabytes * 2**30)
     labels: dict[Any, str] = {}
 
     def task(function: Any, label: str, options: dict[str, Any], *arguments: Any) -> Any:

@@ -19,8 +19,9 @@ GratNetError (the CLI prints one line and exits 2). The resolved grid is a list 
     epochs = 4
     [evaluate]                           # EvaluateConfig fields (size, ior, brdf_slices)
     size = 128
-    [resources]                          # per task: CPUs, GPUs (fractions share one GPU)
+    [resources]                          # per task: CPUs, GPUs (fractions share one GPU), memory
     train_gpus = 0.25
+    groundtruth_memory_gb = 3
 
     [[datasets]]
     generator = "blazed"                 # a built-in generator …
@@ -61,10 +62,11 @@ _NAME = re.compile(r"[A-Za-z0-9][A-Za-z0-9_.+-]*")
 class Resources:
     """Ray resources asked for by each task (a fractional GPU lets several small trainings share one)."""
 
-    groundtruth_cpus: float = 1.0
-    groundtruth_gpus: float = 0.0
-    train_cpus: float = 1.0
-    train_gpus: float = 0.0
+    groundtruth_cpus: float = 1.0  # also the BLAS threads of its products (Ray sets OMP_NUM_THREADS)
+    groundtruth_memory_gb: float = 0.0  # memory reserved per ground-truth task (GiB; 0: none)
+    train_cpus: float = 1.0  # also its torch threads
+    train_gpus: float = 0.0  # a fraction lets several trainings share one GPU (CUDA then, as device auto picks)
+    train_memory_gb: float = 0.0  # memory reserved per training task (GiB; 0: none)
 
     def __post_init__(self) -> None:
         for field in dataclasses.fields(self):
