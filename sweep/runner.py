@@ -141,6 +141,8 @@ def run_sweep(spec: SweepSpec, address: str | None = None, workers: int | None =
             options["address"] = address
         else:
             options["num_cpus"] = workers or os.cpu_count() or 1
+            # A private instance reports no usage statistics (and tries no network beyond loopback for them).
+            os.environ.setdefault("RAY_USAGE_STATS_ENABLED", "0")
             # Workers of a local instance import gratnet, trainer and sweep from where the driver does.
             root = str(Path(__file__).resolve().parents[1])
             path = os.pathsep.join(filter(None, [root, os.environ.get("PYTHONPATH")]))

@@ -8,7 +8,7 @@ GratNetError (the CLI prints one line and exits 2). The resolved grid is a list 
 
     presets = ["tiny", "small"]          # network sizes (trainer/model.py PRESETS)
     seeds = [0, 1]
-    out = "out/sweep"                    # results folder (the CLI's --out wins)
+    out = "out/sweep"                    # results folder, from the current folder (the CLI's --out wins)
 
     [groundtruth]                        # VolumeConfig + OpticsConfig fields, for every dataset
     resolution = 257
@@ -28,13 +28,16 @@ GratNetError (the CLI prints one line and exits 2). The resolved grid is a list 
     params = { period_um = 2.5 }         # … with parameter overrides
     [[datasets]]
     name = "scan"
-    file = "scans/patch.gsf"             # … or a height-field file
+    file = "scans/patch.gsf"             # … or a height-field file (relative to the sweep file's folder)
     load = { dx_um = 0.1 }               # LoadOptions for the file
     groundtruth = { resolution = 513, parts = 4 }   # per-dataset ground-truth overrides
 
     [[variants]]                         # training-option axis (default: one variant, "base")
     name = "long"
     epochs = 12
+
+    [bench]                              # optional: gratnet bench's frame-time measurement of every model
+    sizes = "512"
 """
 
 from __future__ import annotations

@@ -235,3 +235,27 @@ def test_without_ray_only_the_sweep_itself_is_refused(tmp_path, capsys, monkeypa
     stderr = capsys.readouterr().err
     assert "pip install 'gratnet[sweep]'" in stderr and len(stderr.strip().splitlines()) == 1
     assert not (tmp_path / "out").exists()
+
+
+def test_bench_table_measures_every_finished_model(swept):
+    """[bench]: gratnet bench's frame time against error, for the sweep's models (texture path, 16² frames)."""
+    import dataclasses
+
+    from gratnet.errors import GratNetError
+    from sweep.runner import collect_rows, run_bench
+    from sweep.spec import load_sweep
+    from trainer.bench import BenchConfig
+
+    spec = load_sweep(swept / "tiny.toml", swept / "out")
+    spec = dataclasses.replace(spec, bench=BenchConfig(sizes="16", weights_paths="texture", repeats=1,
+                                                       torch_devices="cpu"))
+    rows = collect_rows(spec)
+    try:
+        run_bench(spec, rows, progress=False)
+    except GratNetError as error:
+        pytest.skip(f"no headless OpenGL context: {error}")
+    results = json.loads((swept / "out" / "bench" / "bench.json").read_text())
+    assert sorted(result["model"] for result in results) == sorted(row["run"] for row in rows)
+    assert all(result["flip_mean"] == next(row["flip_mean"] for row in rows if row["run"] == result["model"])
+               for result in results)
+    assert (swept / "out" / "bench" / "pareto.png").is_file()
