@@ -1,10 +1,11 @@
 """Wall time of a small ``gratnet sweep`` on a local Ray instance with 1 and 2 workers, and the split ground
 truth's agreement with the unsplit one.
 
-1. The same sweep (written to OUT/small.toml: two datasets × two presets × two seeds, 129² volumes of 11
-   slices, 41 wavelengths, 2 epochs, 64² evaluation slices) run from scratch with ``--workers 1`` and
+1. The same sweep (written to OUT/small.toml: two datasets × three presets × two seeds, 129² volumes of 11
+   slices, 41 wavelengths, 4 epochs, 64² evaluation slices) run from scratch with ``--workers 1`` and
    ``--workers 2`` into separate folders; wall time of the whole command (Ray start-up included), and
-   whether both tables hold the same numbers (timings aside).
+   whether both tables hold the same numbers (timings aside); with the machine's load average (other jobs
+   on the same cores lengthen every figure) and the sum of the runs' own seconds.
 2. One volume (default 257² × 11, 81 wavelengths, the CD) computed whole as one Ray task and as 4
    wavelength blocks (sweep.tasks.volume_part, the sweep's own task) on a local Ray instance of 2 workers;
    wall times, and the largest relative difference between the two (bit-for-bit or ≤ 1e-6 expected).
@@ -20,13 +21,14 @@ from __future__ import annotations
 
 import argparse
 import json
+import os
 import subprocess
 import sys
 import time
 from pathlib import Path
 
 SMALL = """
-presets = ["tiny", "small"]
+presets = ["tiny", "small", "medium"]
 seeds = [0, 1]
 
 [groundtruth]
@@ -36,7 +38,7 @@ sigma_s_um = 4.0
 wavelength_step_nm = 10.0
 
 [train]
-epochs = 2
+epochs = 4
 batch_size = 8192
 
 [evaluate]
@@ -61,6 +63,8 @@ def sweep_wall_time(folder: Path, workers: int) -> dict:
     seconds = time.perf_counter() - started
     rows = json.loads((out / "results.json").read_text())
     return {"measurement": "sweep wall time", "workers": workers, "runs": len(rows), "seconds": round(seconds, 1),
+            "sum_of_run_seconds": round(sum(row["run_seconds"] for row in rows), 1),
+            "load_average_1min_after": round(os.getloadavg()[0], 2),
             "rows": [{key: value for key, value in row.items() if key not in TIMINGS} for row in rows]}
 
 

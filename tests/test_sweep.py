@@ -137,7 +137,14 @@ def test_finished_runs_are_skipped_and_an_interrupted_one_resumes(swept, capsys)
     checkpoint = (interrupted / "checkpoint.pt").stat().st_mtime_ns
     assert main(["sweep", str(swept / "tiny.toml"), "--out", str(swept / "out"), "--dry-run"]) == 0
     assert "resume sine-tiny-base-s1" in capsys.readouterr().out
-    assert main(["sweep", str(swept / "tiny.toml"), "--out", str(swept / "out"), "--workers", "2", "--quiet"]) == 0
+    # With a dataset whose ground truth fails in its task: reported (exit 1), the other work goes on.
+    broken = TINY + '[[datasets]]\nname = "broken"\ngenerator = "blazed"\ngroundtruth = { sigma_s_um = 1000.0 }\n'
+    (swept / "broken.toml").write_text(broken)
+    assert main(["sweep", str(swept / "broken.toml"), "--out", str(swept / "out"), "--workers", "2", "--quiet"]) == 1
+    stderr = capsys.readouterr().err
+    assert "failed: broken: ground truth: " in stderr and "max_grid_samples" in stderr
+    assert "more tasks failed with one of these errors" in stderr  # its BRDF slices and runs
+    assert not (swept / "out" / "runs" / "broken-tiny-base-s0" / "model.npz").exists()
     # Resumed, not retrained: the checkpoint (rewritten after every epoch) was only read.
     assert (interrupted / "checkpoint.pt").stat().st_mtime_ns == checkpoint
     others = {path: time for path, time in before.items() if path.parent != interrupted}
