@@ -100,7 +100,7 @@ def split_agreement(generator: str, resolution: int, slices: int, parts: int, wo
         part = ray.remote(tasks.volume_part).options(num_cpus=1)
         results = ray.get([part.remote(dataset, surface_ref, block) for block in range(parts)])
         total = results[0][0].copy()
-        for xyz, _ in results[1:]:
+        for xyz, _, _ in results[1:]:
             total += xyz
         split = volume_from_sum(field, config, optics, surface, total, results[0][1])
         split_seconds = time.perf_counter() - started

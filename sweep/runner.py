@@ -15,7 +15,6 @@ import dataclasses
 import json
 import os
 import sys
-import time
 from pathlib import Path
 from typing import Any
 
@@ -75,9 +74,12 @@ def _submit(ray: Any, spec: SweepSpec, plan: Plan, out: Path) -> dict[Any, str]:
         if gigabytes > 0:
             options["memory"] = int(gigabytes * 2**30)
     labels: dict[Any, str] = {}
+    remote: dict[Any, Any] = {}  # one Ray remote function per task function
 
     def task(function: Any, label: str, options: dict[str, Any], *arguments: Any) -> Any:
-        ref = ray.remote(function).options(name=label, **options).remote(*arguments)
+        if function not in remote:
+            remote[function] = ray.remote(function)
+        ref = remote[function].options(name=label, **options).remote(*arguments)
         labels[ref] = label
         return ref
 
@@ -97,7 +99,7 @@ def _submit(ray: Any, spec: SweepSpec, plan: Plan, out: Path) -> dict[Any, str]:
             parts = [task(tasks.volume_part, f"{name}: λ block {block + 1}/{dataset.parts}", gt_options, dataset,
                           surface, block) for block in range(dataset.parts)]
             metadata = task(tasks.assemble_volume, f"{name}: assemble volume", {"num_cpus": 1}, out, dataset,
-                            surface, time.time(), *parts)
+                            surface, *parts)
         dependencies[name] = [metadata]
         evaluate = spec.runs[0].evaluate
         if evaluate.brdf_slices and name in needed:

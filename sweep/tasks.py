@@ -85,12 +85,15 @@ def prepare(dataset: DatasetSpec) -> Any:
     return prepare_surface(load_field(dataset), dataset.optics)
 
 
-def volume_part(dataset: DatasetSpec, surface: Any, block: int) -> tuple[Any, int]:
-    """Block ``block`` of ``dataset.parts``: the float64 XYZ sum over its wavelengths, and the node count."""
+def volume_part(dataset: DatasetSpec, surface: Any, block: int) -> tuple[Any, int, float]:
+    """Block ``block`` of ``dataset.parts``: the float64 XYZ sum over its wavelengths, the node count, and
+    the seconds it took."""
     from trainer.groundtruth import compute_volume_part, wavelength_blocks
 
+    started = time.perf_counter()
     wavelengths = wavelength_blocks(dataset.optics, dataset.parts)[block]
-    return compute_volume_part(surface, dataset.volume, dataset.optics, wavelengths)
+    xyz, nodes = compute_volume_part(surface, dataset.volume, dataset.optics, wavelengths)
+    return xyz, nodes, time.perf_counter() - started
 
 
 def _write_volume(out: Path, dataset: DatasetSpec, volume: Any, seconds: float) -> dict[str, Any]:
@@ -104,16 +107,17 @@ def _write_volume(out: Path, dataset: DatasetSpec, volume: Any, seconds: float) 
     return dict(volume.metadata)
 
 
-def assemble_volume(out: Path, dataset: DatasetSpec, surface: Any, started: float, *parts: tuple[Any, int]
+def assemble_volume(out: Path, dataset: DatasetSpec, surface: Any, *parts: tuple[Any, int, float]
                     ) -> dict[str, Any]:
-    """Add the wavelength blocks' sums (in block order) and write the volume; returns its metadata."""
+    """Add the wavelength blocks' sums (in block order) and write the volume; returns its metadata (its
+    ``compute_seconds``: the blocks' seconds added, as if computed one after another)."""
     from trainer.groundtruth import volume_from_sum
 
     total = parts[0][0].copy()
-    for xyz, _ in parts[1:]:
+    for xyz, _, _ in parts[1:]:
         total += xyz
     volume = volume_from_sum(load_field(dataset), dataset.volume, dataset.optics, surface, total, parts[0][1])
-    return _write_volume(out, dataset, volume, time.time() - started)
+    return _write_volume(out, dataset, volume, sum(part[2] for part in parts))
 
 
 def ground_truth(out: Path, dataset: DatasetSpec) -> dict[str, Any]:
