@@ -1,5 +1,6 @@
 #!/usr/bin/env bash
 # Train the paper's network sizes on one material at one fixed budget, for `gratnet bench`'s error axis.
+# The same grid, with seeds, volume and table, is `gratnet sweep benchmarks/size_sweep.toml` (sweep/, on Ray).
 # Every preset sees the same samples, epochs, schedule and seed; only the hidden widths differ.
 # Usage: bash benchmarks/size_sweep.sh [VOLUME.exr] [OUT_DIR]   (extra train flags via SWEEP_FLAGS="...",
 # e.g. "--seed 1"; a subset of the presets via SWEEP_PRESETS="small paper")

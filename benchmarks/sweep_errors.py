@@ -5,6 +5,9 @@ sizes, MACs per pixel, training samples, epochs, training seconds, mean FLIP ove
 slices, FLIP at (0°, 0°) and mean PSNR (as ``gratnet bench`` reads them).
 
     python benchmarks/sweep_errors.py out/sweep/* out/sweep_seed1/* out/sweep_seed2/* assets/blazed
+
+``gratnet sweep`` writes the same figures for its runs as OUT/results.{csv,md,json} (sweep/tasks.py
+``result_row``); this script remains for run folders made by hand.
 """
 
 from __future__ import annotations

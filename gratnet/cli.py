@@ -29,6 +29,7 @@ SUBCOMMAND_MODULES: dict[str, str] = {
     "view": "viewer.view_cli",
     "bench": "trainer.bench_cli",
     "mitsuba-render": "mitsuba_plugin.render_cli",
+    "sweep": "sweep.cli",
 }
 
 

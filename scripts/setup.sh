@@ -34,5 +34,5 @@ if [ ! -x "$venv/bin/python" ]; then
     python3 -m venv "$venv"
 fi
 echo "setup: installing Python packages into $venv (pip, constraints.txt)"
-"$venv/bin/python" -m pip install -q --disable-pip-version-check -c constraints.txt -e ".[trainer,dev,mitsuba]"
+"$venv/bin/python" -m pip install -q --disable-pip-version-check -c constraints.txt -e ".[trainer,dev,mitsuba,sweep]"
 echo "setup: done; activate with: source $venv/bin/activate"

@@ -8,6 +8,7 @@ pyproject.toml:
 - ``gratnet/`` and ``viewer/`` (the runtime): the core ``dependencies`` only (no torch).
 - ``trainer/`` (the offline stage): core + the ``trainer`` extra.
 - ``mitsuba_plugin/`` (the Mitsuba 3 BSDF and ``gratnet mitsuba-render``): core + the ``mitsuba`` extra.
+- ``sweep/`` (``gratnet sweep`` on Ray, a tool on top of trainer/): core + the ``trainer`` and ``sweep`` extras.
 - ``tests/`` and ``benchmarks/``: core + every extra.
 """
 
@@ -52,6 +53,7 @@ ALLOWED = {
     "viewer": CORE,
     "trainer": CORE | EXTRAS.get("trainer", set()),
     "mitsuba_plugin": CORE | EXTRAS.get("mitsuba", set()),
+    "sweep": CORE | EXTRAS.get("trainer", set()) | EXTRAS.get("sweep", set()),
     "tests": CORE.union(*EXTRAS.values()),
     "benchmarks": CORE.union(*EXTRAS.values()),
 }

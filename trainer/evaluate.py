@@ -16,7 +16,7 @@ from typing import Any
 
 import numpy as np
 
-from gratnet.atomic import make_folder
+from gratnet.atomic import atomic_path, make_folder
 from gratnet.brdf import slice_view_directions
 from gratnet.config import config_field, config_to_dict
 from gratnet.encoding import range_forward
@@ -72,9 +72,9 @@ def ground_truth_brdf_slice(
     if path is not None and path.exists():
         return np.load(path)
     xyz = brdf_slice_xyz(prepare_surface(field, optics), config, optics, progress=progress)
-    if path is not None:
-        path.parent.mkdir(parents=True, exist_ok=True)
-        np.save(path, xyz)
+    if path is not None:  # atomically: workers of a sweep share the cache
+        with atomic_path(path) as temporary:
+            np.save(temporary, xyz)
     return xyz
 
 

@@ -233,13 +233,17 @@ class FTerm:
         v: np.ndarray,
         w_slices: Sequence[float | np.ndarray],
         progress: bool | str = False,
+        wavelengths: Sequence[int] | None = None,
     ) -> np.ndarray:
         """CIE XYZ on the grid u (columns) × v (rows) for each entry of ``w_slices``.
 
         Each entry is a scalar w (the whole slice at one w: exact direct transform) or an array of
         shape (len(v), len(u)) giving w per sample (Chebyshev interpolation in w, shared by all such
         entries). Returns float64 of shape (len(w_slices), len(v), len(u), 3). ``progress`` shows a
-        bar over wavelengths (a string sets its label).
+        bar over wavelengths (a string sets its label). ``wavelengths`` (indices into the spectral
+        samples) sums only those wavelengths' terms: XYZ is a sum over λ, so parts computed apart add
+        up to the whole (the Chebyshev plan still follows the full spectrum, so every part uses the
+        same nodes).
         """
         u = np.asarray(u, dtype=np.float64)
         v = np.asarray(v, dtype=np.float64)
@@ -259,13 +263,14 @@ class FTerm:
             self.tolerance,
         )
         self.last_node_count = interpolation.count if varying else 0
-        wavelengths = self.spectral.wavelengths_um
+        chosen = range(len(self.spectral.wavelengths_um)) if wavelengths is None else list(wavelengths)
         bar = tqdm(
-            total=len(wavelengths), desc=progress if isinstance(progress, str) else "F-term",
+            total=len(chosen), desc=progress if isinstance(progress, str) else "F-term",
             unit="λ", disable=not progress, leave=False,
         )
         with bar:
-            for wavelength, weights in zip(wavelengths, self.spectral.xyz_weights, strict=True):
+            for wavelength, weights in zip(self.spectral.wavelengths_um[chosen], self.spectral.xyz_weights[chosen],
+                                           strict=True):
                 wavenumber = 2.0 * np.pi / wavelength
                 kernel_x = self._kernel(u, self.surface.x_um, self.surface.window_x, wavenumber)
                 kernel_y = self._kernel(v, self.surface.y_um, self.surface.window_y, wavenumber)

@@ -51,6 +51,36 @@ def volume_key_vectors(config: VolumeConfig) -> tuple[np.ndarray, np.ndarray, li
     return u, v, w_slices
 
 
+def wavelength_blocks(optics: OpticsConfig, parts: int) -> list[range]:
+    """The spectral samples of ``optics`` in ``parts`` contiguous blocks of near-equal size (indices).
+
+    A volume is the sum of its blocks' :func:`compute_volume_part` results (XYZ is a sum over λ), so
+    the blocks of one large volume can be computed on different workers and added.
+    """
+    count = len(spectral_weights(optics.wavelength_start_nm, optics.wavelength_end_nm,
+                                 optics.wavelength_step_nm).wavelengths_nm)
+    if not 1 <= parts <= count:
+        raise GratNetError(f"cannot split {count} wavelengths into {parts} blocks (1 … {count})")
+    edges = np.linspace(0, count, parts + 1).round().astype(int)
+    return [range(int(low), int(high)) for low, high in zip(edges[:-1], edges[1:], strict=True)]
+
+
+def compute_volume_part(
+    surface: PreparedSurface,
+    config: VolumeConfig,
+    optics: OpticsConfig,
+    wavelengths: range | None = None,
+    progress: bool = False,
+) -> tuple[np.ndarray, int]:
+    """The float64 XYZ sum (S, R, R, 3) over the spectral samples ``wavelengths`` (all when None), and the
+    Chebyshev node count used; :func:`volume_from_sum` turns the sum of all parts into a volume."""
+    spectral = spectral_weights(optics.wavelength_start_nm, optics.wavelength_end_nm, optics.wavelength_step_nm)
+    u, v, w_slices = volume_key_vectors(config)
+    engine = FTerm(surface, spectral, optics.tolerance)
+    xyz = engine.xyz_grid(u, v, w_slices, progress="ground truth" if progress else False, wavelengths=wavelengths)
+    return xyz, engine.last_node_count
+
+
 def compute_volume(
     field: HeightField,
     config: VolumeConfig,
@@ -61,10 +91,21 @@ def compute_volume(
 ) -> Volume:
     """Sample CIE XYZ(u, v, w) of ``field`` on ``config``'s grid (eq. 1–3 of physics.md)."""
     surface = surface or prepare_surface(field, optics, report)
+    xyz, node_count = compute_volume_part(surface, config, optics, progress=progress)
+    return volume_from_sum(field, config, optics, surface, xyz, node_count)
+
+
+def volume_from_sum(
+    field: HeightField,
+    config: VolumeConfig,
+    optics: OpticsConfig,
+    surface: PreparedSurface,
+    xyz: np.ndarray,
+    node_count: int,
+) -> Volume:
+    """The volume (float32, unreachable samples zeroed, metadata) from the XYZ sum over all wavelengths."""
     spectral = spectral_weights(optics.wavelength_start_nm, optics.wavelength_end_nm, optics.wavelength_step_nm)
     u, v, w_slices = volume_key_vectors(config)
-    engine = FTerm(surface, spectral, optics.tolerance)
-    xyz = engine.xyz_grid(u, v, w_slices, progress="ground truth" if progress else False)
     xyz[:, ~physical_mask(u, v)] = 0.0  # u² + v² > 4: no pair of directions reaches it
     grid_samples = surface.heights_um.shape
     metadata = {
@@ -84,7 +125,7 @@ def compute_volume(
         "wavelengths_nm": [float(x) for x in spectral.wavelengths_nm],
         "illuminant": ILLUMINANT,
         "observer": OBSERVER,
-        "chebyshev_nodes": engine.last_node_count,
+        "chebyshev_nodes": node_count,
         "interpolation_tolerance": optics.tolerance,
         "source": field.source,
         "preparation_notes": list(surface.notes),

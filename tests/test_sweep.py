@@ -1,0 +1,268 @@
+"""``gratnet sweep`` on a local Ray instance (2 workers) against the same runs done one by one without Ray.
+
+A tiny grid (65² volumes of 5 slices, 11 wavelengths, preset tiny, 1 epoch, 32² evaluation slices): two
+datasets × two seeds, one of the datasets' volumes split into three wavelength blocks. The reference runs
+are the ordinary commands (``gratnet groundtruth``, ``gratnet train``) in a fresh process with one thread,
+as each sweep task has (1 CPU). Then: finished runs skipped, an interrupted run resumed from its
+checkpoint, the split ground truth against the unsplit one, and bad sweep files refused up front.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from gratnet.cli import main
+from gratnet.volume import read_volume
+
+REPO = Path(__file__).resolve().parents[1]
+
+TINY = """
+presets = ["tiny"]
+seeds = [0, 1]
+
+[groundtruth]
+resolution = 65
+slices = 5
+sigma_s_um = 3.0
+wavelength_step_nm = 40.0
+
+[train]
+epochs = 1
+test_slices = "2"
+batch_size = 4096
+
+[evaluate]
+size = 32
+
+[resources]
+train_cpus = 1
+
+[[datasets]]
+generator = "blazed"
+params = { size_um = 10.0 }
+
+[[datasets]]
+name = "sine"
+generator = "sinusoidal"
+params = { size_um = 10.0 }
+groundtruth = { parts = 3 }
+"""
+# The same grid as separate commands: dataset -> (height field, ground-truth flags); train flags.
+REFERENCE_DATASETS = {
+    "blazed": "generator:blazed(size_um=10.0)",
+    "sine": "generator:sinusoidal(size_um=10.0)",
+}
+GROUNDTRUTH_FLAGS = ["--res", "65", "--slices", "5", "--sigma-s", "3.0", "--wavelength-step-nm", "40.0", "--quiet"]
+TRAIN_FLAGS = ["--preset", "tiny", "--epochs", "1", "--test-slices", "2", "--batch-size", "4096", "--size", "32",
+               "--quiet"]
+TIMINGS = {"train_seconds", "run_seconds", "model", "run"}
+
+
+@pytest.fixture(scope="module")
+def swept(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """The tiny sweep, run once on a local Ray instance with 2 CPUs."""
+    pytest.importorskip("ray")
+    folder = tmp_path_factory.mktemp("sweep")
+    (folder / "tiny.toml").write_text(TINY)
+    assert main(["sweep", str(folder / "tiny.toml"), "--out", str(folder / "out"), "--workers", "2", "--quiet"]) == 0
+    return folder
+
+
+def _rows(folder: Path) -> dict[str, dict]:
+    return {row["run"]: row for row in json.loads((folder / "out" / "results.json").read_text())}
+
+
+def test_sweep_table_matches_the_runs_done_one_by_one(swept, tmp_path):
+    from sweep.spec import load_sweep
+    from sweep.tasks import result_row
+
+    rows = _rows(swept)
+    assert sorted(rows) == ["blazed-tiny-base-s0", "blazed-tiny-base-s1", "sine-tiny-base-s0", "sine-tiny-base-s1"]
+    text = (swept / "out" / "results.md").read_text()
+    assert all(f"| {name} |" in text for name in rows)
+    assert (swept / "out" / "results.csv").read_text().count("\n") == 5
+    assert (swept / "out" / "pareto.png").stat().st_size > 1000
+    config = json.loads((swept / "out" / "sweep.config.json").read_text())
+    assert [run["name"] for run in config["runs"]] == list(rows)
+
+    # One by one in a fresh process with one thread, as each task has (Ray sets OMP_NUM_THREADS to a task's CPUs;
+    # OpenBLAS's complex products differ in the last bits between thread counts).
+    commands = []
+    for name, heightfield in REFERENCE_DATASETS.items():
+        volume = str(tmp_path / f"{name}.exr")
+        commands.append(["groundtruth", heightfield, "--out", volume, *GROUNDTRUTH_FLAGS])
+        commands += [["train", volume, "--out", str(tmp_path / f"{name}-tiny-base-s{seed}"), "--seed", str(seed),
+                      *TRAIN_FLAGS, "--cache-dir", str(tmp_path / "cache")] for seed in (0, 1)]
+    script = ("import json, sys, torch\nfrom gratnet.cli import main\ntorch.set_num_threads(1)\n"
+              "sys.exit(max(main(command) for command in json.loads(sys.argv[1])))")
+    environment = {**os.environ, "OMP_NUM_THREADS": "1", "OPENBLAS_NUM_THREADS": "1",
+                   "PYTHONPATH": os.pathsep.join(filter(None, [str(REPO), os.environ.get("PYTHONPATH")]))}
+    subprocess.run([sys.executable, "-c", script, json.dumps(commands)], env=environment, check=True,
+                   capture_output=True)
+    spec = load_sweep(swept / "tiny.toml", swept / "out")
+    for name in REFERENCE_DATASETS:
+        # The split volume (sine: three wavelength blocks on different workers) equals the unsplit one.
+        assert np.array_equal(read_volume(tmp_path / f"{name}.exr").xyz,
+                              read_volume(swept / "out" / "volumes" / f"{name}.exr").xyz), name
+    for run in spec.runs:
+        expected = {key: value for key, value in result_row(run, tmp_path / run.name).items() if key not in TIMINGS}
+        got = {key: value for key, value in rows[run.name].items() if key not in TIMINGS}
+        assert got == expected, run.name
+    # The seeds differ (else the comparison above could not tell the runs apart).
+    assert rows["blazed-tiny-base-s0"]["flip_mean"] != rows["blazed-tiny-base-s1"]["flip_mean"]
+
+
+def test_finished_runs_are_skipped_and_an_interrupted_one_resumes(swept, capsys):
+    runs = swept / "out" / "runs"
+    before = {path: path.stat().st_mtime_ns for path in runs.glob("*/result.json")}
+    rows = _rows(swept)
+    # Nothing left: no Ray instance, no task, the same table.
+    assert main(["sweep", str(swept / "tiny.toml"), "--out", str(swept / "out"), "--quiet"]) == 0
+    assert {path: path.stat().st_mtime_ns for path in runs.glob("*/result.json")} == before
+    assert _rows(swept) == rows
+    assert main(["sweep", str(swept / "tiny.toml"), "--out", str(swept / "out"), "--dry-run"]) == 0
+    assert capsys.readouterr().out.count("done ") == 4
+
+    # Interrupted after its last checkpoint, before the model and the evaluation were written.
+    interrupted = runs / "sine-tiny-base-s1"
+    for name in ("result.json", "model.npz", "metrics.json", "history.json"):
+        (interrupted / name).unlink()
+    checkpoint = (interrupted / "checkpoint.pt").stat().st_mtime_ns
+    assert main(["sweep", str(swept / "tiny.toml"), "--out", str(swept / "out"), "--dry-run"]) == 0
+    assert "resume sine-tiny-base-s1" in capsys.readouterr().out
+    # With a dataset whose ground truth fails in its task: reported (exit 1), the other work goes on.
+    broken = TINY + '[[datasets]]\nname = "broken"\ngenerator = "blazed"\ngroundtruth = { sigma_s_um = 1000.0 }\n'
+    (swept / "broken.toml").write_text(broken)
+    assert main(["sweep", str(swept / "broken.toml"), "--out", str(swept / "out"), "--workers", "2", "--quiet"]) == 1
+    stderr = capsys.readouterr().err
+    assert "failed: broken: ground truth: " in stderr and "max_grid_samples" in stderr
+    assert "more tasks failed with one of these errors" in stderr  # its BRDF slices and runs
+    assert not (swept / "out" / "runs" / "broken-tiny-base-s0" / "model.npz").exists()
+    # Resumed, not retrained: the checkpoint (rewritten after every epoch) was only read.
+    assert (interrupted / "checkpoint.pt").stat().st_mtime_ns == checkpoint
+    others = {path: time for path, time in before.items() if path.parent != interrupted}
+    assert {path: path.stat().st_mtime_ns for path in others} == others
+    after = _rows(swept)
+    assert {key: value for key, value in after["sine-tiny-base-s1"].items() if key != "run_seconds"} == \
+        {key: value for key, value in rows["sine-tiny-base-s1"].items() if key != "run_seconds"}
+
+
+@pytest.mark.parametrize("scheme", ["regular", "simple-max"])
+def test_split_ground_truth_agrees_with_the_unsplit_one(scheme):
+    from trainer.fourier import OpticsConfig, prepare_surface
+    from trainer.generators import generate
+    from trainer.groundtruth import (
+        VolumeConfig,
+        compute_volume,
+        compute_volume_part,
+        volume_from_sum,
+        wavelength_blocks,
+    )
+
+    field = generate("blazed", size_um=10.0)
+    optics = OpticsConfig(sigma_s_um=3.0, wavelength_step_nm=40.0)
+    config = VolumeConfig(resolution=33, slices=3, sampling=scheme)
+    whole = compute_volume(field, config, optics, progress=False)
+    surface = prepare_surface(field, optics)
+    blocks = wavelength_blocks(optics, 4)
+    assert [index for block in blocks for index in block] == list(range(11))
+    parts = [compute_volume_part(surface, config, optics, block) for block in blocks]
+    total = parts[0][0] + parts[1][0] + parts[2][0] + parts[3][0]
+    split = volume_from_sum(field, config, optics, surface, total, parts[0][1])
+    assert split.metadata["chebyshev_nodes"] == whole.metadata["chebyshev_nodes"]
+    assert np.max(whole.xyz) > 0.01
+    # Each block alone is a real part of the sum (not the whole, not nothing).
+    assert 0 < np.max(parts[0][0]) < np.max(total)
+    if scheme == "regular":  # one exact transform per slice and wavelength: the same numbers
+        assert np.array_equal(split.xyz, whole.xyz)
+    relative = np.abs(split.xyz - whole.xyz) / np.maximum(np.abs(whole.xyz), 1e-30)
+    assert relative.max() <= 1e-6
+
+
+def _write(tmp_path: Path, text: str) -> str:
+    path = tmp_path / "bad.toml"
+    path.write_text(text)
+    return str(path)
+
+
+DATASET = '[[datasets]]\ngenerator = "blazed"\n'
+BAD_FILES = {
+    "not TOML": ("presets = [tiny", "not valid TOML"),
+    "unknown top-level key": ("epochs = 3\n" + DATASET, "unknown key 'epochs'"),
+    "unknown train key": ("[train]\nepoch = 3\n" + DATASET, "[train]: unknown key 'epoch'"),
+    "preset in train": ("[train]\npreset = \"tiny\"\n" + DATASET, "unknown key 'preset'"),
+    "unknown preset": ('presets = ["huge"]\n' + DATASET, "unknown preset 'huge'"),
+    "unknown generator": ('[[datasets]]\ngenerator = "zebra"\n', "unknown generator 'zebra'"),
+    "unknown generator parameter": (DATASET + "params = { pitch = 2 }\n", "has no parameter 'pitch'"),
+    "bad generator parameter": (DATASET + "params = { size_um = -1.0 }\n", "size_um must be > 0"),
+    "wrong type": ('[groundtruth]\nresolution = "big"\n' + DATASET, "resolution must be a whole number"),
+    "unknown ground-truth key": (DATASET + "groundtruth = { res = 65 }\n", "unknown key 'res'"),
+    "no datasets": ('presets = ["tiny"]\n', "no [[datasets]]"),
+    "missing file": ('[[datasets]]\nfile = "nowhere.gsf"\n', "does not exist"),
+    "generator and file": (DATASET + 'file = "x.gsf"\n', "exactly one of"),
+    "too many parts": ('[groundtruth]\nparts = 500\n' + DATASET, "cannot split 81 wavelengths into 500"),
+    "held-out slice out of range": ('[groundtruth]\nslices = 3\n' + DATASET, "out of range for 3 slices"),
+    "same name twice": (DATASET + DATASET, "share the name 'blazed'"),
+    "negative seed": ("seeds = [-1]\n" + DATASET, "seeds must be ≥ 0"),
+    "negative resources": ("[resources]\ntrain_gpus = -0.5\n" + DATASET, "train_gpus must be a number ≥ 0"),
+    "unknown variant key": (DATASET + '[[variants]]\nname = "x"\nlearnrate = 1\n', "variants[0]: unknown key"),
+}
+
+
+@pytest.mark.parametrize("case", sorted(BAD_FILES))
+def test_bad_sweep_file_is_one_line_exit_2_before_any_work(tmp_path, capsys, case):
+    text, message = BAD_FILES[case]
+    code = main(["sweep", _write(tmp_path, text), "--out", str(tmp_path / "out"), "--quiet"])
+    stderr = capsys.readouterr().err
+    assert code == 2
+    assert message in stderr
+    assert len(stderr.strip().splitlines()) == 1, stderr
+    assert not (tmp_path / "out").exists()
+
+
+def test_a_folder_of_another_configuration_is_refused(swept, tmp_path, capsys):
+    changed = TINY.replace("epochs = 1", "epochs = 2")
+    code = main(["sweep", _write(tmp_path, changed), "--out", str(swept / "out"), "--quiet"])
+    assert code == 2
+    assert "made with a different configuration" in capsys.readouterr().err
+
+
+def test_without_ray_only_the_sweep_itself_is_refused(tmp_path, capsys, monkeypatch):
+    monkeypatch.setitem(sys.modules, "ray", None)  # import ray now raises ImportError
+    path = _write(tmp_path, 'presets = ["tiny"]\n' + DATASET)
+    assert main(["sweep", path, "--out", str(tmp_path / "out"), "--dry-run"]) == 0
+    assert main(["sweep", path, "--out", str(tmp_path / "out")]) == 2
+    stderr = capsys.readouterr().err
+    assert "pip install 'gratnet[sweep]'" in stderr and len(stderr.strip().splitlines()) == 1
+    assert not (tmp_path / "out").exists()
+
+
+def test_bench_table_measures_every_finished_model(swept):
+    """[bench]: gratnet bench's frame time against error, for the sweep's models (texture path, 16² frames)."""
+    import dataclasses
+
+    from gratnet.errors import GratNetError
+    from sweep.runner import collect_rows, run_bench
+    from sweep.spec import load_sweep
+    from trainer.bench import BenchConfig
+
+    spec = load_sweep(swept / "tiny.toml", swept / "out")
+    spec = dataclasses.replace(spec, bench=BenchConfig(sizes="16", weights_paths="texture", repeats=1,
+                                                       torch_devices="cpu"))
+    rows = collect_rows(spec)
+    try:
+        run_bench(spec, rows, progress=False)
+    except GratNetError as error:
+        pytest.skip(f"no headless OpenGL context: {error}")
+    results = json.loads((swept / "out" / "bench" / "bench.json").read_text())
+    assert sorted(result["model"] for result in results) == sorted(row["run"] for row in rows)
+    assert all(result["flip_mean"] == next(row["flip_mean"] for row in rows if row["run"] == result["model"])
+               for result in results)
+    assert (swept / "out" / "bench" / "pareto.png").is_file()
