@@ -8,7 +8,8 @@ session and prints one JSON object:
    to the swap of the first frame that shows a picture;
 2. ``--interact-s`` seconds of frames while the background compile runs;
 3. a material switch to ``--switch-to`` (as the panel's combo does: ``app.switch``, which also brings that
-   material's default view), frames until its picture is on show and, with ``--takeover``, until the faster (baked) path renders it;
+   material's default view), frames until its picture is on show and, with ``--takeover``, until the
+   faster (baked) path renders it;
 4. a switch to the BRDF slice, frames until the slice is on show.
 
 Every frame's work (``stats.last_frame_s``: from the end of the wait for input to the buffer swap) is
