@@ -226,7 +226,7 @@ def test_a_switch_brings_the_default_view_of_the_new_material_and_mesh(app):
 
 
 def test_a_default_view_worked_out_in_the_background_yields_to_the_user():
-    """In the window's background mode the defaults come from a thread; a user who moves the light,
+    """In the window's background mode the defaults come from a worker process; a user who moves the light,
     camera or exposure (or switches again) before they arrive keeps their choice."""
     from viewer.defaults import DefaultViewRequests, state_defaults
 

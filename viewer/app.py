@@ -335,8 +335,8 @@ class ViewerApp:
         self.meshes = list(MESHES) + [spec for spec in extra_meshes if spec not in MESHES]
         self.weights_path = weights_path
         self._supply = SceneSupply(ctx, weights_path, background, worker)
-        # A switch of material, mesh or mode brings that pair's default view (viewer.defaults), worked out off
-        # the window's thread in the background mode.
+        # A switch of material, mesh or mode brings that pair's default view (viewer.defaults), worked out in a
+        # worker process in the background mode.
         self._defaults = DefaultViewRequests(background)
         self._last_mesh = self.state.mesh  # the last mesh that loaded (restored if a newer one fails)
         # Per material and mesh: measured seconds per "effective pixel" (covered + 5 % of uncovered).

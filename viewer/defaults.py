@@ -540,15 +540,16 @@ class DefaultViewRequests:
     """The viewer's default view for its material, mesh and mode, worked out off the window's thread.
 
     :func:`state_defaults` costs about 0.5 s of numpy the first time for a pair (cached after), far over a
-    frame's budget; with ``background`` it runs on one worker thread and :meth:`take` hands the result
-    over once it is ready. A result is dropped when the user has moved the light, camera or exposure,
-    or switched again, since it was asked for: their choice wins.
+    frame's budget; with ``background`` it runs in one worker process (started at the first request) and
+    :meth:`take` hands the result over once it is ready. A process, not a thread: on a thread its numpy
+    calls held the GIL for long enough to stretch the window's frames to 0.3 s (measured with
+    benchmarks/viewer_latency.py). A result is dropped when the user has moved the light, camera or
+    exposure, or switched again, since it was asked for: their choice wins.
     """
 
     def __init__(self, background: bool) -> None:
-        from concurrent.futures import ThreadPoolExecutor
-
-        self._executor = ThreadPoolExecutor(1, thread_name_prefix="gratnet-defaults") if background else None
+        self._background = background
+        self._executor: Any = None  # concurrent.futures.ProcessPoolExecutor, made at the first request
         self._pending: tuple[Any, tuple[Any, ...], Any] | None = None  # (future or result, asked-for key, view)
 
     @staticmethod
@@ -562,12 +563,18 @@ class DefaultViewRequests:
     def request(self, state: Any) -> None:
         """Ask for the default view of ``state``'s material, mesh and mode (replaces an earlier request)."""
         key = self._key(state)
-        if self._executor is None:
+        if not self._background:
             try:
                 result: Any = state_defaults(*key)
             except GratNetError:
                 result = None
         else:
+            if self._executor is None:
+                import multiprocessing
+                from concurrent.futures import ProcessPoolExecutor
+
+                # spawn: a forked copy of a process holding a GL context and threads is not safe
+                self._executor = ProcessPoolExecutor(1, mp_context=multiprocessing.get_context("spawn"))
             result = self._executor.submit(state_defaults, *key)
         self._pending = (result, key, self._view(state))
 
@@ -586,7 +593,7 @@ class DefaultViewRequests:
                 return None
             try:
                 result = result.result()
-            except GratNetError:
+            except Exception:  # noqa: BLE001 - any failure (also a lost worker) only means no default view
                 result = None  # the viewer reports an unusable material or mesh itself
         self._pending = None
         if result is None or self._key(state) != key or self._view(state) != view:
@@ -594,9 +601,10 @@ class DefaultViewRequests:
         return result
 
     def release(self) -> None:
-        """Stop the worker thread (a computation under way finishes in the background and is dropped)."""
+        """Stop the worker process (a computation under way finishes in the background and is dropped)."""
         if self._executor is not None:
             self._executor.shutdown(wait=False, cancel_futures=True)
+            self._executor = None
         self._pending = None
 
 
