@@ -28,7 +28,7 @@ from pathlib import Path
 
 from gratnet.config import add_arguments, add_quiet_flag, config_field, from_arguments, parse_float
 from gratnet.errors import GratNetError
-from viewer.defaults import FALLBACK, FOV_DEGREES, fill_scene_defaults, with_fallback
+from viewer.defaults import FALLBACK, FOV_DEGREES
 
 __all__ = ["MitsubaRenderConfig", "parse_environment", "register", "run"]
 
@@ -149,27 +149,11 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 def _resolve_config(arguments: argparse.Namespace) -> MitsubaRenderConfig:
     """The config from the flags, every value checked as ``gratnet render`` checks it (nothing rendered,
     Mitsuba not loaded yet)."""
-    from gratnet.brdf import check_exposure, check_ior
-    from viewer.camera import Camera
-    from viewer.render_cli import _numbers, check_scene_numbers, parse_size
+    from viewer.render_cli import check_scene, scene_fields
 
-    theta, phi = _numbers(arguments.light_text, 2, "--light", "θ,φ in degrees such as 45,90")
-    distance, azimuth, elevation = _numbers(arguments.camera_text, 3, "--camera",
-                                            "DIST,AZIMUTH,ELEVATION (metres, degrees, degrees) such as 0.25,-90,45")
-    point = None
-    if arguments.point_light_text is not None:
-        point = tuple(_numbers(arguments.point_light_text, 3, "--point-light", "X,Y,Z in metres such as 0,0.1,0.2"))
-    width, height = parse_size(arguments.size_text)
-    config = dataclasses.replace(
-        from_arguments(MitsubaRenderConfig, arguments),
-        light_theta_degrees=theta, light_phi_degrees=phi, point_light=point, camera_distance=distance,
-        camera_azimuth_degrees=azimuth, camera_elevation_degrees=elevation, width=width, height=height,
-        environment=str(arguments.environment),
-    )
-    check_exposure(config.exposure)
-    check_ior(config.ior)  # 0: no Fresnel; 1 is its limit (physics.md, "The A-term")
-    check_scene_numbers((theta, phi), point, (distance, azimuth, elevation))
-    Camera(distance, azimuth, elevation, fov_deg=config.fov_degrees)  # checks the elevation and the field of view
+    config = dataclasses.replace(from_arguments(MitsubaRenderConfig, arguments), **scene_fields(arguments),
+                                 environment=str(arguments.environment))
+    check_scene(config)
     for name, value in (("--light-intensity", config.light_intensity),
                         ("--environment-scale", config.environment_scale)):
         if not (math.isfinite(value) and 0.0 <= value < 3e38):
@@ -190,22 +174,19 @@ def run(arguments: argparse.Namespace) -> int:
     """Check the outputs and every input, path-trace, write the image and its config together."""
     import numpy as np
 
-    from gratnet.atomic import atomic_paths, check_output_file
-    from gratnet.config import config_path_for, config_text
-    from gratnet.display import xyz_to_display_srgb8
     from gratnet.modelfile import load_model
     from mitsuba_plugin.runtime import resolve_variant
     from viewer.camera import Camera, Light
-    from viewer.render_cli import _warn_if_black, _write_exr, build_mesh, resolve_material
+    from viewer.render_cli import build_mesh, resolve_material, resolve_scene_command, warn_if_black, write_render
 
     out = Path(arguments.out)
-    if out.suffix.lower() not in _OUTPUT_SUFFIXES:
-        raise GratNetError(f"--out must end in .png (display sRGB) or .exr (linear sRGB float), got {arguments.out}")
-    check_output_file(out)
-    check_output_file(config_path_for(out))
-    resolve_variant(_resolve_config(with_fallback(arguments)).variant)  # flags, then Mitsuba, before the defaults
-    fill_scene_defaults(arguments)  # the unset --light, --camera, --exposure: gratnet render's
-    config = _resolve_config(arguments)
+
+    def resolve(flags: argparse.Namespace) -> MitsubaRenderConfig:
+        config = _resolve_config(flags)
+        resolve_variant(config.variant)  # a missing Mitsuba is one line before the defaults' work
+        return config
+
+    config = resolve_scene_command(arguments, resolve)
     camera = Camera(config.camera_distance, config.camera_azimuth_degrees, config.camera_elevation_degrees,
                     fov_deg=config.fov_degrees)
     light = None
@@ -244,18 +225,10 @@ def run(arguments: argparse.Namespace) -> int:
         raise GratNetError("the render contains NaN or inf after the exposure; nothing was written")
     xyz = linear @ np.linalg.inv(xyz_to_linear_srgb_matrix())  # the display pipeline and the black check take XYZ
 
-    # The image and its config land together or not at all.
-    with atomic_paths(out, config_path_for(out)) as (image_temporary, config_temporary):
-        if out.suffix.lower() == ".png":
-            from PIL import Image
-
-            Image.fromarray(xyz_to_display_srgb8(xyz, 1.0)).save(image_temporary, format="PNG")
-        else:
-            _write_exr(image_temporary, linear.astype(np.float32), out)
-        config_temporary.write_text(config_text(out, mitsuba_render=config, model_file=str(model_path),
-                                                variant=variant, render_seconds=round(seconds, 3)), encoding="utf-8")
+    write_render(out, xyz, linear_srgb=linear, mitsuba_render=config, model_file=str(model_path), variant=variant,
+                 render_seconds=round(seconds, 3))
     print(f"wrote {out}: {Path(model_path).parent.name if model_path.name == 'model.npz' else model_path.name}, "
           f"mesh {config.mesh}, {config.width}×{config.height}, {config.spp} spp, {variant}, "
           f"exposure {config.exposure:g}, {seconds:.1f} s")
-    _warn_if_black(xyz, config.exposure)
+    warn_if_black(xyz, config.exposure)
     return 0

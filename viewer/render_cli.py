@@ -24,13 +24,18 @@ from __future__ import annotations
 import argparse
 import dataclasses
 import math
+from collections.abc import Callable
 from pathlib import Path
+from typing import Any, TypeVar
 
 from gratnet.config import add_arguments, add_quiet_flag, config_field, from_arguments, parse_float, parse_numbers
 from gratnet.errors import GratNetError
 from viewer.defaults import FALLBACK, FOV_DEGREES, fill_scene_defaults, with_fallback
 
-__all__ = ["ASSETS", "MESHES", "RenderConfig", "register", "resolve_material", "run", "shipped_materials"]
+ConfigT = TypeVar("ConfigT")
+
+__all__ = ["ASSETS", "MESHES", "RenderConfig", "check_scene", "register", "resolve_material", "resolve_scene_command",
+           "run", "scene_fields", "shipped_materials", "warn_if_black", "write_render"]
 
 #: Shipped materials: ``assets/NAME/model.npz``.
 ASSETS = Path(__file__).resolve().parents[1] / "assets"
@@ -193,31 +198,84 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     parser.set_defaults(handler=run)
 
 
-def _resolve_config(arguments: argparse.Namespace) -> RenderConfig:
-    """The config from the flags, every compound flag parsed and every value checked (no GL yet)."""
+def scene_fields(arguments: argparse.Namespace) -> dict[str, Any]:
+    """``--light``, ``--point-light``, ``--camera`` and ``--size`` parsed into the config fields that ``render``,
+    ``mitsuba-render`` (and ``view``) share: ``light_theta_degrees`` … ``height`` (one line if malformed)."""
     theta, phi = _numbers(arguments.light_text, 2, "--light", "θ,φ in degrees such as 45,90")
     distance, azimuth, elevation = _numbers(arguments.camera_text, 3, "--camera",
                                             "DIST,AZIMUTH,ELEVATION (metres, degrees, degrees) such as 0.25,-90,45")
     point = None
-    if arguments.point_light_text is not None:
+    if getattr(arguments, "point_light_text", None) is not None:
         point = tuple(_numbers(arguments.point_light_text, 3, "--point-light", "X,Y,Z in metres such as 0,0.1,0.2"))
     width, height = parse_size(arguments.size_text)
-    config = dataclasses.replace(
-        from_arguments(RenderConfig, arguments),
-        light_theta_degrees=theta, light_phi_degrees=phi, point_light=point, camera_distance=distance,
-        camera_azimuth_degrees=azimuth, camera_elevation_degrees=elevation, width=width, height=height,
-    )
+    return {"light_theta_degrees": theta, "light_phi_degrees": phi, "point_light": point,
+            "camera_distance": distance, "camera_azimuth_degrees": azimuth, "camera_elevation_degrees": elevation,
+            "width": width, "height": height}
+
+
+def check_scene(config: Any) -> None:
+    """Refuse (one line) a scene the float32 shaders cannot use: exposure, IOR, light, point light, camera
+    (elevation and field of view included). ``config``: a :class:`RenderConfig` or a config with its fields."""
     from gratnet.brdf import check_exposure, check_ior
+    from viewer.camera import Camera
 
     check_exposure(config.exposure)
     check_ior(config.ior)  # 0: no Fresnel; 1 is its limit (physics.md, "The A-term")
-    check_scene_numbers((theta, phi), point, (distance, azimuth, elevation))
-    from viewer.camera import Camera
+    camera = (config.camera_distance, config.camera_azimuth_degrees, config.camera_elevation_degrees)
+    check_scene_numbers((config.light_theta_degrees, config.light_phi_degrees), config.point_light, camera)
+    Camera(*camera, fov_deg=config.fov_degrees)  # checks the elevation and the field of view
 
-    Camera(distance, azimuth, elevation, fov_deg=config.fov_degrees)  # checks the elevation and the field of view
-    if config.slice and width != height:
-        raise GratNetError(f"--slice renders a square image; give --size N,N (got {width},{height})")
-    if config.slice and point is not None:
+
+def resolve_scene_command(arguments: argparse.Namespace, resolve: Callable[[argparse.Namespace], ConfigT]) -> ConfigT:
+    """The steps every rendering command takes before any work, in order: the output's suffix and place
+    (and its config's), the flags given (``resolve`` on :func:`viewer.defaults.with_fallback`), then the
+    unset ``--light``/``--camera``/``--exposure`` from the material and mesh (which reads the model), then
+    ``resolve`` for real."""
+    from gratnet.atomic import check_output_file
+    from gratnet.config import config_path_for
+
+    out = Path(arguments.out)
+    if out.suffix.lower() not in _OUTPUT_SUFFIXES:
+        raise GratNetError(f"--out must end in .png (display sRGB) or .exr (linear sRGB float), got {arguments.out}")
+    check_output_file(out)
+    check_output_file(config_path_for(out))
+    resolve(with_fallback(arguments))  # the flags given are checked before the defaults read the model
+    fill_scene_defaults(arguments)  # the unset --light, --camera, --exposure, from the material and mesh
+    return resolve(arguments)
+
+
+def write_render(out: Path, xyz: Any, *, linear_srgb: Any = None, **documents: Any) -> None:
+    """The image (``.png``: 8-bit display sRGB; ``.exr``: linear sRGB float32, ``linear_srgb`` if given, else
+    converted from ``xyz``) and its ``NAME.config.json`` (``documents``), landing together or not at all.
+
+    Args:
+        xyz: the exposed CIE XYZ image ``(H, W, 3)``.
+    """
+    import numpy as np
+
+    from gratnet.atomic import atomic_paths
+    from gratnet.config import config_path_for, config_text
+    from gratnet.display import xyz_to_display_srgb8, xyz_to_linear_srgb
+
+    xyz = np.asarray(xyz, dtype=np.float64)
+    with atomic_paths(out, config_path_for(out)) as (image_temporary, config_temporary):
+        if out.suffix.lower() == ".png":
+            from PIL import Image
+
+            Image.fromarray(xyz_to_display_srgb8(xyz, 1.0)).save(image_temporary, format="PNG")
+        else:
+            linear = xyz_to_linear_srgb(xyz) if linear_srgb is None else linear_srgb
+            _write_exr(image_temporary, np.asarray(linear, dtype=np.float32), out)
+        config_temporary.write_text(config_text(out, **documents), encoding="utf-8")
+
+
+def _resolve_config(arguments: argparse.Namespace) -> RenderConfig:
+    """The config from the flags, every compound flag parsed and every value checked (no GL yet)."""
+    config = dataclasses.replace(from_arguments(RenderConfig, arguments), **scene_fields(arguments))
+    check_scene(config)
+    if config.slice and config.width != config.height:
+        raise GratNetError(f"--slice renders a square image; give --size N,N (got {config.width},{config.height})")
+    if config.slice and config.point_light is not None:
         raise GratNetError("--slice takes a directional light (--light θ,φ), not --point-light")
     return config
 
@@ -226,19 +284,11 @@ def run(arguments: argparse.Namespace) -> int:
     """Check every input, render, write the image and its config atomically."""
     import numpy as np
 
-    from gratnet.atomic import atomic_paths, check_output_file
-    from gratnet.config import config_path_for, config_text
     from gratnet.modelfile import load_model
     from viewer.camera import Camera, Light
 
     out = Path(arguments.out)
-    if out.suffix.lower() not in _OUTPUT_SUFFIXES:
-        raise GratNetError(f"--out must end in .png (display sRGB) or .exr (linear sRGB float), got {arguments.out}")
-    check_output_file(out)
-    check_output_file(config_path_for(out))
-    _resolve_config(with_fallback(arguments))  # the flags given are checked before the defaults read the model
-    fill_scene_defaults(arguments)  # the unset --light, --camera, --exposure, from the material and mesh
-    config = _resolve_config(arguments)
+    config = resolve_scene_command(arguments, _resolve_config)
     if config.skip_dark and out.suffix.lower() != ".png":
         raise GratNetError("--skip-dark applies to .png output only: an EXR keeps values below the display's step")
     camera = Camera(config.camera_distance, config.camera_azimuth_degrees, config.camera_elevation_degrees,
@@ -270,24 +320,16 @@ def run(arguments: argparse.Namespace) -> int:
     if not np.all(np.isfinite(xyz)):
         raise GratNetError("the render contains NaN or inf; nothing was written (please report this)")
 
-    # The image and its config land together or not at all.
-    with atomic_paths(out, config_path_for(out)) as (image_temporary, config_temporary):
-        if out.suffix.lower() == ".png":
-            from PIL import Image
-
-            Image.fromarray(SceneRenderer.display_srgb8(xyz)).save(image_temporary, format="PNG")
-        else:
-            _write_exr(image_temporary, SceneRenderer.linear_srgb(xyz), out)
-        config_temporary.write_text(config_text(out, render=config, model_file=str(model_path)), encoding="utf-8")
+    write_render(out, xyz, render=config, model_file=str(model_path))
     what = (f"BRDF slice, light θ={config.light_theta_degrees:g}° φ={config.light_phi_degrees:g}°" if config.slice
             else f"mesh {config.mesh}")
     print(f"wrote {out}: {Path(model_path).parent.name if model_path.name == 'model.npz' else model_path.name}, "
           f"{what}, {config.width}×{config.height}, exposure {config.exposure:g}")
-    _warn_if_black(xyz, config.exposure)
+    warn_if_black(xyz, config.exposure)
     return 0
 
 
-def _warn_if_black(xyz: object, exposure: float) -> None:
+def warn_if_black(xyz: object, exposure: float) -> None:
     """The black-picture hint (gratnet.showcase.black_image_hint) on stderr; the exit status is unchanged."""
     import sys
 

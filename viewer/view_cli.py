@@ -80,17 +80,17 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 
 
 def _scene_numbers(arguments: argparse.Namespace) -> tuple[float, float, float, float, float]:
-    """--light θ,φ and --camera DIST,AZIMUTH,ELEVATION parsed, and every scene number checked (one line if bad)."""
-    from gratnet.brdf import check_exposure, check_ior
-    from viewer.render_cli import _numbers, check_scene_numbers
+    """--light θ,φ, --camera DIST,AZIMUTH,ELEVATION and --size parsed, and every scene number checked as
+    ``gratnet render`` checks them (one line if bad): θ, φ, distance, azimuth, elevation."""
+    import dataclasses
 
-    theta, phi = _numbers(arguments.light_text, 2, "--light", "θ,φ in degrees such as 20,90")
-    distance, azimuth, elevation = _numbers(arguments.camera_text, 3, "--camera",
-                                            "DIST,AZIMUTH,ELEVATION (metres, degrees, degrees) such as 0.18,-90,50")
-    check_exposure(arguments.exposure)
-    check_ior(arguments.ior)  # 0: no Fresnel; 1 is its limit (physics.md, "The A-term")
-    check_scene_numbers((theta, phi), None, (distance, azimuth, elevation))
-    return theta, phi, distance, azimuth, elevation
+    from viewer.render_cli import RenderConfig, check_scene, scene_fields
+
+    config = dataclasses.replace(RenderConfig(), **scene_fields(arguments), exposure=arguments.exposure,
+                                 ior=arguments.ior)
+    check_scene(config)
+    return (config.light_theta_degrees, config.light_phi_degrees, config.camera_distance,
+            config.camera_azimuth_degrees, config.camera_elevation_degrees)
 
 
 def _state(arguments: argparse.Namespace) -> object:
