@@ -66,7 +66,7 @@ def _ground_truth_inputs(arguments: argparse.Namespace, volume_metadata: dict[st
     from trainer.loaders import LoadOptions, load_heightfield
 
     spec = arguments.heightfield or volume_metadata.get("source", "")
-    if not spec or not (arguments.heightfield or str(spec).startswith("generator:")):
+    if not spec or not (arguments.heightfield or str(spec).startswith(("generator:", "dataset:"))):
         print(
             "gratnet: no --heightfield and the volume was not made by a built-in generator: skipping BRDF slices",
             file=sys.stderr,
