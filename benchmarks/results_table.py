@@ -47,6 +47,66 @@ def _split(folder: Path) -> str:
     return json.loads(path.read_text()).get("train", {}).get("split", "?") if path.exists() else "?"
 
 
+def _presets_section() -> list[str]:
+    """The paper's datasets as presets (trainer/datasets.py) and the diagnostics, with their commands."""
+    from trainer.datasets import PRESETS
+
+    lines = [
+        "## The paper's datasets (presets) and the diagnostics",
+        "",
+        "The paper's own datasets (its Fig. 2 caption and §4) are named presets: a height field and its",
+        "coherence window. `gratnet heightfield list` lists them; each preset name works wherever a height field",
+        "does, and the ground-truth commands take the preset's σs unless `--sigma-s` is given (the paper's",
+        "1001² × 11 grid, the default, takes hours per dataset on 2 CPU cores):",
+        "",
+        "    gratnet groundtruth paper-cd --sampling simple-max --out out/volumes/paper-cd.exr",
+        "    gratnet heightfield preview paper-cd --out paper-cd.png",
+        "    gratnet brdfslice paper-pits --light 0,0 --exposure 2000 --out pits.png",
+        "",
+        "| preset | dataset | patch (µm): paper → built | 4σs (µm) | max height (µm): paper → built | paper | notes |",
+        "|---|---|---|---|---|---|---|",
+    ]
+    for preset in PRESETS.values():
+        field = preset.field()
+        built_height = float(field.heights_um.max() - field.heights_um.min())
+        nominal = "—" if preset.max_height_um is None else f"{preset.max_height_um:g}"
+        lines.append(
+            f"| `{preset.name}` | {preset.title} | {preset.patch_um:g} → {field.size_um[0]:.4g} | "
+            f"{preset.four_sigma_s_um:g} | {nominal} → {built_height:.3g} | {preset.paper} | {preset.notes} |"
+        )
+    lines += [
+        "",
+        "No model is trained on these presets yet (issue 15): the shipped materials above are 20 µm patches",
+        "under the default 65 µm window, not the paper's datasets, so their comparison with the paper is not",
+        "like for like.",
+        "",
+        "Diagnostics (trainer/diagnostics.py), written by `gratnet train` and `gratnet evaluate` into",
+        "metrics.json and report.md:",
+        "",
+        "- **Interpolation oracle** (`--oracle`, on by default; needs the volume): the volume's own samples,",
+        "  interpolated trilinearly in its grid coordinates (u*, v*, t) (SciPy's RegularGridInterpolator; the key",
+        "  vector is mapped by the runtime's contract, so `simple` and `simple-max` volumes are interpolated where",
+        "  they are uniform) at each BRDF slice's exact key vectors and scored with the same metrics as the network",
+        "  (`oracle_flip` beside `flip`). It bounds what the training grid can deliver: a network far above it loses",
+        "  in the network, not in the grid.",
+        "- **Error by region** of each BRDF slice, regions from the ground-truth slice itself: `specular`",
+        "  (key within 3 standard deviations of the window's specular lobe at 780 nm, at least 3 pixels),",
+        "  `dark` (exposed Y < 0.002), `orders` (lit pixels ≥ 10 % of their 99th-percentile Y), `floor` (the",
+        "  rest: speckle and scattering); per region the pixel fraction, mean FLIP and relative L1 of exposed",
+        "  XYZ, for the network and the oracle (report.md, \"Error by region\").",
+        "- **Training curves**: `gratnet train ... --epoch-flip-size 128` scores the (0°, 0°) 2000 RU slice at",
+        "  128² after every epoch (`slice_flip` in history.json; the ground truth is computed once and cached);",
+        "  training_curves.png plots the loss and that FLIP against the epoch. `gratnet evaluate` plots the",
+        "  history.json found beside the model.",
+        "",
+        "    gratnet evaluate assets/cd/model.npz --volume out/volumes/cd.exr --out out/reports/cd",
+        "    gratnet train out/volumes/paper-cd.exr --split all --epochs 100 --epoch-flip-size 128 \\",
+        "        --out out/runs/paper-cd",
+        "",
+    ]
+    return lines
+
+
 def main() -> None:
     """Write the results page."""
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
@@ -151,6 +211,7 @@ def main() -> None:
         "    - `funnel-176` (59.6k parameters, within the paper's footprint) once the budget, not the size,",
         "      stops being the limit.",
         "",
+        *_presets_section(),
         "## Every slice",
         "",
         *details,

@@ -41,7 +41,8 @@ class DatasetPreset:
 
     ``generator`` names a built-in generator (trainer/generators.py) run with ``parameters``; ``None``
     means the measured scan :data:`SNAKE_SCAN`. ``patch_um`` and ``max_height_um`` are the paper's
-    nominal values (µm; ``None`` where the paper gives none); ``four_sigma_s_um`` is its coherence window 4σs.
+    nominal values (µm; ``None`` where the paper gives none; the snake's 65 µm is the paper's scan, of
+    which only a 10 µm crop is available here); ``four_sigma_s_um`` is its coherence window 4σs.
     """
 
     name: str
@@ -92,7 +93,7 @@ PRESETS: dict[str, DatasetPreset] = {
         ),
         _preset(
             name="paper-cd", title="synthetic compact disc, 65 µm patch", paper="§4 Datasets; Fig. 2",
-            four_sigma_s_um=40.0, patch_um=65.0, max_height_um=0.11, generator="cd",
+            four_sigma_s_um=40.0, patch_um=65.0, max_height_um=None, generator="cd",
             parameters={"size_um": 65.0},
             notes="tracks every 1.6 µm, pits/lands of 3T…11T (T = 0.2777 µm), 110 nm deep; the patch is "
             "snapped to 41 whole tracks (65.6 µm); pit depth and width are this project's (CD standard) values",
@@ -105,7 +106,7 @@ PRESETS: dict[str, DatasetPreset] = {
         ),
         _preset(
             name="paper-snake", title="corn snake skin (AFM scan)", paper="§4 Datasets; Fig. 2 (crop 12.5 µm)",
-            four_sigma_s_um=65.0, patch_um=10.0, max_height_um=SNAKE_SCAN_WHITE_UM, generator=None,
+            four_sigma_s_um=65.0, patch_um=65.0, max_height_um=None, generator=None,
             notes="the real Elaphe guttata AFM crop in assets/data (100 × 100 px, dx ≈ 0.1 µm, white ≈ 0.375 µm, "
             "both approximate), repeated periodically under the window: the paper's full 65 µm scan is not "
             "available here",
