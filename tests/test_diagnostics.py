@@ -127,7 +127,7 @@ def test_training_records_slice_flip_and_plots_the_curves(tiny_run):
     assert 0.0 <= history["epochs"][0]["slice_flip"] <= 1.0
     assert (run / "training_curves.png").stat().st_size > 1000
     report = (run / "report.md").read_text()
-    assert "training_curves.png" in report and "Error by region" in report
+    assert "training_curves.png" in report and "Error by region" in report and "brdf_regions.png" in report
 
 
 def test_report_holds_the_oracle_and_the_regions_beside_the_network(tiny_run):

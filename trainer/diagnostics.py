@@ -118,6 +118,41 @@ def region_errors(reference_xyz: np.ndarray, test_xyz: np.ndarray, labels: np.nd
     return results
 
 
+#: Colours of the region map: specular, orders, floor, dark (outside the disc: white).
+REGION_COLOURS = ("#e41a1c", "#ffbf00", "#4daf4a", "#1f2a44")
+
+
+def region_figure(path: str | os.PathLike[str], rows: list[tuple[str, np.ndarray]]) -> None:
+    """A PNG of the region maps (one panel per ``(label, labels)``), with a legend of :data:`REGIONS`."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    from matplotlib.colors import ListedColormap
+    from matplotlib.patches import Patch
+
+    from gratnet.atomic import atomic_path
+
+    if not rows:
+        raise GratNetError("region_figure needs at least one (label, labels) panel")
+    colormap = ListedColormap(["#ffffff", *REGION_COLOURS])
+    figure, axes = plt.subplots(1, len(rows), figsize=(2.4 * len(rows), 3.0), dpi=120, squeeze=False,
+                                layout="constrained")
+    try:
+        for axis, (label, labels) in zip(axes[0], rows, strict=True):
+            axis.imshow(labels + 1, cmap=colormap, vmin=0, vmax=len(REGIONS), interpolation="nearest")
+            axis.set_title(label, fontsize=8)
+            axis.set_xticks([])
+            axis.set_yticks([])
+        handles = [Patch(color=colour, label=name) for name, colour in zip(REGIONS, REGION_COLOURS, strict=True)]
+        figure.legend(handles=handles, loc="outside lower center", ncol=len(REGIONS), fontsize=8)
+        figure.suptitle("Regions of the ground-truth BRDF slices (trainer/diagnostics.py)", fontsize=9)
+        with atomic_path(path) as temporary:
+            figure.savefig(temporary, format="png")
+    finally:
+        plt.close(figure)
+
+
 def plot_history(history: dict[str, Any], path: str | os.PathLike[str]) -> bool:
     """Write loss (log scale) and, where recorded, per-epoch slice FLIP against the epoch as a PNG.
 

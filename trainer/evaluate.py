@@ -96,9 +96,9 @@ def evaluate_brdf_slices(
 ) -> list[dict[str, Any]]:
     """Metrics and a comparison figure for the paper's five BRDF slices; per-region errors; and, with a
     ``volume`` and ``config.oracle``, the interpolation oracle's metrics (``oracle``) beside the network's."""
-    from trainer.diagnostics import oracle_brdf_slice, region_errors, region_labels
+    from trainer.diagnostics import oracle_brdf_slice, region_errors, region_figure, region_labels
 
-    rows, figure_rows = [], []
+    rows, figure_rows, region_maps = [], [], []
     for theta, phi, exposure in STANDARD_SLICES:
         slice_config = SliceConfig(theta, phi, size=config.size, exposure=exposure, ior=config.ior)
         reference = ground_truth_brdf_slice(field, optics, slice_config, config.cache_dir, config.progress)
@@ -106,6 +106,7 @@ def evaluate_brdf_slices(
         _, inside = slice_view_directions(config.size)
         metrics = image_metrics(reference, predicted, mask=inside)
         labels = region_labels(reference, slice_config, optics.sigma_s_um)
+        region_maps.append((_slice_label(theta, phi, exposure), labels))
         row: dict[str, Any] = {
             "slice": _slice_label(theta, phi, exposure), "theta": theta, "phi": phi, "exposure": exposure, **metrics,
             "regions": region_errors(reference, predicted, labels),
@@ -118,6 +119,7 @@ def evaluate_brdf_slices(
         rows.append(row)
         figure_rows.append((_slice_label(theta, phi, exposure), reference, predicted))
     comparison_figure(out_dir / "brdf_slices.png", figure_rows, title="BRDF slices: ground truth | network | FLIP")
+    region_figure(out_dir / "brdf_regions.png", region_maps)
     return rows
 
 
@@ -202,6 +204,8 @@ def evaluate_model(
                                                       volume=volume)
         table += results["brdf_slices"]
         sections.append(region_table(results["brdf_slices"]))
+        if config.oracle and volume is None:
+            sections.append("The interpolation oracle needs the volume (--volume): not evaluated.\n")
     if history is not None:
         from trainer.diagnostics import plot_history
 
