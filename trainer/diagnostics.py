@@ -43,37 +43,55 @@ ORDER_FRACTION = 0.1
 LONGEST_WAVELENGTH_UM = 0.78
 
 
-def interpolate_volume(volume: Volume, u: np.ndarray, v: np.ndarray, w: np.ndarray) -> np.ndarray:
-    """Trilinear interpolation of the volume's XYZ at key vectors (u, v, w) (any equal shapes) → (…, 3).
+class VolumeOracle:
+    """Trilinear interpolation of a volume's XYZ at key vectors: the interpolation oracle.
 
     Interpolates in grid coordinates (u*, v*, t), where the volume is uniform; a one-slice volume is
-    interpolated bilinearly in (u*, v*). Keys outside [−2, 2]² are clamped to the grid's edge.
+    interpolated bilinearly in (u*, v*). Keys outside [−2, 2]² are clamped to the grid's edge. Built once
+    per volume (the samples are used in place, as float32).
     """
-    from scipy.interpolate import RegularGridInterpolator
 
-    scheme = volume.metadata.get("scheme")
-    if scheme not in ("regular", "simple", "simple-max"):
-        raise GratNetError(f"volume has no known sampling scheme in its metadata (got {scheme!r})")
-    coordinates = np.clip(network_coordinates(np.asarray(u, np.float64), np.asarray(v, np.float64),
-                                              np.asarray(w, np.float64), scheme), -1.0, 1.0)
-    axis = np.linspace(-1.0, 1.0, volume.resolution)  # c = u*/2 of volume_axes (linspace(−2, 2, R))
-    values = volume.xyz.astype(np.float64)  # (S, rows = v*, columns = u*, 3)
-    if volume.slices == 1:
-        interpolator = RegularGridInterpolator((axis, axis), values[0], method="linear")
-        return interpolator(np.stack([coordinates[..., 1], coordinates[..., 0]], axis=-1))
-    t_values = np.asarray(volume.metadata.get("slice_t") or np.linspace(0.0, 1.0, volume.slices), np.float64)
-    interpolator = RegularGridInterpolator((2.0 * t_values - 1.0, axis, axis), values, method="linear")
-    points = np.stack([coordinates[..., 2], coordinates[..., 1], coordinates[..., 0]], axis=-1)
-    return interpolator(points)
+    def __init__(self, volume: Volume) -> None:
+        from scipy.interpolate import RegularGridInterpolator
+
+        scheme = volume.metadata.get("scheme")
+        if scheme not in ("regular", "simple", "simple-max"):
+            raise GratNetError(f"volume has no known sampling scheme in its metadata (got {scheme!r})")
+        self.scheme = scheme
+        self.one_slice = volume.slices == 1
+        axis = np.linspace(-1.0, 1.0, volume.resolution)  # c = u*/2 of volume_axes (linspace(−2, 2, R))
+        if self.one_slice:
+            self._interpolator = RegularGridInterpolator((axis, axis), volume.xyz[0], method="linear")
+        else:
+            t_values = np.asarray(volume.metadata.get("slice_t") or np.linspace(0.0, 1.0, volume.slices), np.float64)
+            # xyz is (S, rows = v*, columns = u*, 3)
+            self._interpolator = RegularGridInterpolator((2.0 * t_values - 1.0, axis, axis), volume.xyz,
+                                                         method="linear")
+
+    def __call__(self, u: np.ndarray, v: np.ndarray, w: np.ndarray) -> np.ndarray:
+        """XYZ (…, 3) at key vectors (u, v, w) of equal shapes."""
+        coordinates = np.clip(network_coordinates(np.asarray(u, np.float64), np.asarray(v, np.float64),
+                                                  np.asarray(w, np.float64), self.scheme), -1.0, 1.0)
+        order = [1, 0] if self.one_slice else [2, 1, 0]  # (c_t,) c_v, c_u: the volume's axis order
+        return np.asarray(self._interpolator(coordinates[..., order]), np.float64)
+
+    def brdf_slice(self, config: SliceConfig) -> np.ndarray:
+        """exposure · A · XYZ_oracle for every pixel of a BRDF slice (size, size, 3); 0 outside the disc."""
+        light, views, inside = slice_geometry(config)
+        key = -(light + views)
+        xyz = np.zeros(views.shape)
+        xyz[inside] = self(key[inside][:, 0], key[inside][:, 1], key[inside][:, 2])
+        return expose_slice(config, light, views, inside, xyz)
+
+
+def interpolate_volume(volume: Volume, u: np.ndarray, v: np.ndarray, w: np.ndarray) -> np.ndarray:
+    """:class:`VolumeOracle` of ``volume`` at key vectors (u, v, w) → (…, 3) (one-off use)."""
+    return VolumeOracle(volume)(u, v, w)
 
 
 def oracle_brdf_slice(volume: Volume, config: SliceConfig) -> np.ndarray:
-    """exposure · A · XYZ_oracle for every pixel of a BRDF slice (size, size, 3); 0 outside the disc."""
-    light, views, inside = slice_geometry(config)
-    key = -(light + views)
-    xyz = np.zeros(views.shape)
-    xyz[inside] = interpolate_volume(volume, key[inside][:, 0], key[inside][:, 1], key[inside][:, 2])
-    return expose_slice(config, light, views, inside, xyz)
+    """:meth:`VolumeOracle.brdf_slice` of ``volume`` (one-off use)."""
+    return VolumeOracle(volume).brdf_slice(config)
 
 
 def specular_radius(sigma_s_um: float, size: int) -> float:

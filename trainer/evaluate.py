@@ -96,9 +96,10 @@ def evaluate_brdf_slices(
 ) -> list[dict[str, Any]]:
     """Metrics and a comparison figure for the paper's five BRDF slices; per-region errors; and, with a
     ``volume`` and ``config.oracle``, the interpolation oracle's metrics (``oracle``) beside the network's."""
-    from trainer.diagnostics import oracle_brdf_slice, region_errors, region_figure, region_labels
+    from trainer.diagnostics import VolumeOracle, region_errors, region_figure, region_labels
 
     rows, figure_rows, region_maps = [], [], []
+    oracle_of_volume = VolumeOracle(volume) if volume is not None and config.oracle else None
     for theta, phi, exposure in STANDARD_SLICES:
         slice_config = SliceConfig(theta, phi, size=config.size, exposure=exposure, ior=config.ior)
         reference = ground_truth_brdf_slice(field, optics, slice_config, config.cache_dir, config.progress)
@@ -111,8 +112,8 @@ def evaluate_brdf_slices(
             "slice": _slice_label(theta, phi, exposure), "theta": theta, "phi": phi, "exposure": exposure, **metrics,
             "regions": region_errors(reference, predicted, labels),
         }
-        if volume is not None and config.oracle:
-            oracle = oracle_brdf_slice(volume, slice_config)
+        if oracle_of_volume is not None:
+            oracle = oracle_of_volume.brdf_slice(slice_config)
             row["oracle"] = {**image_metrics(reference, oracle, mask=inside),
                              "regions": region_errors(reference, oracle, labels)}
             row["oracle_flip"] = row["oracle"]["flip"]
