@@ -156,7 +156,10 @@ def train(
     checkpoint_path = out_dir / "checkpoint.pt"
     if resume and checkpoint_path.exists():
         state = torch.load(checkpoint_path, map_location=device, weights_only=False)
-        if state["config"] != config_to_dict(config):
+        # The per-epoch diagnostic does not change the training: it may differ (or be absent) on resume.
+        diagnostic = ("epoch_flip_size",)
+        saved = {key: value for key, value in state["config"].items() if key not in diagnostic}
+        if saved != {key: value for key, value in config_to_dict(config).items() if key not in diagnostic}:
             raise GratNetError(
                 f"{checkpoint_path} was made with a different configuration; start afresh without --resume"
             )
