@@ -47,6 +47,31 @@ def _split(folder: Path) -> str:
     return json.loads(path.read_text()).get("train", {}).get("split", "?") if path.exists() else "?"
 
 
+REGION_NAMES = ("specular", "orders", "floor", "dark")
+
+
+def _regions_section(folder: Path, rows: list[dict]) -> list[str]:
+    """Per-region FLIP (and the oracle's, when evaluated) of a material, with its region maps and curves."""
+    if not rows or "regions" not in rows[0]:
+        return []
+    lines = [
+        "Mean FLIP by region (share of the view disc in brackets; trainer/diagnostics.py), and the interpolation",
+        "oracle's whole-slice FLIP where the volume was at hand:",
+        "",
+        "| slice | " + " | ".join(REGION_NAMES) + " | oracle |",
+        "|---|" + "---|" * (len(REGION_NAMES) + 1),
+    ]
+    for row in rows:
+        cells = [f"{_number(row['regions'][name]['flip'], 3)} ({100 * row['regions'][name]['fraction']:.3g} %)"
+                 for name in REGION_NAMES]
+        lines.append(f"| {row['slice']} | " + " | ".join(cells) + f" | {_number(row.get('oracle_flip'), 3)} |")
+    lines.append("")
+    for figure, caption in (("brdf_regions.png", "regions"), ("training_curves.png", "training curves")):
+        if (folder / figure).exists():
+            lines += [f"![{folder.name} {caption}](../assets/{folder.name}/{figure})", ""]
+    return lines
+
+
 def _presets_section() -> list[str]:
     """The paper's datasets as presets (trainer/datasets.py) and the diagnostics, with their commands."""
     from trainer.datasets import PRESETS
@@ -103,7 +128,34 @@ def _presets_section() -> list[str]:
         "    gratnet train out/volumes/paper-cd.exr --split all --epochs 100 --epoch-flip-size 128 \\",
         "        --out out/runs/paper-cd",
         "",
+        "The oracle needs the material's 1001² × 11 volume (out/volumes/NAME.exr, hours to compute on 2 cores);",
+        "none is kept on this machine, so no oracle figure below is measured yet (`—`).",
+        "",
     ]
+    lines += _region_summary()
+    return lines
+
+
+def _region_summary(assets: Path = Path("assets")) -> list[str]:
+    """One line per shipped material that has the region split: the range of each region's FLIP over the slices."""
+    lines = []
+    for folder in sorted(assets.iterdir()):
+        path = folder / "metrics.json"
+        rows = json.loads(path.read_text()).get("brdf_slices", []) if path.exists() else []
+        if not rows or "regions" not in rows[0]:
+            continue
+        parts = []
+        for name in REGION_NAMES:
+            flips = [row["regions"][name]["flip"] for row in rows if row["regions"][name]["flip"] is not None]
+            shares = [100 * row["regions"][name]["fraction"] for row in rows]
+            if flips:
+                parts.append(f"{name} {min(flips):.3g}–{max(flips):.3g} ({min(shares):.3g}–{max(shares):.3g} % of "
+                             "the disc)")
+        lines.append(f"- `{folder.name}` (shipped model, re-evaluated): mean FLIP by region over the five slices: "
+                     + "; ".join(parts) + ".")
+    if lines:
+        lines = ["Measured so far (`bash scripts/reevaluate_materials.sh NAME`: today's evaluation of a shipped model,",
+                 "no retraining; \"Every slice\" below has the tables and region maps):", "", *lines, ""]
     return lines
 
 
@@ -156,6 +208,7 @@ def main() -> None:
                 f"{_number(row['ssim_srgb'])} | {_number(row['flip'])} |"
             )
         details += ["", f"![{folder.name} BRDF slices](../assets/{folder.name}/brdf_slices.png)", ""]
+        details += _regions_section(folder, [slices[name] for name in SLICE_ORDER if name in slices])
     lines += [
         "",
         "## Reading these numbers",
