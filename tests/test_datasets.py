@@ -152,3 +152,14 @@ def test_groundtruth_of_the_smallest_preset_uses_its_window(tmp_path):
     assert main([*arguments, str(override), "--sigma-s", "5"]) == 0
     assert read_volume(override).metadata["sigma_s_um"] == 5.0
     assert math.isclose(read_volume(tmp_path / "pits.exr").metadata["window_extent_um"], 6 * 15.556 / 4)
+
+
+def test_evaluation_rebuilds_a_scan_preset_from_a_volumes_source(fields):
+    """A volume of paper-snake records dataset:paper-snake; evaluation finds its height field from that."""
+    from gratnet.cli import build_parser
+    from trainer.train_cli import _ground_truth_inputs
+
+    arguments = build_parser(only="evaluate").parse_args(["evaluate", "model.npz", "--out", "report"])
+    field, optics = _ground_truth_inputs(arguments, {"source": "dataset:paper-snake", "sigma_s_um": 16.25})
+    np.testing.assert_array_equal(field.heights_um, fields["paper-snake"].heights_um)
+    assert optics.sigma_s_um == 16.25
