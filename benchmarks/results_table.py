@@ -47,6 +47,118 @@ def _split(folder: Path) -> str:
     return json.loads(path.read_text()).get("train", {}).get("split", "?") if path.exists() else "?"
 
 
+REGION_NAMES = ("specular", "orders", "floor", "dark")
+
+
+def _regions_section(folder: Path, rows: list[dict]) -> list[str]:
+    """Per-region FLIP (and the oracle's, when evaluated) of a material, with its region maps and curves."""
+    if not rows or "regions" not in rows[0]:
+        return []
+    lines = [
+        "Mean FLIP by region (share of the view disc in brackets; trainer/diagnostics.py), and the interpolation",
+        "oracle's whole-slice FLIP where the volume was at hand:",
+        "",
+        "| slice | " + " | ".join(REGION_NAMES) + " | oracle |",
+        "|---|" + "---|" * (len(REGION_NAMES) + 1),
+    ]
+    for row in rows:
+        cells = [f"{_number(row['regions'][name]['flip'], 3)} ({100 * row['regions'][name]['fraction']:.3g} %)"
+                 for name in REGION_NAMES]
+        lines.append(f"| {row['slice']} | " + " | ".join(cells) + f" | {_number(row.get('oracle_flip'), 3)} |")
+    lines.append("")
+    for figure, caption in (("brdf_regions.png", "regions"), ("training_curves.png", "training curves")):
+        if (folder / figure).exists():
+            lines += [f"![{folder.name} {caption}](../assets/{folder.name}/{figure})", ""]
+    return lines
+
+
+def _presets_section() -> list[str]:
+    """The paper's datasets as presets (trainer/datasets.py) and the diagnostics, with their commands."""
+    from trainer.datasets import PRESETS
+
+    lines = [
+        "## The paper's datasets (presets) and the diagnostics",
+        "",
+        "The paper's own datasets (its Fig. 2 caption and §4) are named presets: a height field and its",
+        "coherence window. `gratnet heightfield list` lists them; each preset name works wherever a height field",
+        "does, and the ground-truth commands take the preset's σs unless `--sigma-s` is given (the paper's",
+        "1001² × 11 grid, the default, takes hours per dataset on 2 CPU cores):",
+        "",
+        "    gratnet groundtruth paper-cd --sampling simple-max --out out/volumes/paper-cd.exr",
+        "    gratnet heightfield preview paper-cd --out paper-cd.png",
+        "    gratnet brdfslice paper-pits --light 0,0 --exposure 2000 --out pits.png",
+        "",
+        "| preset | dataset | patch (µm): paper → built | 4σs (µm) | max height (µm): paper → built | paper | notes |",
+        "|---|---|---|---|---|---|---|",
+    ]
+    for preset in PRESETS.values():
+        field = preset.field()
+        built_height = float(field.heights_um.max() - field.heights_um.min())
+        nominal = "—" if preset.max_height_um is None else f"{preset.max_height_um:g}"
+        lines.append(
+            f"| `{preset.name}` | {preset.title} | {preset.patch_um:g} → {field.size_um[0]:.4g} | "
+            f"{preset.four_sigma_s_um:g} | {nominal} → {built_height:.3g} | {preset.paper} | {preset.notes} |"
+        )
+    lines += [
+        "",
+        "No model is trained on these presets yet (issue 15): the shipped materials above are 20 µm patches",
+        "under the default 65 µm window, not the paper's datasets, so their comparison with the paper is not",
+        "like for like.",
+        "",
+        "Diagnostics (trainer/diagnostics.py), written by `gratnet train` and `gratnet evaluate` into",
+        "metrics.json and report.md:",
+        "",
+        "- **Interpolation oracle** (`--oracle`, on by default; needs the volume): the volume's own samples,",
+        "  interpolated trilinearly in its grid coordinates (u*, v*, t) (SciPy's RegularGridInterpolator; the key",
+        "  vector is mapped by the runtime's contract, so `simple` and `simple-max` volumes are interpolated where",
+        "  they are uniform) at each BRDF slice's exact key vectors and scored with the same metrics as the network",
+        "  (`oracle_flip` beside `flip`). It bounds what the training grid can deliver: a network far above it loses",
+        "  in the network, not in the grid.",
+        "- **Error by region** of each BRDF slice, regions from the ground-truth slice itself: `specular`",
+        "  (key within 3 standard deviations of the window's specular lobe at 780 nm, at least 3 pixels),",
+        "  `dark` (exposed Y < 0.002), `orders` (lit pixels ≥ 10 % of their 99th-percentile Y), `floor` (the",
+        "  rest: speckle and scattering); per region the pixel fraction, mean FLIP and relative L1 of exposed",
+        "  XYZ, for the network and the oracle (report.md, \"Error by region\").",
+        "- **Training curves**: `gratnet train ... --epoch-flip-size 128` scores the (0°, 0°) 2000 RU slice at",
+        "  128² after every epoch (`slice_flip` in history.json; the ground truth is computed once and cached);",
+        "  training_curves.png plots the loss and that FLIP against the epoch. `gratnet evaluate` plots the",
+        "  history.json found beside the model.",
+        "",
+        "    gratnet evaluate assets/cd/model.npz --volume out/volumes/cd.exr --out out/reports/cd",
+        "    gratnet train out/volumes/paper-cd.exr --split all --epochs 100 --epoch-flip-size 128 \\",
+        "        --out out/runs/paper-cd",
+        "",
+        "The oracle needs the material's 1001² × 11 volume (out/volumes/NAME.exr, hours to compute on 2 cores);",
+        "none is kept on this machine, so no oracle figure below is measured yet (`—`).",
+        "",
+    ]
+    lines += _region_summary()
+    return lines
+
+
+def _region_summary(assets: Path = Path("assets")) -> list[str]:
+    """One line per shipped material that has the region split: the range of each region's FLIP over the slices."""
+    lines = []
+    for folder in sorted(assets.iterdir()):
+        path = folder / "metrics.json"
+        rows = json.loads(path.read_text()).get("brdf_slices", []) if path.exists() else []
+        if not rows or "regions" not in rows[0]:
+            continue
+        parts = []
+        for name in REGION_NAMES:
+            flips = [row["regions"][name]["flip"] for row in rows if row["regions"][name]["flip"] is not None]
+            shares = [100 * row["regions"][name]["fraction"] for row in rows]
+            if flips:
+                parts.append(f"{name} {min(flips):.3g}–{max(flips):.3g} ({min(shares):.3g}–{max(shares):.3g} % of "
+                             "the disc)")
+        lines.append(f"- `{folder.name}` (shipped model, re-evaluated): mean FLIP by region over the five slices: "
+                     + "; ".join(parts) + ".")
+    if lines:
+        lines = ["Measured so far (`bash scripts/reevaluate_materials.sh NAME`: today's evaluation of a shipped model,",
+                 "no retraining; \"Every slice\" below has the tables and region maps):", "", *lines, ""]
+    return lines
+
+
 def main() -> None:
     """Write the results page."""
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
@@ -96,6 +208,7 @@ def main() -> None:
                 f"{_number(row['ssim_srgb'])} | {_number(row['flip'])} |"
             )
         details += ["", f"![{folder.name} BRDF slices](../assets/{folder.name}/brdf_slices.png)", ""]
+        details += _regions_section(folder, [slices[name] for name in SLICE_ORDER if name in slices])
     lines += [
         "",
         "## Reading these numbers",
@@ -151,6 +264,7 @@ def main() -> None:
         "    - `funnel-176` (59.6k parameters, within the paper's footprint) once the budget, not the size,",
         "      stops being the limit.",
         "",
+        *_presets_section(),
         "## Every slice",
         "",
         *details,

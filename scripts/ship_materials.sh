@@ -4,6 +4,8 @@
 # it on the held-out slices and the paper's BRDF slices, and copy the small results into assets/NAME/:
 # model.npz, model.config.json, metrics.json, report.md, history.json and the figures.
 # Usage: bash scripts/ship_materials.sh [NAME ...]   (extra train flags via TRAIN_FLAGS="...")
+# NAME may also be one of the paper's datasets (gratnet heightfield list), e.g. paper-cd, with its own σs;
+# TRAIN_FLAGS="--epoch-flip-size 128" records the (0°, 0°) slice's FLIP per epoch for the training curves.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 materials=("$@")
@@ -22,7 +24,10 @@ for name in "${materials[@]}"; do
     cp "$run"/{model.npz,model.config.json,metrics.json,report.md,history.json,brdf_slices.png} "assets/$name/"
     # Held-out volume slices exist only when slices were held out (not with --split all).
     # A stale figure from an earlier held-out run must not stay beside a model that had none.
-    if [ -f "$run/volume_slices.png" ]; then cp "$run/volume_slices.png" "assets/$name/"
-    else rm -f "assets/$name/volume_slices.png"; fi
+    # The same for the other optional figures (region maps, training curves).
+    for figure in volume_slices.png brdf_regions.png training_curves.png; do
+        if [ -f "$run/$figure" ]; then cp "$run/$figure" "assets/$name/"
+        else rm -f "assets/$name/$figure"; fi
+    done
     echo "shipped assets/$name"
 done

@@ -16,11 +16,17 @@ from trainer.loaders import LoadOptions, load_heightfield
 def add_heightfield_input(parser: argparse.ArgumentParser) -> None:
     """HEIGHTFIELD (file or generator name), --quiet, and the OpticsConfig and LoadOptions flags."""
     parser.add_argument("heightfield", metavar="HEIGHTFIELD",
-                        help="height-field file (.npz .gsf .npy .png .exr) or built-in generator name (such as "
-                        "blazed; list: gratnet heightfield list)")
+                        help="height-field file (.npz .gsf .npy .png .exr), built-in generator name (such as "
+                        "blazed) or paper dataset (such as paper-cd, with its own σs); list: gratnet heightfield list")
     add_quiet_flag(parser)
     add_arguments(parser, OpticsConfig)
     add_arguments(parser, LoadOptions)
+    # A paper dataset preset brings its own σs: None here means "the preset's, else OpticsConfig's default".
+    for action in parser._actions:
+        if action.dest == "sigma_s_um":
+            action.help = (f"std σs of the Gaussian coherence window (µm) (default: a paper dataset's own, else "
+                           f"{OpticsConfig.sigma_s_um:g}, i.e. 4σs = 65 µm)")
+    parser.set_defaults(sigma_s_um=None)
 
 
 def require_suffix(path: str, suffix: str, what: str) -> None:
@@ -36,6 +42,11 @@ GRID_SAMPLES_RANGE = (16, 16384)
 
 def read_heightfield_input(arguments: argparse.Namespace) -> tuple[HeightField, OpticsConfig, LoadOptions]:
     """The loaded height field with the resolved optics and load options (limits checked before loading)."""
+    from trainer import datasets
+
+    if arguments.sigma_s_um is None:
+        preset = datasets.PRESETS.get(arguments.heightfield) if not Path(arguments.heightfield).exists() else None
+        arguments.sigma_s_um = preset.sigma_s_um if preset is not None else OpticsConfig.sigma_s_um
     optics = from_arguments(OpticsConfig, arguments)
     if optics.wavelength_step_nm < MIN_WAVELENGTH_STEP_NM:
         raise GratNetError(f"--wavelength-step-nm must be at least {MIN_WAVELENGTH_STEP_NM} nm (typical: 5), "

@@ -3,7 +3,9 @@
 BRDF slices (physics.md, "The A-term and BRDF slices") are rendered twice at the same key vectors:
 ground truth from the height field (exact F-term, no volume lookup) and the network through the runtime's
 numpy evaluator (gratnet.modelfile.evaluate_keys); both × exposure × A. Metrics (trainer/metrics.py):
-PSNR on exposed XYZ clipped to [0, 1], SSIM in display sRGB and YCbCr, mean FLIP.
+PSNR on exposed XYZ clipped to [0, 1], SSIM in display sRGB and YCbCr, mean FLIP. Beside the network:
+the interpolation oracle (the volume's own samples interpolated at the same keys) and the error split by
+region (specular peak, diffraction orders, speckle floor, dark background): trainer/diagnostics.py.
 """
 
 from __future__ import annotations
@@ -46,6 +48,8 @@ class EvaluateConfig:
     size: int = config_field(256, "BRDF-slice image width and height (pixels)")
     ior: float = config_field(1.5, "refractive index of the Fresnel term (0: off)")
     brdf_slices: bool = config_field(True, "evaluate the paper's five BRDF slices (needs the height field)")
+    oracle: bool = config_field(True, "also score the interpolation oracle on the BRDF slices: the volume "
+                                "interpolated trilinearly at the exact keys (needs the volume; cheap)")
     cache_dir: str = config_field("out/cache", "where ground-truth BRDF slices are cached (.npy)")
     progress: bool = config_field(True, "progress bars while computing ground-truth slices", cli=False)
 
@@ -83,22 +87,60 @@ def _slice_label(theta: float, phi: float, exposure: float) -> str:
 
 
 def evaluate_brdf_slices(
-    model: ModelFile, field: HeightField, optics: OpticsConfig, config: EvaluateConfig, out_dir: Path
+    model: ModelFile,
+    field: HeightField,
+    optics: OpticsConfig,
+    config: EvaluateConfig,
+    out_dir: Path,
+    volume: Volume | None = None,
 ) -> list[dict[str, Any]]:
-    """Metrics and a comparison figure for the paper's five BRDF slices."""
-    rows, figure_rows = [], []
+    """Metrics and a comparison figure for the paper's five BRDF slices; per-region errors; and, with a
+    ``volume`` and ``config.oracle``, the interpolation oracle's metrics (``oracle``) beside the network's."""
+    from trainer.diagnostics import VolumeOracle, region_errors, region_figure, region_labels
+
+    rows, figure_rows, region_maps = [], [], []
+    oracle_of_volume = VolumeOracle(volume) if volume is not None and config.oracle else None
     for theta, phi, exposure in STANDARD_SLICES:
         slice_config = SliceConfig(theta, phi, size=config.size, exposure=exposure, ior=config.ior)
         reference = ground_truth_brdf_slice(field, optics, slice_config, config.cache_dir, config.progress)
         predicted = network_brdf_slice(model, slice_config)
         _, inside = slice_view_directions(config.size)
         metrics = image_metrics(reference, predicted, mask=inside)
-        rows.append(
-            {"slice": _slice_label(theta, phi, exposure), "theta": theta, "phi": phi, "exposure": exposure, **metrics}
-        )
+        labels = region_labels(reference, slice_config, optics.sigma_s_um)
+        region_maps.append((_slice_label(theta, phi, exposure), labels))
+        row: dict[str, Any] = {
+            "slice": _slice_label(theta, phi, exposure), "theta": theta, "phi": phi, "exposure": exposure, **metrics,
+            "regions": region_errors(reference, predicted, labels),
+        }
+        if oracle_of_volume is not None:
+            oracle = oracle_of_volume.brdf_slice(slice_config)
+            row["oracle"] = {**image_metrics(reference, oracle, mask=inside),
+                             "regions": region_errors(reference, oracle, labels)}
+            row["oracle_flip"] = row["oracle"]["flip"]
+        rows.append(row)
         figure_rows.append((_slice_label(theta, phi, exposure), reference, predicted))
     comparison_figure(out_dir / "brdf_slices.png", figure_rows, title="BRDF slices: ground truth | network | FLIP")
+    region_figure(out_dir / "brdf_regions.png", region_maps)
     return rows
+
+
+def region_table(rows: list[dict[str, Any]]) -> str:
+    """Markdown: per slice and region, the pixel fraction and the network's (and oracle's) FLIP and relative L1."""
+    from trainer.diagnostics import REGIONS
+    from trainer.report import metrics_table_markdown
+
+    lines = []
+    for row in rows:
+        for name in REGIONS:
+            network, oracle = row["regions"][name], row.get("oracle", {}).get("regions", {}).get(name, {})
+            lines.append({"slice": row["slice"], "region": name, "fraction": network["fraction"],
+                          "flip": network["flip"], "relative_l1": network["relative_l1"],
+                          "oracle_flip": oracle.get("flip"), "oracle_relative_l1": oracle.get("relative_l1")})
+    return ("## Error by region\n\nRegions of the ground-truth slice (trainer/diagnostics.py): specular peak, "
+            "diffraction orders (bright), speckle floor (lit), dark background; fraction of the view disc; FLIP "
+            "averaged over the region; relative L1 = Σ|pred − ref| / Σ|ref| of exposed XYZ.\n\n"
+            + metrics_table_markdown(lines, ["slice", "region", "fraction", "flip", "relative_l1", "oracle_flip",
+                                             "oracle_relative_l1"]))
 
 
 def evaluate_volume_slices(model: ModelFile, volume: Volume, slices: list[int], out_dir: Path) -> list[dict[str, Any]]:
@@ -140,8 +182,10 @@ def evaluate_model(
     optics: OpticsConfig | None = None,
     volume_slices: list[int] | None = None,
     extra: dict[str, Any] | None = None,
+    history: dict[str, Any] | None = None,
 ) -> dict[str, Any]:
-    """Evaluate and write the report folder (metrics.json, report.md, PNG figures)."""
+    """Evaluate and write the report folder (metrics.json, report.md, PNG figures; with the training
+    ``history``, training_curves.png: loss and per-epoch slice FLIP against the epoch)."""
     out_dir = make_folder(out_dir)
     results: dict[str, Any] = {
         "model": {
@@ -155,14 +199,24 @@ def evaluate_model(
     if volume is not None and volume_slices:
         results["volume_slices"] = evaluate_volume_slices(model, volume, volume_slices, out_dir)
         table += results["volume_slices"]
+    sections = []
     if field is not None and config.brdf_slices:
-        results["brdf_slices"] = evaluate_brdf_slices(model, field, optics or OpticsConfig(), config, out_dir)
+        results["brdf_slices"] = evaluate_brdf_slices(model, field, optics or OpticsConfig(), config, out_dir,
+                                                      volume=volume)
         table += results["brdf_slices"]
+        sections.append(region_table(results["brdf_slices"]))
+        if config.oracle and volume is None:
+            sections.append("The interpolation oracle needs the volume (--volume): not evaluated.\n")
+    if history is not None:
+        from trainer.diagnostics import plot_history
+
+        plot_history(history, out_dir / "training_curves.png")
     write_report(
         out_dir,
         results,
         table,
-        ["slice", "psnr_xyz", "ssim_ycbcr", "ssim_srgb", "flip", "psnr_transformed"],
+        ["slice", "psnr_xyz", "ssim_ycbcr", "ssim_srgb", "flip", "oracle_flip", "psnr_transformed"],
         title=f"GratNet evaluation: {model.metadata.get('volume', {}).get('source', '?')[:80]}",
+        sections=sections,
     )
     return results

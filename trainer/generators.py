@@ -207,6 +207,10 @@ class ScratchesParams(_Parameters):
     depth_jitter: float = _fraction(0.3, "per-scratch depth variation, uniform ± this fraction (dimensionless)")
     min_length_um: float = _length(3.0, "shortest scratch (µm)")
     max_length_um: float = _length(15.0, "longest scratch (µm)")
+    damping_sigma_um: float = _length(0.0, "std of a Gaussian damping window centred on the patch that fades the "
+                                           "cuts towards the edges (µm); 0 = off", zero_ok=True)
+    max_depth_um: float = _length(0.0, "if > 0, the cuts are rescaled so that the deepest is this deep (µm); "
+                                       "0 = as cut", zero_ok=True)
     size_um: float = _size(20.0)
     dx_um: float = _dx()
     seed: int = _seed("positions, orientations, lengths and depths")
@@ -244,6 +248,8 @@ class CornerCubeParams(_Parameters):
 
     generator_name: typing.ClassVar[str] = "corner_cube"
     max_height_um: float = _length(1.5, "peak-to-valley height (µm); sets the cube edge = max_height_um·√3/2")
+    mirror_tile_um: float = _length(0.0, "if > 0, a design this wide (µm) is repeated mirrored (tile, mirror "
+                                         "image, tile, …) to fill the patch; 0 = one design", zero_ok=True)
     size_um: float = _size(20.0)
     dx_um: float = _dx()
     seed: int = _seed("random lateral offset of the array")
@@ -420,6 +426,9 @@ def scratches(params: ScratchesParams) -> HeightField:
     Each scratch: uniform random centre and orientation, length uniform in [min_length_um,
     max_length_um], depth δ = depth_um·(1 ± depth_jitter); cross-section of a sphere of radius R pressed
     δ deep (half-width √(2Rδ − δ²)), rounded ends. Overlaps keep the deepest cut; wrapped periodically.
+    With damping_sigma_um > 0 the cuts are multiplied by exp(−r²/(2σ²)), r the distance (µm) from the
+    patch centre (the paper's "Gaussian damping window" on its scratch scan, §4); with max_depth_um > 0
+    they are then rescaled so that the deepest is max_depth_um deep (the height span).
     """
     samples, dx, width = _grid("scratches", params.size_um, params.dx_um)
     rng = np.random.default_rng(params.seed)
@@ -448,6 +457,12 @@ def scratches(params: ScratchesParams) -> HeightField:
                 cut = np.where(distance_sq < half_width**2, cut, 0.0)
                 window = np.ix_(rows, columns)
                 heights[window] = np.minimum(heights[window], cut)
+    if params.damping_sigma_um > 0:
+        offsets = np.arange(samples) * dx - width / 2
+        damping = np.exp(-(offsets**2) / (2 * params.damping_sigma_um**2))
+        heights *= np.outer(damping, damping)
+    if params.max_depth_um > 0 and heights.min() < 0:
+        heights *= params.max_depth_um / -heights.min()
     return _field(heights, dx, params)
 
 
@@ -495,7 +510,18 @@ def corner_cube(params: CornerCubeParams) -> HeightField:
     t_i = 1 − frac(q_i); so t* is the m-th smallest t_i and s = √3·t*. The height spans 0 (concave
     corners) to 2/√3 cube edges (convex corners), so the cube edge is max_height_um·√3/2. Faces are cube
     faces, tilted 54.74° (slope √2). Hexagonal cells √2 edges apart: not periodic in a square patch.
+    With mirror_tile_um > 0 the design is made on a square tile that wide and the patch is filled with
+    it and its mirror images alternately along x and y (the paper's corner cubes: a 24 µm design
+    mirrored to 72 µm, §4); the patch is then a whole number of tiles (size_um rounded).
     """
+    if params.mirror_tile_um > 0:
+        tiles = max(1, round(params.size_um / params.mirror_tile_um))
+        _grid("corner_cube", tiles * params.mirror_tile_um, params.dx_um)  # refuses an oversized patch up front
+        tile = corner_cube(dataclasses.replace(params, mirror_tile_um=0.0, size_um=params.mirror_tile_um))
+        rows = [tile.heights_um if index % 2 == 0 else tile.heights_um[::-1] for index in range(tiles)]
+        column = np.concatenate(rows, axis=0)
+        blocks = [column if index % 2 == 0 else column[:, ::-1] for index in range(tiles)]
+        return _field(np.concatenate(blocks, axis=1), tile.dx_um, params)
     samples, dx, width = _grid("corner_cube", params.size_um, params.dx_um)
     edge = params.max_height_um * math.sqrt(3) / 2
     offset = np.random.default_rng(params.seed).uniform(0, 2 * width, 2)

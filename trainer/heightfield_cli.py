@@ -39,7 +39,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     )
     actions = parser.add_subparsers(dest="action", metavar="ACTION", required=True)
 
-    listing = actions.add_parser("list", help="list the built-in generators with their parameters")
+    listing = actions.add_parser("list", help="list the built-in generators with their parameters, and the paper's "
+                                 "datasets (presets)")
     listing.set_defaults(handler=_list)
 
     generate = actions.add_parser(
@@ -125,6 +126,9 @@ def _list(arguments: argparse.Namespace) -> int:
         for field in dataclasses.fields(params_class):
             flag = "--" + field.name.replace("_", "-")
             print(f"    {flag:26} {field.default!r:>8}  {field.metadata.get('help', '')}")
+    from trainer.datasets import listing
+
+    print(listing())
     return 0
 
 

@@ -65,23 +65,28 @@ class LoadOptions:
 
 
 def load_heightfield(spec: str | os.PathLike[str], options: LoadOptions | None = None) -> HeightField:
-    """Load ``spec``: a file (.npy, .npz, .gsf, .png, .exr) or a built-in generator name (its defaults).
+    """Load ``spec``: a file (.npy, .npz, .gsf, .png, .exr), a built-in generator name (its defaults) or a
+    paper dataset preset (trainer/datasets.py, e.g. ``paper-cd``).
 
     An existing file wins over a generator of the same name. ``options`` apply to files only.
     """
-    from trainer import generators
+    from trainer import datasets, generators
 
     options = options or LoadOptions()
     path = Path(spec)
     if str(spec).startswith("generator:"):
         return generator_from_source(str(spec))
+    if str(spec).startswith(datasets.SOURCE_PREFIX):  # a scan-based preset's recorded source
+        return datasets.preset(str(spec)).field()
     if not path.exists():
         if str(spec) in generators.GENERATORS:
             return generators.generate(str(spec))
+        if datasets.is_preset(str(spec)):
+            return datasets.preset(str(spec)).field()
         if path.suffix.lower() in SUFFIXES:
             raise GratNetError(f"no such file: {path}")
         raise GratNetError(f"{str(spec)!r} is neither a file nor a built-in generator "
-                           f"({', '.join(generators.GENERATORS)})")
+                           f"({', '.join(generators.GENERATORS)}) nor a paper dataset ({', '.join(datasets.PRESETS)})")
     if path.is_dir():
         raise GratNetError(f"{path} is a folder, not a height-field file")
     suffix = path.suffix.lower()

@@ -144,18 +144,20 @@ def write_report(
     table_rows: list[dict[str, Any]],
     table_columns: list[str],
     title: str,
+    sections: list[str] | None = None,
 ) -> None:
     """Write ``folder/metrics.json`` and ``folder/report.md``.
 
     metrics.json is strict JSON (indent 2): numpy values become Python numbers and non-finite
     floats become the strings "inf", "-inf", "nan". report.md holds the title, the metrics table
-    and links to the PNG files already in ``folder`` (write the figures first).
+    and links to the PNG files already in ``folder`` (write the figures first); ``sections`` (markdown
+    text) follow the table.
     """
     folder = Path(folder)
     text = json.dumps(_json_ready(metrics), indent=2, allow_nan=False, ensure_ascii=False) + "\n"
     write_text_atomic(folder / "metrics.json", text)
 
-    parts = [f"# {title}\n", metrics_table_markdown(table_rows, table_columns)]
+    parts = [f"# {title}\n", metrics_table_markdown(table_rows, table_columns), *(sections or [])]
     figures = sorted(p.name for p in folder.glob("*.png") if p.is_file() and not p.name.startswith("."))
     if figures:
         parts.append("## Figures\n")

@@ -7,11 +7,13 @@ sinusoidal encoding; targets are the range-transformed XYZ.
 
 from __future__ import annotations
 
+import copy
 import dataclasses
 import json
 import math
 import os
 import time
+from collections.abc import Callable
 from typing import Any
 
 import numpy as np
@@ -122,9 +124,18 @@ def held_out_loss(
 
 
 def train(
-    volume: Volume, config: TrainConfig, out_dir: str | os.PathLike[str], resume: bool = False, progress: bool = True
+    volume: Volume,
+    config: TrainConfig,
+    out_dir: str | os.PathLike[str],
+    resume: bool = False,
+    progress: bool = True,
+    per_epoch: Callable[[ModelFile], dict[str, Any]] | None = None,
 ) -> tuple[FunnelMLP, ModelFile, dict[str, Any]]:
-    """Train on ``volume``; writes checkpoint.pt (every epoch), model.npz and history.json to ``out_dir``."""
+    """Train on ``volume``; writes checkpoint.pt (every epoch), model.npz and history.json to ``out_dir``.
+
+    ``per_epoch`` (optional) gets the model file of the weights after each epoch; what it returns (e.g. a
+    slice's FLIP) joins that epoch's record in history.json. Its time is not counted as training time.
+    """
     out_dir = make_folder(out_dir)
     device = pick_device(config.device)
     torch.manual_seed(config.seed)
@@ -145,7 +156,10 @@ def train(
     checkpoint_path = out_dir / "checkpoint.pt"
     if resume and checkpoint_path.exists():
         state = torch.load(checkpoint_path, map_location=device, weights_only=False)
-        if state["config"] != config_to_dict(config):
+        # The per-epoch diagnostic does not change the training: it may differ (or be absent) on resume.
+        diagnostic = ("epoch_flip_size",)
+        saved = {key: value for key, value in state["config"].items() if key not in diagnostic}
+        if saved != {key: value for key, value in config_to_dict(config).items() if key not in diagnostic}:
             raise GratNetError(
                 f"{checkpoint_path} was made with a different configuration; start afresh without --resume"
             )
@@ -190,6 +204,10 @@ def train(
         }
         if test_samples is not None:
             record["held_out_loss"] = held_out_loss(model, test_samples, encoding, device, config.batch_size)
+        if per_epoch is not None:
+            snapshot = copy.deepcopy(model).cpu().to_model_file(encoding=encoding, range=range_spec,
+                                                                scheme=volume.metadata["scheme"], metadata={})
+            record.update(per_epoch(snapshot))
         history["epochs"].append(record)
         history["train_seconds"] = round(history["train_seconds"] + seconds, 2)
         if progress:

@@ -66,7 +66,7 @@ def _ground_truth_inputs(arguments: argparse.Namespace, volume_metadata: dict[st
     from trainer.loaders import LoadOptions, load_heightfield
 
     spec = arguments.heightfield or volume_metadata.get("source", "")
-    if not spec or not (arguments.heightfield or str(spec).startswith("generator:")):
+    if not spec or not (arguments.heightfield or str(spec).startswith(("generator:", "dataset:"))):
         print(
             "gratnet: no --heightfield and the volume was not made by a built-in generator: skipping BRDF slices",
             file=sys.stderr,
@@ -105,6 +105,30 @@ def _check_before_work(arguments: argparse.Namespace, evaluating: bool) -> None:
             check_output_folder(arguments.cache_dir, "--cache-dir")
 
 
+#: The slice scored after each epoch by --epoch-flip-size: the paper's headline view, (0°, 0°) at 2000 RU.
+EPOCH_FLIP_SLICE = (0.0, 0.0, 2000.0)
+
+
+def _epoch_flip(arguments: argparse.Namespace, config: Any, volume_metadata: dict[str, Any]) -> Any:
+    """A per-epoch callback: mean FLIP of the network's (0°, 0°) 2000 RU slice at a low size against the
+    exact ground truth (computed once, cached); None with a message when there is no height field."""
+    from trainer.brdfslice import SliceConfig
+    from trainer.evaluate import ground_truth_brdf_slice, network_brdf_slice
+    from trainer.metrics import flip
+
+    field, optics = _ground_truth_inputs(arguments, volume_metadata)
+    if field is None:
+        return None
+    theta, phi, exposure = EPOCH_FLIP_SLICE
+    slice_config = SliceConfig(theta, phi, size=config.epoch_flip_size, exposure=exposure, ior=arguments.ior)
+    reference = ground_truth_brdf_slice(field, optics, slice_config, arguments.cache_dir, not arguments.quiet)
+
+    def score(model_file: Any) -> dict[str, Any]:
+        return {"slice_flip": flip(reference, network_brdf_slice(model_file, slice_config))[0]}
+
+    return score
+
+
 def run_train(arguments: argparse.Namespace) -> int:
     """Train, save, evaluate."""
     from gratnet.volume import read_volume
@@ -120,7 +144,9 @@ def run_train(arguments: argparse.Namespace) -> int:
     held_out = _slice_list(config.test_slices, "--test-slices") if config.split == "slices" else []
     volume = read_volume(arguments.volume)
     out = Path(arguments.out)
-    model, model_file, history = train(volume, config, out, resume=arguments.resume, progress=not arguments.quiet)
+    per_epoch = _epoch_flip(arguments, config, volume.metadata) if config.epoch_flip_size else None
+    model, model_file, history = train(volume, config, out, resume=arguments.resume, progress=not arguments.quiet,
+                                       per_epoch=per_epoch)
     save_config(out / "model.npz", train=config, volume=arguments.volume)
     print(
         f"wrote {out / 'model.npz'}: {model.parameter_count} parameters, layers {model.sizes}, "
@@ -140,9 +166,21 @@ def run_train(arguments: argparse.Namespace) -> int:
             optics=optics,
             volume_slices=held_out,
             extra={"training": {k: v for k, v in history.items() if k != "epochs"}},
+            history=history,
         )
         print(f"wrote {out / 'report.md'}")
     return 0
+
+
+def _read_history(path: Path) -> dict[str, Any] | None:
+    """The training history beside a model, for its curves; None when absent or unreadable (it is optional)."""
+    import json
+
+    try:
+        history = json.loads(path.read_text(encoding="utf-8"))
+    except (OSError, ValueError):
+        return None
+    return history if isinstance(history, dict) and isinstance(history.get("epochs"), list) else None
 
 
 def run_evaluate(arguments: argparse.Namespace) -> int:
@@ -158,8 +196,11 @@ def run_evaluate(arguments: argparse.Namespace) -> int:
     volume = read_volume(arguments.volume) if arguments.volume else None
     metadata = volume.metadata if volume is not None else model.metadata.get("volume", {})
     field, optics = _ground_truth_inputs(arguments, metadata) if evaluate_config.brdf_slices else (None, None)
+    history_path = Path(arguments.model).with_name("history.json")  # the training's, beside a trained model
+    history = _read_history(history_path)
     evaluate_model(
-        model, arguments.out, evaluate_config, volume=volume, field=field, optics=optics, volume_slices=slices
+        model, arguments.out, evaluate_config, volume=volume, field=field, optics=optics, volume_slices=slices,
+        history=history,
     )
     save_config(
         Path(arguments.out) / "metrics.json",

@@ -36,12 +36,17 @@ class TrainConfig:
     seed: int = config_field(0, "seed of initialisation, shuffling and the random split")
     device: str = config_field("auto", "torch device: auto (CUDA when present), cpu, cuda")
     max_train_samples: int = config_field(0, "use at most this many training samples (0: all)")
+    epoch_flip_size: int = config_field(0, "if > 0, after each epoch score the BRDF slice (0°, 0°) 2000 RU at this "
+                                        "size (pixels, e.g. 128) with mean FLIP into history.json (needs the "
+                                        "height field; 0: off)")
 
     def __post_init__(self) -> None:
         if self.epochs < 1 or self.batch_size < 1:
             raise GratNetError(f"--epochs and --batch-size must be ≥ 1, got {self.epochs}, {self.batch_size}")
         if not self.learning_rate > 0:
             raise GratNetError(f"--learning-rate must be positive, got {self.learning_rate}")
+        if not 0 <= self.epoch_flip_size <= 1024:
+            raise GratNetError(f"--epoch-flip-size must be from 0 (off) to 1024 pixels, got {self.epoch_flip_size}")
         if self.split not in ("slices", "random", "all"):
             raise GratNetError(f"--split must be slices, random or all, got {self.split!r}")
 
