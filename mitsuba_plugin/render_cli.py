@@ -28,7 +28,7 @@ from pathlib import Path
 
 from gratnet.config import add_arguments, add_quiet_flag, config_field, from_arguments, parse_float
 from gratnet.errors import GratNetError
-from viewer.defaults import FALLBACK, FOV_DEGREES
+from viewer.render_cli import SceneConfig
 
 __all__ = ["MitsubaRenderConfig", "parse_environment", "register", "run"]
 
@@ -38,17 +38,9 @@ MAX_SPP = 1 << 16
 
 
 @dataclasses.dataclass
-class MitsubaRenderConfig:
+class MitsubaRenderConfig(SceneConfig):
     """Path-tracing a material on a mesh with Mitsuba 3: lights, environment, camera and sampling."""
 
-    material: str = config_field("blazed", "shipped material name (assets/NAME/model.npz) or a model-file path")
-    mesh: str = config_field("cd", "cd, sphere, plane, or the path of a Wavefront .obj file (metres, +z up)")
-    light_theta_degrees: float = config_field(FALLBACK.light_theta_degrees,
-                                              "directional light: polar angle from +z, degrees", cli=False)
-    light_phi_degrees: float = config_field(FALLBACK.light_phi_degrees, "directional light: azimuth from +x, degrees",
-                                            cli=False)
-    point_light: tuple[float, float, float] | None = config_field(
-        None, "point light position, metres (replaces the directional light)", cli=False)
     light_intensity: float = config_field(
         1.0, "the light's irradiance (directional, on a plane facing it) or intensity (point, W/sr: irradiance "
         "intensity/d² at d metres), as gratnet render's at 1; 0: environment only (typical: 0 to 10)")
@@ -56,20 +48,6 @@ class MitsubaRenderConfig:
         "none", "environment light: none, a constant radiance (one number, or R,G,B in linear sRGB) or the path "
         "of a lat-long .exr (its up is +z)", cli=False)
     environment_scale: float = config_field(1.0, "factor on the environment's radiance (typical: 1e-5 to 1)")
-    camera_distance: float = config_field(FALLBACK.camera_distance, "camera distance from the origin, metres",
-                                          cli=False)
-    camera_azimuth_degrees: float = config_field(FALLBACK.camera_azimuth_degrees, "camera azimuth from +x, degrees",
-                                                 cli=False)
-    camera_elevation_degrees: float = config_field(FALLBACK.camera_elevation_degrees,
-                                                   "camera elevation above the xy-plane, degrees", cli=False)
-    fov_degrees: float = config_field(FOV_DEGREES, "vertical field of view, degrees (typical: 20 to 60)", flag="--fov")
-    exposure: float = config_field(FALLBACK.exposure, "exposure: the factor applied to the radiance before display "
-                                   "(linear)", cli=False)
-    width: int = config_field(512, "image width, pixels", cli=False)
-    height: int = config_field(512, "image height, pixels", cli=False)
-    ior: float = config_field(1.5, "refractive index for the Fresnel factor of the A-term (typical: 1.3 to 2.5; "
-                              "0: none)")
-    fresnel: bool = config_field(True, "apply the Fresnel factor (--no-fresnel: R/R0 = 1)")
     spp: int = config_field(64, f"samples per pixel (1 … {MAX_SPP}; typical: 16 to 256)")
     integrator: str = config_field("path", "direct (one bounce, emitter + BSDF sampling) or path",
                                    choices=["direct", "path"])
@@ -80,11 +58,6 @@ class MitsubaRenderConfig:
     specular_probability: float = config_field(0.5, "share of BSDF samples drawn around the mirror direction "
                                                "(0 to 1)")
     lobe_degrees: float = config_field(2.0, "angular standard deviation of that lobe, degrees (typical: 0.5 to 10)")
-
-    @property
-    def effective_ior(self) -> float | None:
-        """The A-term's ``ior`` argument: ``None`` when Fresnel is off."""
-        return self.ior if self.fresnel and self.ior != 0 else None
 
 
 def parse_environment(text: str) -> float | tuple[float, float, float] | Path | None:

@@ -34,8 +34,8 @@ from viewer.defaults import FALLBACK, FOV_DEGREES, fill_scene_defaults, with_fal
 
 ConfigT = TypeVar("ConfigT")
 
-__all__ = ["ASSETS", "MESHES", "RenderConfig", "check_scene", "register", "resolve_material", "resolve_scene_command",
-           "run", "scene_fields", "shipped_materials", "warn_if_black", "write_render"]
+__all__ = ["ASSETS", "MESHES", "RenderConfig", "SceneConfig", "check_scene", "register", "resolve_material",
+           "resolve_scene_command", "run", "scene_fields", "shipped_materials", "warn_if_black", "write_render"]
 
 #: Shipped materials: ``assets/NAME/model.npz``.
 ASSETS = Path(__file__).resolve().parents[1] / "assets"
@@ -49,8 +49,8 @@ _SRGB_CHROMATICITIES = (0.64, 0.33, 0.30, 0.60, 0.15, 0.06, 0.3127, 0.3290)
 
 
 @dataclasses.dataclass
-class RenderConfig:
-    """Rendering a material on a mesh (or its BRDF slice) with one light and an orbit camera."""
+class SceneConfig:
+    """One light, an orbit camera, a material on a mesh: what every rendering command shares."""
 
     material: str = config_field("blazed", "shipped material name (assets/NAME/model.npz) or a model-file path")
     mesh: str = config_field("cd", "cd, sphere, plane, or the path of a Wavefront .obj file (metres, +z up)")
@@ -67,13 +67,24 @@ class RenderConfig:
     camera_elevation_degrees: float = config_field(FALLBACK.camera_elevation_degrees,
                                                    "camera elevation above the xy-plane, degrees", cli=False)
     fov_degrees: float = config_field(FOV_DEGREES, "vertical field of view, degrees (typical: 20 to 60)", flag="--fov")
-    exposure: float = config_field(FALLBACK.exposure, "exposure: the factor applied to XYZ before display (linear)",
-                                   cli=False)
+    exposure: float = config_field(FALLBACK.exposure, "exposure: the linear factor applied to the rendered CIE XYZ "
+                                   "(A · XYZ per unit irradiance) before display", cli=False)
     width: int = config_field(512, "image width, pixels", cli=False)
     height: int = config_field(512, "image height, pixels", cli=False)
     ior: float = config_field(1.5, "refractive index for the Fresnel factor of the A-term (typical: 1.3 to 2.5; "
                               "0: none)")
     fresnel: bool = config_field(True, "apply the Fresnel factor (--no-fresnel: R/R0 = 1)")
+
+    @property
+    def effective_ior(self) -> float | None:
+        """The A-term's ``ior`` argument: ``None`` when Fresnel is off."""
+        return self.ior if self.fresnel and self.ior != 0 else None
+
+
+@dataclasses.dataclass
+class RenderConfig(SceneConfig):
+    """Rendering a material on a mesh (or its BRDF slice) with one light and an orbit camera."""
+
     slice: bool = config_field(False, "render the network's BRDF slice for the light θ,φ instead of a mesh")
     weights_path: str = config_field(
         "auto", "where the shader reads the network's weights: texture (packed RGBA32F texture), baked "
@@ -83,11 +94,6 @@ class RenderConfig:
     skip_dark: bool = config_field(
         False, "PNG only: skip the network where exposure · A · (the model's cached output bound) cannot reach the "
         "display's smallest step; the first use per model builds the bound (minutes on a CPU)")
-
-    @property
-    def effective_ior(self) -> float | None:
-        """The A-term's ``ior`` argument: ``None`` when Fresnel is off."""
-        return self.ior if self.fresnel and self.ior != 0 else None
 
 
 def _numbers(text: str, count: int | tuple[int, ...], flag: str, form: str) -> list[float]:
