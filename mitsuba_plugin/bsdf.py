@@ -58,11 +58,10 @@ def _model(filename: str) -> ModelFile:
 
 def check_ior(ior: float) -> float | None:
     """The A-term's ``ior`` argument for a plugin/flag value: None for 0 (no Fresnel), else the value; refused
-    (one GratNetError) exactly where ``gratnet render`` refuses it (viewer.renderer's IOR check)."""
-    from viewer.renderer import _ior_uniform
+    (one GratNetError) exactly where ``gratnet render`` refuses it (``gratnet.brdf.check_ior``)."""
+    from gratnet.brdf import check_ior as check
 
-    value = _ior_uniform(float(ior))
-    return None if value == 0.0 else value
+    return check(float(ior), "ior")
 
 
 def _checked(value: float, name: str, low: float, high: float, low_open: bool = False) -> float:

@@ -382,11 +382,11 @@ class ViewerApp:
         if new == self.state:
             return False
         try:
-            from viewer.renderer import _ior_uniform
+            from gratnet.brdf import check_ior
 
             new.camera()
             new.light()
-            _ior_uniform(new.effective_ior)
+            check_ior(new.effective_ior, "ior")
             self._supply.check(new)  # cheap checks (and, when not in the background, the loading itself)
         except GratNetError as error:
             self.message = str(error)
