@@ -71,6 +71,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                         help="where the shader reads the network's weights: texture, baked (literals in a generated "
                         "shader) or auto (baked for nets up to 32k multiply-adds on a CPU rasterizer, else texture; "
                         "default: auto)")
+    parser.add_argument("--spp", "--samples", dest="spp", type=parse_int, default=16, metavar="N",
+                        help="samples per pixel accumulated while the view stands still (progressive anti-aliasing, "
+                        "as gratnet render --spp; 1: off; typical: 4 to 64; the panel changes it; default: 16)")
     parser.add_argument("--screenshot-dir", default=".", metavar="DIR",
                         help="folder for the Screenshot button's PNGs (default: the working folder)")
     parser.add_argument("--max-frames", type=parse_int, default=0, metavar="N",
@@ -106,6 +109,10 @@ def _state(arguments: argparse.Namespace) -> object:
     theta, phi, distance, azimuth, elevation = _scene_numbers(arguments)
     if arguments.max_frames < 0:
         raise GratNetError(f"--max-frames must be ≥ 0, got {arguments.max_frames}")
+    from viewer.render_cli import MAX_SAMPLES
+
+    if not 1 <= arguments.spp <= MAX_SAMPLES:
+        raise GratNetError(f"--spp (samples per pixel) must be an integer in 1 … {MAX_SAMPLES}, got {arguments.spp}")
     # Read (cheaply) before a window opens: a bad model or mesh file is one line, not a broken window.
     load_model(resolve_material(arguments.material))
     if arguments.mesh not in MESHES:
@@ -133,7 +140,7 @@ def run(arguments: argparse.Namespace) -> int:
     state = _state(arguments)
     extra = [] if state.mesh in ("cd", "sphere", "plane") else [state.mesh]
     with ViewerWindow(state, size, screenshot_dir=arguments.screenshot_dir, extra_meshes=extra,
-                      weights_path=arguments.weights_path) as window:
+                      weights_path=arguments.weights_path, max_samples=arguments.spp) as window:
         window.run(arguments.max_frames)
         if window.gl_errors:
             raise GratNetError(f"OpenGL reported errors: {'; '.join(window.gl_errors[:3])} (please report this)")
