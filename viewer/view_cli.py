@@ -101,18 +101,16 @@ def _state(arguments: argparse.Namespace) -> object:
     from gratnet.atomic import check_output_folder
     from gratnet.modelfile import load_model
     from viewer.app import SLIDERS, ViewerState
-    from viewer.render_cli import MESHES, build_mesh, resolve_material
+    from viewer.render_cli import MAX_SAMPLES, MESHES, build_mesh, resolve_material
 
     check_output_folder(arguments.screenshot_dir, "--screenshot-dir")
+    if not 1 <= arguments.spp <= MAX_SAMPLES:
+        raise GratNetError(f"--spp (samples per pixel) must be an integer in 1 … {MAX_SAMPLES}, got {arguments.spp}")
     _scene_numbers(with_fallback(arguments))  # the flags given are checked before the defaults read the model
     fill_scene_defaults(arguments)  # the unset --light, --camera, --exposure, from the material and mesh
     theta, phi, distance, azimuth, elevation = _scene_numbers(arguments)
     if arguments.max_frames < 0:
         raise GratNetError(f"--max-frames must be ≥ 0, got {arguments.max_frames}")
-    from viewer.render_cli import MAX_SAMPLES
-
-    if not 1 <= arguments.spp <= MAX_SAMPLES:
-        raise GratNetError(f"--spp (samples per pixel) must be an integer in 1 … {MAX_SAMPLES}, got {arguments.spp}")
     # Read (cheaply) before a window opens: a bad model or mesh file is one line, not a broken window.
     load_model(resolve_material(arguments.material))
     if arguments.mesh not in MESHES:
