@@ -8,7 +8,8 @@ SceneRenderer takes a ``render_path``) and per sample count (anti-aliasing: ``sa
 frame is one ``render_rgba`` call, read-back of the float image included (a window or a file needs it),
 after a warm-up frame at the same size that pays for compilation, Mesa's JIT and allocations. Two times
 per frame: the wall time (the read-back waits for the GPU, so it includes all GPU work) and the GL timer
-query's GPU time of the same commands. Every row records ``GL_RENDERER``.
+query's GPU time of the same commands (none for frames over ~3.9 s: moderngl reads the timer as 32 bits of
+nanoseconds). Every row records ``GL_RENDERER``.
 
 Skip-work is off (no ``skip_threshold``): every covered pixel runs the network, as for an EXR file.
 """
@@ -66,10 +67,15 @@ def scene_view(model_path: str, mesh: str) -> SceneView:
     return SceneView(mesh, camera, light, defaults.exposure)
 
 
-def _timed(frame: Any, ctx: Any, repeats: int, max_seconds: float) -> tuple[list[float], list[float]]:
+#: moderngl reads GL_TIME_ELAPSED as a 32-bit count of nanoseconds: frames longer than this (llvmpipe at full HD)
+#: have no GPU time (``None``); their wall time stands.
+_TIMER_LIMIT_S = (2**32 - 1) * 1e-9
+
+
+def _timed(frame: Any, ctx: Any, repeats: int, max_seconds: float) -> tuple[list[float], list[float | None]]:
     """Wall and GL-timer seconds of ``frame()`` calls: ``repeats`` of them, fewer once ``max_seconds`` is spent."""
     walls: list[float] = []
-    gpus: list[float] = []
+    gpus: list[float | None] = []
     query = ctx.query(time=True)  # moderngl 5 frees queries with the context (they have no release())
     while len(walls) < repeats and sum(walls) < max_seconds:
         start = time.perf_counter()
@@ -77,7 +83,8 @@ def _timed(frame: Any, ctx: Any, repeats: int, max_seconds: float) -> tuple[list
             frame()
         ctx.finish()
         walls.append(time.perf_counter() - start)
-        gpus.append(query.elapsed * 1e-9)  # nanoseconds; waits for the result
+        elapsed = query.elapsed * 1e-9  # nanoseconds; waits for the result
+        gpus.append(elapsed if walls[-1] < 0.9 * _TIMER_LIMIT_S else None)
     return walls, gpus
 
 
@@ -117,7 +124,7 @@ def scene_frame_times(ctx: Any, model: Any, model_path: str, view: SceneView, we
                     "requested_render_path": render_path,
                     "render_path": str(getattr(renderer, "render_path", render_path)),
                     "setup_s": setup_seconds, "times_s": walls, "seconds": seconds, "gpu_times_s": gpus,
-                    "gpu_seconds": statistics.median(gpus), "fps": 1.0 / seconds,
+                    "gpu_seconds": statistics.median(gpus) if None not in gpus else None, "fps": 1.0 / seconds,
                     "covered_pixels": int(np.count_nonzero(coverage)), "evaluations": evaluations,
                     "gmac_per_s": model.macs_per_evaluation * evaluations / seconds / 1e9,
                     "model_file": model_path,
@@ -137,6 +144,13 @@ def _format(value: object, digits: int = 3) -> str:
     return str(value)
 
 
+def _milliseconds(seconds: float | None) -> str:
+    if seconds is None:
+        return "—"
+    milliseconds = seconds * 1e3
+    return f"{milliseconds:.0f}" if milliseconds >= 100 else f"{milliseconds:.3g}"
+
+
 def markdown_table(rows: list[dict[str, Any]]) -> str:
     """One row per (model, size, weights path, render path, samples per pixel)."""
     header = ("| model | MACs/pixel | mesh | size | weights | render path | spp | frame (ms, wall) | GPU (ms, timer) "
@@ -148,7 +162,7 @@ def markdown_table(rows: list[dict[str, Any]]) -> str:
             render_path = f"{row['requested_render_path']} → {render_path}"
         lines.append("| " + " | ".join(_format(value) for value in (
             row["model"], row["macs_per_pixel"], row["mesh"], f"{row['width']}×{row['height']}", row["weights_path"],
-            render_path, row["spp"], row["seconds"] * 1e3, row["gpu_seconds"] * 1e3, row["fps"],
+            render_path, row["spp"], _milliseconds(row["seconds"]), _milliseconds(row["gpu_seconds"]), row["fps"],
             row["covered_pixels"], row["gmac_per_s"], row["gl_renderer"])) + " |")
     return "\n".join(lines) + "\n"
 

@@ -102,14 +102,15 @@ def main() -> None:
 
     from gratnet.atomic import atomic_path
 
-    panels = [_panel(SceneRenderer.display_srgb8(images[count]), crop, 2) for count in shown]
+    zoom = max(1, size[0] // crop[2])  # the crop enlarged to the picture's width
+    panels = [_panel(SceneRenderer.display_srgb8(images[count]), crop, zoom) for count in shown]
     gap = np.full((panels[0].shape[0], 6, 3), 255, np.uint8)
     picture = np.concatenate([panels[0], gap, panels[1]], axis=1)
     arguments.out.parent.mkdir(parents=True, exist_ok=True)
     with atomic_path(arguments.out) as temporary:
         Image.fromarray(picture).save(temporary, format="PNG", optimize=True)
     print(f"wrote {arguments.out} ({' | '.join(f'{count} spp' for count in shown)}; below each: rows "
-          f"{crop[0]}–{crop[0] + crop[2]}, columns {crop[1]}–{crop[1] + crop[2]}, enlarged 2×)")
+          f"{crop[0]}–{crop[0] + crop[2]}, columns {crop[1]}–{crop[1] + crop[2]}, enlarged {zoom}×)")
 
 
 if __name__ == "__main__":

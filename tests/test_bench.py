@@ -138,7 +138,7 @@ def test_scene_bench_times_every_combination_and_records_the_device(tmp_path):
                                                                             (12, 12, 2)}
     for row in rows:
         assert row["gl_renderer"] and row["gl_renderer"] != "unknown" and row["weights_path"] == "texture"
-        assert len(row["times_s"]) == 2 and row["seconds"] > 0 and row["gpu_seconds"] > 0
+        assert len(row["times_s"]) == 2 and row["seconds"] > 0 and row["gpu_seconds"] > 0  # frames ≪ 4 s
         assert 0 < row["covered_pixels"] <= row["width"] * row["height"]
         # Each sample that hits the disc is one evaluation: about spp × covered pixels.
         assert row["evaluations"] == pytest.approx(row["spp"] * row["covered_pixels"], rel=0.3)
