@@ -41,7 +41,8 @@ Staying responsive on a CPU rasterizer (Mesa llvmpipe: a full 320×240 CD-disc p
 - Progressive anti-aliasing (issue 12; ``max_samples``, the panel's "samples" choice): once a mesh view's
   full-resolution picture is complete and the view stands still, each further step adds the next sub-pixel
   sample (:func:`viewer.antialias.sample_offsets`, the offsets of ``gratnet render --spp``) in bands of rows
-  sized like the refinement's, into float32 sums, and shows their mean, until ``max_samples``; any change
+  sized like the refinement's, into float32 sums, and shows their mean, until ``max_samples`` (not while a
+  faster program for the view still compiles in the background: that compile gets the CPU); any change
   of the view starts again from the 1-sample preview. Previews and refinement bands are 1 sample (the pixel
   centre), so interaction costs what it did. The mean of k samples equals ``SceneRenderer.render(...,
   samples=k)`` (tests/test_viewer.py). BRDF-slice mode stays at 1 sample.
@@ -483,10 +484,13 @@ class ViewerApp:
         return accumulation if accumulation is not None and accumulation.key == self.render_key() else None
 
     def _accumulation_due(self) -> bool:
-        """A still, complete mesh view below the sample cap, with its full-resolution mesh ready."""
+        """A still, complete mesh view below the sample cap, with its full-resolution mesh ready and nothing
+        else on its way for it: while a faster program compiles in the background, extra samples would take
+        the CPU from that compile (and each costs several times more on the slower path)."""
         accumulation = self._current_accumulation()
         return (accumulation is not None and accumulation.samples < self.max_samples and not self.moving
-                and not self.state.slice_mode and self._supply.scene_ready(self.state, preview=False))
+                and not self.state.slice_mode and self._supply.scene_ready(self.state, preview=False)
+                and not self._supply.pending(self.state))
 
     def orbit(self, dx_pixels: float, dy_pixels: float, degrees_per_pixel: float = 0.4) -> bool:
         """A mouse drag over the picture: the camera orbits (in BRDF-slice mode the light moves)."""
