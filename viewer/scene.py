@@ -107,13 +107,50 @@ class SceneRenderer:
         weights_path: ``auto``, ``texture`` or ``baked``: where the shader reads the weights
             (:class:`~viewer.renderer.NetworkRenderer`; the choice is ``self.network.weights_path``).
         baked_source: as :class:`~viewer.renderer.NetworkRenderer` (a baked ``mlp.glsl`` made earlier).
+        render_path: ``forward`` (the network in the fragment shader), ``deferred`` (a G-buffer pass, then the
+            network in a compute shader over the pixels that need it: :mod:`viewer.deferred`) or ``auto``
+            (:func:`viewer.deferred.choose_render_path`: measured once per GPU and network shape, cached).
+        deferred_weights: where the deferred path's compute shader reads the weights
+            (:data:`viewer.deferred.DEFERRED_WEIGHTS`).
     """
 
     def __init__(self, ctx: moderngl.Context, model: ModelFile, shader_root: str | Path | None = None,
-                 weights_path: str = "auto", baked_source: str | None = None) -> None:
+                 weights_path: str = "auto", baked_source: str | None = None, render_path: str = "auto",
+                 deferred_weights: str = "auto") -> None:
+        from viewer.deferred import DeferredRenderer, check_render_path
+
+        self._requested_path = check_render_path(render_path)
         self.ctx = ctx
         self.network = NetworkRenderer(ctx, model, shader_root, weights_path, baked_source)
         self.model = model
+        self.deferred = DeferredRenderer(self, deferred_weights)  # compiles nothing until used
+        self._render_path: tuple[str, str] | None = None
+
+    @property
+    def render_path(self) -> str:
+        """The path mesh renders take, ``forward`` or ``deferred`` (``auto`` measures on first use)."""
+        return self._resolved_path()[0]
+
+    @property
+    def render_path_reason(self) -> str:
+        """Why :attr:`render_path` was taken, e.g. ``requested`` or ``deferred: 12.1 ms vs forward 31.0 ms …``."""
+        return self._resolved_path()[1]
+
+    def _resolved_path(self) -> tuple[str, str]:
+        if self._render_path is None:
+            from viewer.deferred import choose_render_path
+
+            self._render_path = choose_render_path(self, self._requested_path)
+        return self._render_path
+
+    def _render_path_probe(self, uploaded: MeshBuffers, camera: Camera, light: Light, size: tuple[int, int],
+                           path: str) -> None:
+        """One render on ``path`` (the ``auto`` probe of :func:`viewer.deferred.choose_render_path`)."""
+        saved, self._render_path = self._render_path, (path, "probe")
+        try:
+            self._render(uploaded, camera, light, size, 1.0, 1.5, 1)
+        finally:
+            self._render_path = saved
 
     @property
     def program(self) -> moderngl.Program:
@@ -193,9 +230,19 @@ class SceneRenderer:
 
     def _render(self, mesh: Mesh | MeshBuffers, camera: Camera, light: Light, size: tuple[int, int],
                 exposure: float, ior: float | None, layers: int, skip_threshold: float | None = None,
-                depth_prepass: bool = True, statistics: dict[str, int] | None = None) -> list[np.ndarray]:
+                depth_prepass: bool = True, statistics: dict[str, int] | None = None,
+                offsets_px: np.ndarray | None = None) -> list[np.ndarray]:
         width, height = check_size(size)
         skip_threshold_value(skip_threshold)  # check before any GL work
+        if layers == 1 and (offsets_px is not None or self.render_path == "deferred"):
+            # The deferred path (viewer/deferred.py); it takes the samples (render_layers stays forward).
+            uploaded = mesh if isinstance(mesh, MeshBuffers) else self.upload(mesh)
+            try:
+                return [self.deferred.render(uploaded, camera, light, (width, height), exposure, ior, skip_threshold,
+                                             statistics, offsets_px)]
+            finally:
+                if uploaded is not mesh:
+                    uploaded.release()
         program = self.program
         if statistics is not None:
             _, program = self.network.counting_program(_PROGRAM)
@@ -304,4 +351,5 @@ class SceneRenderer:
 
     def release(self) -> None:
         """Free the GL objects (the context belongs to the caller)."""
+        self.deferred.release()
         self.network.release()
