@@ -81,10 +81,10 @@ void main() {
 #endif
 
 #ifdef SHADE
+layout(local_size_x = SHADE_GROUP) in;  // before mlp.glsl, whose shared-memory copy reads gl_WorkGroupSize
 #include "mlp.glsl"
 #include "range.glsl"
 
-layout(local_size_x = SHADE_GROUP) in;
 layout(rgba32f, binding = 0) uniform restrict image2D u_gbuffer;
 
 void main() {

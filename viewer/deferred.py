@@ -46,6 +46,7 @@ import json
 import math
 import os
 import time
+from collections.abc import Callable
 from pathlib import Path
 from typing import TYPE_CHECKING
 
@@ -68,9 +69,11 @@ __all__ = ["DEFERRED_WEIGHTS", "PROBE_SIZE", "RENDER_PATHS", "DeferredRenderer",
 RENDER_PATHS = ("auto", "forward", "deferred")
 #: Where the compute pass reads the weights (see the module docstring).
 DEFERRED_WEIGHTS = ("auto", "texture", "ssbo", "shared", "baked")
-#: The ``auto`` probe: the CD disc at this size (pixels), each path timed as the best of a few renders.
-PROBE_SIZE = (192, 192)
-_PROBE_RENDERS = 3
+#: The ``auto`` probe: the CD disc at this size (pixels), each path timed as the best of two renders (one
+#: when it is already 1.5× slower than the other's best), after one untimed render that compiles it.
+PROBE_SIZE = (128, 128)
+_PROBE_RENDERS = 2
+_PROBE_CLEAR_RATIO = 1.5
 _PROGRAM = "deferred"
 _SHADE_GROUP = 64  # invocations per SHADE work group
 _TILE = 8  # COMPACT / RESOLVE work groups: 8×8 texels
@@ -156,8 +159,8 @@ class DeferredRenderer:
             except GratNetError as error:
                 if self.weights == "shared" and kernel == "SHADE":
                     bytes_needed = 16 * int(np.prod(self.network.packed_weights.shape[:2]))
-                    raise GratNetError(f"deferred weights 'shared': the net's {bytes_needed} bytes of weights do not "
-                                       f"fit this GPU's compute shared memory ({error})") from error
+                    raise GratNetError(f"deferred weights 'shared': the net's {bytes_needed} bytes of weights must fit "
+                                       f"the GPU's compute shared memory (32 KiB on llvmpipe): {error}") from error
                 raise
             if kernel == "SHADE":
                 self.network._model_uniforms(program, self.weights)
@@ -357,15 +360,18 @@ def _write_cache(path: Path, key: str, entry: dict[str, object]) -> None:
         _LOG.info("cannot write the render-path cache %s: %s", path, error)
 
 
-def _probe_ms(render: object) -> float:
-    """Best wall time of a few renders (ms), after one untimed render that compiles the programs."""
-    render()  # type: ignore[operator]
+def _probe_ms(render: Callable[[], None], rival_ms: float = math.inf) -> float:
+    """Best wall time (ms) of up to :data:`_PROBE_RENDERS` renders after one untimed render that compiles the
+    programs; stops early once a render is clearly slower than ``rival_ms`` (the verdict is clear)."""
+    render()
     best = math.inf
     for _ in range(_PROBE_RENDERS):
         start = time.perf_counter()
-        render()  # type: ignore[operator]
-        best = min(best, time.perf_counter() - start)
-    return 1e3 * best
+        render()
+        best = min(best, 1e3 * (time.perf_counter() - start))
+        if best > _PROBE_CLEAR_RATIO * rival_ms:
+            break
+    return best
 
 
 def choose_render_path(scene: SceneRenderer, render_path: str = "auto") -> tuple[str, str]:
@@ -378,7 +384,8 @@ def choose_render_path(scene: SceneRenderer, render_path: str = "auto") -> tuple
     cache = render_path_cache_file()
     key = _cache_key(scene)
     entry = _read_cache(cache).get(key)
-    if isinstance(entry, dict) and entry.get("path") in ("forward", "deferred") and isinstance(entry.get("reason"), str):
+    if isinstance(entry, dict) and entry.get("path") in ("forward", "deferred") and isinstance(entry.get("reason"),
+                                                                                               str):
         return str(entry["path"]), f"{entry['reason']} (cached)"
 
     from viewer.camera import Camera, Light
@@ -390,9 +397,14 @@ def choose_render_path(scene: SceneRenderer, render_path: str = "auto") -> tuple
     camera = Camera(FALLBACK.camera_distance, FALLBACK.camera_azimuth_degrees, FALLBACK.camera_elevation_degrees)
     light = Light.directional(FALLBACK.light_theta_degrees, FALLBACK.light_phi_degrees)
     uploaded = scene.upload(compact_disc())
+    times: dict[str, float] = {}
     try:
-        times = {path: _probe_ms(lambda path=path: scene._render_path_probe(uploaded, camera, light, PROBE_SIZE, path))
-                 for path in ("forward", "deferred")}
+        for path in ("deferred", "forward"):
+            def render(path: str = path) -> None:
+                scene._render_path_probe(uploaded, camera, light, PROBE_SIZE, path)
+                scene.ctx.finish()
+
+            times[path] = _probe_ms(render, min(times.values(), default=math.inf))
     finally:
         uploaded.release()
     path = min(times, key=lambda name: times[name])

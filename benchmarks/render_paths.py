@@ -1,0 +1,98 @@
+"""Frame times of the forward and deferred render paths (issue 12), one JSON line per configuration.
+
+    PYTHONPATH=. python benchmarks/render_paths.py --material cd --mesh cd --sizes 640x480,1920x1080 \\
+        --samples 1,4 --variants forward:texture,forward:baked,deferred:texture,deferred:ssbo,deferred:baked
+
+A variant is ``PATH:WEIGHTS``: ``forward:texture|baked`` (the fragment-shader network, depth pre-pass;
+one sample per pixel only: multi-sample forward rendering is not this script's), ``deferred:texture|ssbo|
+shared|baked`` (viewer/deferred.py's compute pass reading the weights from there). Scene: the material's
+default light, camera and exposure on the mesh (viewer.defaults, as ``gratnet render``). Each line: the
+best and median wall time (ms, after ``ctx.finish()``) of ``--repeats`` renders after one untimed render
+that compiles the programs (its time is ``first_ms``), the network evaluations (the counters of a separate
+render) and ``GL_RENDERER``. Runs on whatever EGL gives (llvmpipe here; the NVIDIA driver on a GPU machine).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import statistics
+import sys
+import time
+from pathlib import Path
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+
+from gratnet.modelfile import load_model  # noqa: E402
+from viewer.antialias import sample_offsets  # noqa: E402
+from viewer.camera import Camera, Light  # noqa: E402
+from viewer.context import create_headless_context  # noqa: E402
+from viewer.defaults import resolve_defaults  # noqa: E402
+from viewer.render_cli import build_mesh, resolve_material  # noqa: E402
+from viewer.scene import SceneRenderer  # noqa: E402
+
+
+def _sizes(text: str) -> list[tuple[int, int]]:
+    return [tuple(int(v) for v in item.split("x")) for item in text.split(",")]  # type: ignore[misc]
+
+
+def main() -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--material", default="cd")
+    parser.add_argument("--mesh", default="cd")
+    parser.add_argument("--sizes", default="640x480,1920x1080")
+    parser.add_argument("--samples", default="1,4")
+    parser.add_argument("--variants", default="forward:texture,forward:baked,deferred:texture,deferred:ssbo,"
+                        "deferred:baked")
+    parser.add_argument("--repeats", type=int, default=3)
+    arguments = parser.parse_args()
+    model_path = resolve_material(arguments.material)
+    model = load_model(model_path)
+    mesh = build_mesh(arguments.mesh)
+    defaults = resolve_defaults(arguments.material, arguments.mesh)
+    camera = Camera(defaults.camera_distance, defaults.camera_azimuth_degrees, defaults.camera_elevation_degrees)
+    light = Light.directional(defaults.light_theta_degrees, defaults.light_phi_degrees)
+    ctx = create_headless_context()
+    renderer_name = ctx.info.get("GL_RENDERER", "?")
+    for variant in arguments.variants.split(","):
+        path, weights = variant.split(":")
+        weights_path = "baked" if weights == "baked" else "texture"
+        with SceneRenderer(ctx, model, weights_path=weights_path, render_path=path,
+                           deferred_weights=weights if path == "deferred" else "auto") as scene:
+            uploaded = scene.upload(mesh)
+            for size in _sizes(arguments.sizes):
+                for samples in (int(n) for n in arguments.samples.split(",")):
+                    if path == "forward" and samples > 1:
+                        continue
+                    offsets = sample_offsets(samples) if samples > 1 else None
+
+                    def render(counts_out: dict[str, int] | None = None, offsets: object = offsets,
+                               size: tuple[int, int] = size, uploaded: object = uploaded) -> None:
+                        scene._render(uploaded, camera, light, size, defaults.exposure, 1.5, 1,  # type: ignore[arg-type]
+                                      statistics=counts_out, offsets_px=offsets)  # type: ignore[arg-type]
+                        ctx.finish()
+
+                    start = time.perf_counter()
+                    render()
+                    first = time.perf_counter() - start
+                    times = []
+                    for _ in range(arguments.repeats):
+                        start = time.perf_counter()
+                        render()
+                        times.append(time.perf_counter() - start)
+                    counts: dict[str, int] = {}
+                    render(counts)
+                    print(json.dumps({
+                        "material": arguments.material, "mesh": arguments.mesh, "size": list(size), "samples": samples,
+                        "path": path, "weights": weights, "best_ms": round(1e3 * min(times), 1),
+                        "median_ms": round(1e3 * statistics.median(times), 1), "first_ms": round(1e3 * first, 1),
+                        "evaluations": counts.get("evaluations"), "fragments": counts.get("fragments"),
+                        "macs_per_evaluation": model.macs_per_evaluation, "renderer": renderer_name,
+                    }), flush=True)
+            uploaded.release()
+    ctx.release()
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
