@@ -80,6 +80,7 @@ _TILE = 8  # COMPACT / RESOLVE work groups: 8×8 texels
 _LIST_BINDING = 7  # SSBO bindings: skip counters 5 (renderer.py), weights 6, the list 7
 _WEIGHTS_BINDING = 6
 _CACHE_VERSION = 1
+_CHUNK_TEXELS = 1 << 26  # G-buffer texels per chunk of samples at most (1 GiB of RGBA32F)
 
 
 def check_render_path(render_path: object) -> str:
@@ -225,7 +226,7 @@ class DeferredRenderer:
             raise GratNetError(f"sample offsets must be a finite (N ≥ 1, 2) array of pixels, got shape {offsets.shape}")
         threshold = skip_threshold_value(skip_threshold)
         max_rows = int(self.ctx.info.get("GL_MAX_TEXTURE_SIZE", 16384))
-        per_chunk = max(1, min(len(offsets), max_rows // height, (1 << 26) // (width * height)))
+        per_chunk = max(1, min(len(offsets), max_rows // height, _CHUNK_TEXELS // (width * height)))
         gbuffer_program = self._gbuffer_program()
         self.scene._set_uniforms(camera, light, width, height, float(exposure), ior, gbuffer_program)
         compact = self._compute("COMPACT", counting=statistics is not None)
