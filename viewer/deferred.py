@@ -333,6 +333,7 @@ def render_path_cache_file() -> Path:
 
 
 def _cache_key(scene: SceneRenderer) -> str:
+    """GL_RENDERER, the network's shape and where both paths read the weights: what the verdict depends on."""
     network = scene.network
     model = network.model
     return (f"v{_CACHE_VERSION}|{scene.ctx.info.get('GL_RENDERER', '?')}|{'-'.join(map(str, model.layer_sizes))}|"
@@ -375,10 +376,11 @@ def _probe_ms(render: Callable[[], None], rival_ms: float = math.inf) -> float:
     return best
 
 
-def choose_render_path(scene: SceneRenderer, render_path: str = "auto") -> tuple[str, str]:
+def choose_render_path(scene: SceneRenderer, render_path: str = "auto", measure: bool = True) -> tuple[str, str]:
     """``(path, reason)``: ``render_path`` itself unless ``auto``, which takes the cached verdict for this
     ``GL_RENDERER`` and network shape, or measures both paths on the probe scene (the CD disc at
-    :data:`PROBE_SIZE`, default light and camera) and caches the faster (:func:`render_path_cache_file`)."""
+    :data:`PROBE_SIZE`, default light and camera) and caches the faster (:func:`render_path_cache_file`).
+    ``measure=False``: no probe; ``forward`` while nothing is cached (the viewer: its compile process measures)."""
     check_render_path(render_path)
     if render_path != "auto":
         return render_path, "requested"
@@ -388,6 +390,8 @@ def choose_render_path(scene: SceneRenderer, render_path: str = "auto") -> tuple
     if isinstance(entry, dict) and entry.get("path") in ("forward", "deferred") and isinstance(entry.get("reason"),
                                                                                                str):
         return str(entry["path"]), f"{entry['reason']} (cached)"
+    if not measure:
+        return "forward", "auto: not measured yet on this GPU for this network shape (forward until it is)"
 
     from viewer.camera import Camera, Light
     from viewer.defaults import FALLBACK

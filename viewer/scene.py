@@ -112,11 +112,13 @@ class SceneRenderer:
             (:func:`viewer.deferred.choose_render_path`: measured once per GPU and network shape, cached).
         deferred_weights: where the deferred path's compute shader reads the weights
             (:data:`viewer.deferred.DEFERRED_WEIGHTS`).
+        measure_render_path: ``auto`` may time both paths when nothing is cached (False: ``forward`` then;
+            the viewer, whose compile process measures off the window's thread).
     """
 
     def __init__(self, ctx: moderngl.Context, model: ModelFile, shader_root: str | Path | None = None,
                  weights_path: str = "auto", baked_source: str | None = None, render_path: str = "auto",
-                 deferred_weights: str = "auto") -> None:
+                 deferred_weights: str = "auto", measure_render_path: bool = True) -> None:
         from viewer.deferred import DeferredRenderer, check_render_path
 
         self._requested_path = check_render_path(render_path)
@@ -125,6 +127,7 @@ class SceneRenderer:
         self.model = model
         self.deferred = DeferredRenderer(self, deferred_weights)  # compiles nothing until used
         self._render_path: tuple[str, str] | None = None
+        self._measure_render_path = measure_render_path
 
     @property
     def render_path(self) -> str:
@@ -140,7 +143,7 @@ class SceneRenderer:
         if self._render_path is None:
             from viewer.deferred import choose_render_path
 
-            self._render_path = choose_render_path(self, self._requested_path)
+            self._render_path = choose_render_path(self, self._requested_path, self._measure_render_path)
         return self._render_path
 
     def _render_path_probe(self, uploaded: MeshBuffers, camera: Camera, light: Light, size: tuple[int, int],
