@@ -23,7 +23,9 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from gratnet.modelfile import load_model  # noqa: E402
+import numpy as np  # noqa: E402
+
+from gratnet.modelfile import ModelFile, load_model  # noqa: E402
 from viewer.antialias import sample_offsets  # noqa: E402
 from viewer.camera import Camera, Light  # noqa: E402
 from viewer.context import create_headless_context  # noqa: E402
@@ -36,6 +38,17 @@ def _sizes(text: str) -> list[tuple[int, int]]:
     return [tuple(int(v) for v in item.split("x")) for item in text.split(",")]  # type: ignore[misc]
 
 
+def _random_net(like: ModelFile, hidden: list[int]) -> ModelFile:
+    """A random SiLU funnel with ``like``'s encoding, scheme and range (outputs mostly inside (0, 1))."""
+    rng = np.random.default_rng(0)
+    sizes = [like.encoding.features, *hidden, 3]
+    weights = [(rng.standard_normal((o, i)) / np.sqrt(i)).astype(np.float32)
+               for i, o in zip(sizes, sizes[1:], strict=False)]
+    biases = [(0.1 * rng.standard_normal(o)).astype(np.float32) for o in sizes[1:]]
+    biases[-1] = np.array([0.55, 0.6, 0.65], dtype=np.float32)
+    return ModelFile(sizes, weights, biases, "silu", "clamp", like.encoding, like.range, like.scheme)
+
+
 def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--material", default="cd")
@@ -45,9 +58,14 @@ def main() -> int:
     parser.add_argument("--variants", default="forward:texture,forward:baked,deferred:texture,deferred:ssbo,"
                         "deferred:baked")
     parser.add_argument("--repeats", type=int, default=3)
+    parser.add_argument("--random-net", default="", metavar="H1,H2,…",
+                        help="instead of the material's net: a random funnel with these hidden widths and the "
+                        "material's encoding (seed 0), e.g. 16,8 (3.0k MACs: its weights fit 32 KiB of shared memory)")
     arguments = parser.parse_args()
     model_path = resolve_material(arguments.material)
     model = load_model(model_path)
+    if arguments.random_net:
+        model = _random_net(model, [int(width) for width in arguments.random_net.split(",")])
     mesh = build_mesh(arguments.mesh)
     defaults = resolve_defaults(arguments.material, arguments.mesh)
     camera = Camera(defaults.camera_distance, defaults.camera_azimuth_degrees, defaults.camera_elevation_degrees)
@@ -83,7 +101,8 @@ def main() -> int:
                     counts: dict[str, int] = {}
                     render(counts)
                     print(json.dumps({
-                        "material": arguments.material, "mesh": arguments.mesh, "size": list(size), "samples": samples,
+                        "material": arguments.material, "net": "-".join(map(str, model.layer_sizes)),
+                        "mesh": arguments.mesh, "size": list(size), "samples": samples,
                         "path": path, "weights": weights, "best_ms": round(1e3 * min(times), 1),
                         "median_ms": round(1e3 * statistics.median(times), 1), "first_ms": round(1e3 * first, 1),
                         "evaluations": counts.get("evaluations"), "fragments": counts.get("fragments"),
