@@ -9,13 +9,15 @@ shared|baked`` (viewer/deferred.py's compute pass reading the weights from there
 default light, camera and exposure on the mesh (viewer.defaults, as ``gratnet render``). Each line: the
 best and median wall time (ms, after ``ctx.finish()``) of ``--repeats`` renders after one untimed render
 that compiles the programs (its time is ``first_ms``), the network evaluations (the counters of a separate
-render) and ``GL_RENDERER``. Runs on whatever EGL gives (llvmpipe here; the NVIDIA driver on a GPU machine).
+render), ``GL_RENDERER`` and the 1-minute load average (other work on the machine slows a CPU rasterizer).
+Runs on whatever EGL gives (llvmpipe here; the NVIDIA driver on a GPU machine).
 """
 
 from __future__ import annotations
 
 import argparse
 import json
+import os
 import statistics
 import sys
 import time
@@ -107,6 +109,7 @@ def main() -> int:
                         "median_ms": round(1e3 * statistics.median(times), 1), "first_ms": round(1e3 * first, 1),
                         "evaluations": counts.get("evaluations"), "fragments": counts.get("fragments"),
                         "macs_per_evaluation": model.macs_per_evaluation, "renderer": renderer_name,
+                        "load_average_1min": round(os.getloadavg()[0], 2),
                     }), flush=True)
             uploaded.release()
     ctx.release()

@@ -14,6 +14,8 @@
 //   WEIGHTS_SHARED   that buffer copied into the work group's shared memory by mlp_load_shared_weights()
 //                    (compute stage only; #define WEIGHTS_SHARED to the texel count, which must fit
 //                    GL_MAX_COMPUTE_SHARED_MEMORY_SIZE; every invocation of the group must call it).
+//   WEIGHTS_FP16     with either buffer: each texel stored as four IEEE halves (uvec2, packHalf2x16 order),
+//                    unpacked to float32 before the arithmetic (fp16 storage, fp32 sums).
 
 const int HIDDEN_RELU = 0;
 const int HIDDEN_LEAKY_RELU = 1;
@@ -23,12 +25,23 @@ const int OUTPUT_SIGMOID = 1;
 const int OUTPUT_NONE = 2;
 
 #if defined(WEIGHTS_SSBO) || defined(WEIGHTS_SHARED)
+#ifdef WEIGHTS_FP16
+#define WEIGHT_STORAGE uvec2
+vec4 weight_value(uvec2 halves) {
+    return vec4(unpackHalf2x16(halves.x), unpackHalf2x16(halves.y));
+}
+#else
+#define WEIGHT_STORAGE vec4
+vec4 weight_value(vec4 texel) {
+    return texel;
+}
+#endif
 layout(std430, binding = WEIGHTS_BINDING) readonly buffer MlpWeights {
-    vec4 mlp_weights[];  // the packed texture's texels, row-major
+    WEIGHT_STORAGE mlp_weights[];  // the packed texture's texels, row-major
 };
 uniform int u_weights_width;           // texels per row of the packed texture
 #ifdef WEIGHTS_SHARED
-shared vec4 mlp_shared_weights[WEIGHTS_SHARED];
+shared WEIGHT_STORAGE mlp_shared_weights[WEIGHTS_SHARED];
 
 // Copy the weights into shared memory, each invocation a strided share, then wait for the whole group.
 void mlp_load_shared_weights() {
@@ -41,11 +54,11 @@ void mlp_load_shared_weights() {
 }
 
 vec4 weight_texel(int column, int row) {
-    return mlp_shared_weights[row * u_weights_width + column];
+    return weight_value(mlp_shared_weights[row * u_weights_width + column]);
 }
 #else
 vec4 weight_texel(int column, int row) {
-    return mlp_weights[row * u_weights_width + column];
+    return weight_value(mlp_weights[row * u_weights_width + column]);
 }
 #endif
 #else

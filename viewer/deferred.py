@@ -29,6 +29,8 @@ Weights of the compute pass (:data:`DEFERRED_WEIGHTS`): ``texture`` (the packed 
 forward path), ``ssbo`` (the same texels in a std430 buffer), ``shared`` (that buffer copied into each work
 group's shared memory: only nets whose texels fit the driver's shared memory, 32 KiB on llvmpipe, i.e.
 not the shipped 28k-MAC nets) or ``baked`` (viewer/baked.py's literals, the fastest form on llvmpipe).
+``ssbo-fp16`` / ``shared-fp16``: the same with each weight stored as an IEEE half (``unpackHalf2x16``, GL
+4.3 core; the sums stay float32): half the memory traffic, at an error measured in docs/benchmarks.md.
 ``auto``: ``baked`` when the :class:`~viewer.renderer.NetworkRenderer` bakes, else ``ssbo`` (the fastest
 compute form measured on an H100, shared/notes/opengl-on-a-gpu.md).
 
@@ -68,7 +70,9 @@ __all__ = ["DEFERRED_WEIGHTS", "PROBE_SIZE", "RENDER_PATHS", "DeferredRenderer",
 #: ``render_path`` values of :class:`~viewer.scene.SceneRenderer` and ``--render-path``.
 RENDER_PATHS = ("auto", "forward", "deferred")
 #: Where the compute pass reads the weights (see the module docstring).
-DEFERRED_WEIGHTS = ("auto", "texture", "ssbo", "shared", "baked")
+DEFERRED_WEIGHTS = ("auto", "texture", "ssbo", "shared", "baked", "ssbo-fp16", "shared-fp16")
+#: Largest finite IEEE half: a weight beyond it cannot be stored as fp16.
+FP16_MAX = 65504.0
 #: The ``auto`` probe: the CD disc at this size (pixels), each path timed as the best of two renders (one
 #: when it is already 1.5× slower than the other's best), after one untimed render that compiles it.
 PROBE_SIZE = (128, 128)
@@ -114,6 +118,8 @@ class DeferredRenderer:
             weights = "baked" if network.weights_path == "baked" else "ssbo"
         if weights == "baked" and network.weights_path != "baked":
             raise GratNetError("deferred weights 'baked' need a SceneRenderer with weights_path='baked'")
+        if weights.endswith("-fp16") and not np.all(np.abs(network.packed_weights) <= FP16_MAX):
+            raise GratNetError(f"deferred weights {weights!r}: the net has weights beyond fp16's range (±{FP16_MAX:g})")
         self.scene = scene
         self.ctx = scene.ctx
         self.network = network
@@ -144,11 +150,15 @@ class DeferredRenderer:
             overrides = None
             if kernel == "SHADE":
                 overrides = self.network._overrides if self.weights == "baked" else None
-                if self.weights in ("ssbo", "shared"):
+                if self.weights not in ("texture", "baked"):
                     defines["WEIGHTS_BINDING"] = _WEIGHTS_BINDING
                     texels = int(np.prod(self.network.packed_weights.shape[:2]))
-                    defines["WEIGHTS_SSBO" if self.weights == "ssbo" else "WEIGHTS_SHARED"] = (
-                        1 if self.weights == "ssbo" else texels)
+                    if self.weights.startswith("ssbo"):
+                        defines["WEIGHTS_SSBO"] = 1
+                    else:
+                        defines["WEIGHTS_SHARED"] = texels
+                    if self.weights.endswith("-fp16"):
+                        defines["WEIGHTS_FP16"] = 1
                 if self.weights == "baked":
                     _LOG.info("deferred shading program with baked weights (%d MACs per pixel): the first dispatch "
                               "JIT-compiles it (~25 s at 28k MACs on llvmpipe; Mesa's shader cache keeps it)",
@@ -158,22 +168,26 @@ class DeferredRenderer:
             try:
                 program = compile_compute(self.ctx, _PROGRAM, defines, self.network.shader_root, overrides)
             except GratNetError as error:
-                if self.weights == "shared" and kernel == "SHADE":
-                    bytes_needed = 16 * int(np.prod(self.network.packed_weights.shape[:2]))
+                if self.weights.startswith("shared") and kernel == "SHADE":
+                    bytes_needed = (8 if self.weights.endswith("-fp16") else 16) * int(
+                        np.prod(self.network.packed_weights.shape[:2]))
                     raise GratNetError(f"deferred weights 'shared': the net's {bytes_needed} bytes of weights must fit "
                                        f"the GPU's compute shared memory (32 KiB on llvmpipe): {error}") from error
                 raise
             if kernel == "SHADE":
-                self.network._model_uniforms(program, self.weights)
+                self.network._model_uniforms(program, "ssbo" if self.weights.endswith("-fp16") else self.weights)
             self._programs[key] = program
         return self._programs[key]  # type: ignore[return-value]
 
     def _bind_weights(self) -> None:
         if self.weights == "texture":
             self.network.use_weights(0)
-        elif self.weights in ("ssbo", "shared"):
+        elif self.weights != "baked":
             if self._weight_buffer is None:
-                self._weight_buffer = self.ctx.buffer(self.network.packed_weights.tobytes())
+                texels = self.network.packed_weights
+                if self.weights.endswith("-fp16"):  # four halves per texel, in packHalf2x16 order (little-endian)
+                    texels = texels.astype("<f2")
+                self._weight_buffer = self.ctx.buffer(np.ascontiguousarray(texels).tobytes())
             self._weight_buffer.bind_to_storage_buffer(_WEIGHTS_BINDING)
 
     def compile(self) -> None:
