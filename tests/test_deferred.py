@@ -33,6 +33,13 @@ def model():
     return random_model([163, 16, 8, 3], activation="silu", scheme="simple-max", seed=4)
 
 
+def lit_relative_error(actual: np.ndarray, reference: np.ndarray) -> np.ndarray:
+    """Relative error per channel on pixels at least 1e-3 of the reference's peak (FP16_RELATIVE_ERROR's)."""
+    peak = reference.max()
+    lit = reference.max(axis=-1) > 1e-3 * peak
+    return np.abs(actual - reference)[lit] / np.maximum(np.abs(reference[lit]), 1e-3 * peak)
+
+
 @pytest.fixture(scope="module")
 def scenes(ctx, model) -> Iterator[dict[str, object]]:
     """One deferred SceneRenderer per weights source of the compute pass, and a forward one (texture)."""
@@ -82,6 +89,21 @@ def test_deferred_matches_forward_and_numpy_at_every_pixel(scenes, model, weight
     assert scale > 1e-3
     # test_scene's tolerance for the forward path against numpy.
     np.testing.assert_allclose(deferred[..., :3].astype(np.float64), expected, rtol=2e-3, atol=1e-4 * scale)
+
+
+@pytest.mark.parametrize("weights", ["ssbo-fp16", "shared-fp16"])
+def test_fp16_weights_stay_within_the_documented_bound(ctx, model, scenes, weights):
+    from viewer.deferred import FP16_RELATIVE_ERROR
+    from viewer.scene import SceneRenderer
+
+    size = (40, 32)
+    reference = scenes["ssbo"].render(compact_disc(), DISC_CAMERA, DISC_LIGHT, size, EXPOSURE).astype(np.float64)
+    with SceneRenderer(ctx, model, weights_path="texture", render_path="deferred", deferred_weights=weights) as scene:
+        half = scene.render(compact_disc(), DISC_CAMERA, DISC_LIGHT, size, EXPOSURE).astype(np.float64)
+    error = lit_relative_error(half, reference)
+    assert error.size > 100
+    assert 0.0 < error.max() <= FP16_RELATIVE_ERROR  # > 0: the weights really were rounded to halves
+    np.testing.assert_array_equal(half == 0, reference == 0)
 
 
 def test_disc_with_background_and_back_faces_equals_forward_with_the_same_counters(scenes):
@@ -182,6 +204,10 @@ def test_bad_render_path_weights_and_offsets_raise(ctx, model, scenes):
         SceneRenderer(ctx, model, weights_path="texture", deferred_weights="cache")
     with pytest.raises(GratNetError, match="weights_path='baked'"):
         SceneRenderer(ctx, model, weights_path="texture", deferred_weights="baked")
+    huge = random_model([163, 8, 3], seed=1)
+    huge.weights[0][0, 0] = 1e5
+    with pytest.raises(GratNetError, match="fp16"):
+        SceneRenderer(ctx, huge, weights_path="texture", deferred_weights="ssbo-fp16")
     with pytest.raises(GratNetError, match="sample offsets"):
         scenes["ssbo"]._render(plane(1.0), DISC_CAMERA, DISC_LIGHT, (4, 4), 1.0, 1.5, 1, offsets_px=np.zeros((2, 3)))
 
