@@ -5,12 +5,13 @@
 
 A variant is ``PATH:WEIGHTS``: ``forward:texture|baked`` (the fragment-shader network, depth pre-pass;
 one sample per pixel only: multi-sample forward rendering is not this script's), ``deferred:texture|ssbo|
-shared|baked`` (viewer/deferred.py's compute pass reading the weights from there). Scene: the material's
-default light, camera and exposure on the mesh (viewer.defaults, as ``gratnet render``). Each line: the
-best and median wall time (ms, after ``ctx.finish()``) of ``--repeats`` renders after one untimed render
-that compiles the programs (its time is ``first_ms``), the network evaluations (the counters of a separate
-render), ``GL_RENDERER`` and the 1-minute load average (other work on the machine slows a CPU rasterizer).
-Runs on whatever EGL gives (llvmpipe here; the NVIDIA driver on a GPU machine).
+shared|baked|ssbo-fp16|shared-fp16`` (viewer/deferred.py's compute pass reading the weights from there).
+Scene: the material's default light, camera and exposure on the mesh (viewer.defaults, as ``gratnet
+render``). Each line: the best and median wall time (ms, after ``ctx.finish()``) of ``--repeats`` renders,
+the variants interleaved so that all see the same machine load, after one untimed render that compiles
+the programs (its time is ``first_ms``), the network evaluations (the counters of a separate render),
+``GL_RENDERER`` and the 1-minute load average (other work on the machine slows a CPU rasterizer). Runs on
+whatever EGL gives (llvmpipe here; the NVIDIA driver on a GPU machine).
 """
 
 from __future__ import annotations
@@ -74,44 +75,49 @@ def main() -> int:
     light = Light.directional(defaults.light_theta_degrees, defaults.light_phi_degrees)
     ctx = create_headless_context()
     renderer_name = ctx.info.get("GL_RENDERER", "?")
+    scenes: dict[str, tuple[SceneRenderer, object]] = {}
     for variant in arguments.variants.split(","):
         path, weights = variant.split(":")
-        weights_path = "baked" if weights == "baked" else "texture"
-        with SceneRenderer(ctx, model, weights_path=weights_path, render_path=path,
-                           deferred_weights=weights if path == "deferred" else "auto") as scene:
-            uploaded = scene.upload(mesh)
-            for size in _sizes(arguments.sizes):
-                for samples in (int(n) for n in arguments.samples.split(",")):
-                    if path == "forward" and samples > 1:
-                        continue
-                    offsets = sample_offsets(samples) if samples > 1 else None
+        scene = SceneRenderer(ctx, model, weights_path="baked" if weights == "baked" else "texture", render_path=path,
+                              deferred_weights=weights if path == "deferred" else "auto")
+        scenes[variant] = (scene, scene.upload(mesh))
+    for size in _sizes(arguments.sizes):
+        for samples in (int(n) for n in arguments.samples.split(",")):
+            offsets = sample_offsets(samples) if samples > 1 else None
+            # Forward renders one sample per pixel here (multi-sample forward rendering is not this script's).
+            chosen = [v for v in scenes if not (v.startswith("forward:") and samples > 1)]
 
-                    def render(counts_out: dict[str, int] | None = None, offsets: object = offsets,
-                               size: tuple[int, int] = size, uploaded: object = uploaded) -> None:
-                        scene._render(uploaded, camera, light, size, defaults.exposure, 1.5, 1,  # type: ignore[arg-type]
-                                      statistics=counts_out, offsets_px=offsets)  # type: ignore[arg-type]
-                        ctx.finish()
+            def render(variant: str, counts_out: dict[str, int] | None = None, offsets: object = offsets,
+                       size: tuple[int, int] = size) -> float:
+                scene, uploaded = scenes[variant]
+                start = time.perf_counter()
+                scene._render(uploaded, camera, light, size, defaults.exposure, 1.5, 1,  # type: ignore[arg-type]
+                              statistics=counts_out, offsets_px=offsets)  # type: ignore[arg-type]
+                ctx.finish()
+                return time.perf_counter() - start
 
-                    start = time.perf_counter()
-                    render()
-                    first = time.perf_counter() - start
-                    times = []
-                    for _ in range(arguments.repeats):
-                        start = time.perf_counter()
-                        render()
-                        times.append(time.perf_counter() - start)
-                    counts: dict[str, int] = {}
-                    render(counts)
-                    print(json.dumps({
-                        "material": arguments.material, "net": "-".join(map(str, model.layer_sizes)),
-                        "mesh": arguments.mesh, "size": list(size), "samples": samples,
-                        "path": path, "weights": weights, "best_ms": round(1e3 * min(times), 1),
-                        "median_ms": round(1e3 * statistics.median(times), 1), "first_ms": round(1e3 * first, 1),
-                        "evaluations": counts.get("evaluations"), "fragments": counts.get("fragments"),
-                        "macs_per_evaluation": model.macs_per_evaluation, "renderer": renderer_name,
-                        "load_average_1min": round(os.getloadavg()[0], 2),
-                    }), flush=True)
-            uploaded.release()
+            first = {variant: render(variant) for variant in chosen}
+            times: dict[str, list[float]] = {variant: [] for variant in chosen}
+            for _ in range(arguments.repeats):  # interleaved: every variant sees the same machine load
+                for variant in chosen:
+                    times[variant].append(render(variant))
+            for variant in chosen:
+                counts: dict[str, int] = {}
+                render(variant, counts)
+                path, weights = variant.split(":")
+                print(json.dumps({
+                    "material": arguments.material, "net": "-".join(map(str, model.layer_sizes)),
+                    "mesh": arguments.mesh, "size": list(size), "samples": samples,
+                    "path": path, "weights": weights, "best_ms": round(1e3 * min(times[variant]), 1),
+                    "median_ms": round(1e3 * statistics.median(times[variant]), 1),
+                    "first_ms": round(1e3 * first[variant], 1),
+                    "evaluations": counts.get("evaluations"), "fragments": counts.get("fragments"),
+                    "macs_per_evaluation": model.macs_per_evaluation, "renderer": renderer_name,
+                    "load_average_1min": round(os.getloadavg()[0], 2),
+                }), flush=True)
+    for scene, uploaded in scenes.values():
+        uploaded.release()  # type: ignore[attr-defined]
+        scene.release()
     ctx.release()
     return 0
 
