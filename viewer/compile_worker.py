@@ -242,6 +242,8 @@ def _warm(model_path: Path, paths: Sequence[str], groups: Sequence[str], folder:
             ctx = None
             print(f"ready {path} {group} {time.perf_counter() - started:.3f}", flush=True)
     if render_path == "auto" and "surface" in groups:
+        with contextlib.suppress(OSError):
+            os.nice(_BAKED_NICENESS)  # the window is up by now: the probe must not slow it
         for path in done:
             ctx = ctx or create_headless_context()
             with SceneRenderer(ctx, model, weights_path=path, baked_source=source) as scene:

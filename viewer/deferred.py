@@ -31,8 +31,10 @@ group's shared memory: only nets whose texels fit the driver's shared memory, 32
 not the shipped 28k-MAC nets) or ``baked`` (viewer/baked.py's literals, the fastest form on llvmpipe).
 ``ssbo-fp16`` / ``shared-fp16``: the same with each weight stored as an IEEE half (``unpackHalf2x16``, GL
 4.3 core; the sums stay float32): half the memory traffic, at an error measured in docs/benchmarks.md.
-``auto``: ``baked`` when the :class:`~viewer.renderer.NetworkRenderer` bakes, else ``ssbo`` (the fastest
-compute form measured on an H100, shared/notes/opengl-on-a-gpu.md).
+``auto``: ``baked`` when the :class:`~viewer.renderer.NetworkRenderer` bakes; else ``texture`` on a
+software rasterizer (llvmpipe: 1.2–1.3× faster than ``ssbo``, docs/benchmarks.md "Render paths") and
+``ssbo`` on a GPU (the fastest form of the H100 micro-benchmark, shared/notes/opengl-on-a-gpu.md; the
+compute pass itself is not measured on a GPU yet).
 
 Choosing the path (:func:`choose_render_path`): ``auto`` times both paths on a probe scene (the CD disc at
 :data:`PROBE_SIZE`) on the current context for this network's shape, and caches the verdict in
@@ -58,7 +60,7 @@ import numpy as np
 from gratnet.errors import GratNetError
 from viewer.antialias import jitter_matrix
 from viewer.glsl import compile_compute, compile_program
-from viewer.renderer import _LOG, _set, skip_threshold_value
+from viewer.renderer import _LOG, _SOFTWARE_RASTERIZERS, _set, skip_threshold_value
 
 if TYPE_CHECKING:
     from viewer.camera import Camera, Light
@@ -119,7 +121,9 @@ class DeferredRenderer:
             raise GratNetError(f"deferred weights must be one of {', '.join(DEFERRED_WEIGHTS)}, got {weights!r}")
         network = scene.network
         if weights == "auto":
-            weights = "baked" if network.weights_path == "baked" else "ssbo"
+            renderer = str(scene.ctx.info.get("GL_RENDERER", "")).lower()
+            software = any(name in renderer for name in _SOFTWARE_RASTERIZERS)
+            weights = "baked" if network.weights_path == "baked" else "texture" if software else "ssbo"
         if weights == "baked" and network.weights_path != "baked":
             raise GratNetError("deferred weights 'baked' need a SceneRenderer with weights_path='baked'")
         if weights.endswith("-fp16") and not np.all(np.abs(network.packed_weights) <= FP16_MAX):
