@@ -8,6 +8,10 @@ The output is **exposed CIE XYZ**, linear, ``float32`` ``(H, W, 3)`` with row 0 
 mesh does not cover are 0 (``render_rgba``'s alpha is the coverage, 1 or 0). The depth test is on, face
 culling off (back faces are covered but black).
 
+Two render paths (issue 12, ``render_path``): this module's forward path, and the deferred one of
+:mod:`viewer.deferred` (a G-buffer pass, then the network in a compute shader over the pixels that need
+it), which also takes sub-pixel sample offsets; ``_render`` dispatches between them in one place.
+
 Work skipped (issue 5): a depth pre-pass (on by default) draws the mesh's depth first, so that the shading
 pass runs the network once per visible pixel (no overdraw); back faces and A = 0 never run it; with a
 ``skip_threshold`` (:data:`~gratnet.bounds.DISPLAY_SKIP_THRESHOLD` for 8-bit display output, as
@@ -110,6 +114,8 @@ class SceneRenderer:
         render_path: ``forward`` (the network in the fragment shader), ``deferred`` (a G-buffer pass, then the
             network in a compute shader over the pixels that need it: :mod:`viewer.deferred`) or ``auto``
             (:func:`viewer.deferred.choose_render_path`: measured once per GPU and network shape, cached).
+            Both give the same images; :meth:`render_layers` (key vectors and A) and BRDF slices always run
+            forward, and ``depth_prepass`` only concerns the forward path.
         deferred_weights: where the deferred path's compute shader reads the weights
             (:data:`viewer.deferred.DEFERRED_WEIGHTS`).
         measure_render_path: ``auto`` may time both paths when nothing is cached (False: ``forward`` then;
