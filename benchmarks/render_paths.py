@@ -61,6 +61,9 @@ def main() -> int:
     parser.add_argument("--variants", default="forward:texture,forward:baked,deferred:texture,deferred:ssbo,"
                         "deferred:baked")
     parser.add_argument("--repeats", type=int, default=3)
+    parser.add_argument("--light", default="", metavar="θ,φ",
+                        help="directional light instead of the default view's (degrees); e.g. 100,0 puts it below "
+                        "the horizon: nothing is evaluated, so the time is the path's fixed overhead")
     parser.add_argument("--random-net", default="", metavar="H1,H2,…",
                         help="instead of the material's net: a random funnel with these hidden widths and the "
                         "material's encoding (seed 0), e.g. 16,8 (3.0k MACs: its weights fit 32 KiB of shared memory)")
@@ -72,7 +75,9 @@ def main() -> int:
     mesh = build_mesh(arguments.mesh)
     defaults = resolve_defaults(arguments.material, arguments.mesh)
     camera = Camera(defaults.camera_distance, defaults.camera_azimuth_degrees, defaults.camera_elevation_degrees)
-    light = Light.directional(defaults.light_theta_degrees, defaults.light_phi_degrees)
+    theta, phi = ((float(v) for v in arguments.light.split(",")) if arguments.light
+                  else (defaults.light_theta_degrees, defaults.light_phi_degrees))
+    light = Light.directional(theta, phi)
     ctx = create_headless_context()
     renderer_name = ctx.info.get("GL_RENDERER", "?")
     scenes: dict[str, tuple[SceneRenderer, object]] = {}
