@@ -58,7 +58,6 @@ import moderngl
 import numpy as np
 
 from gratnet.errors import GratNetError
-from viewer.antialias import jitter_matrix
 from viewer.glsl import compile_compute, compile_program
 from viewer.renderer import _LOG, _SOFTWARE_RASTERIZERS, _set, skip_threshold_value
 
@@ -314,6 +313,8 @@ class DeferredRenderer:
             for k, offset in enumerate(chunk):
                 matrix = view_projection
                 if offset[0] != 0.0 or offset[1] != 0.0:  # (0, 0): the forward path's matrix, bit for bit
+                    from viewer.antialias import jitter_matrix  # here: it imports scipy.stats (~1 s)
+
                     matrix = np.ascontiguousarray(view_projection @ jitter_matrix(offset, width, height))
                 _set(program, "u_view_projection", matrix.astype(np.float32))
                 box = (0, k * height, width, height)
