@@ -179,6 +179,19 @@ def test_samples_average_single_jittered_renders(scenes, monkeypatch, chunked):
     np.testing.assert_array_equal(centre, scene.render_rgba(mesh, DISC_CAMERA, DISC_LIGHT, size, EXPOSURE))
 
 
+def test_overdraw_costs_no_evaluation_on_the_deferred_path(scenes):
+    from tests.test_skip_work import _two_planes
+
+    camera = Camera(distance=0.3, azimuth_deg=0.0, elevation_deg=90.0, fov_deg=30.0)
+    light = Light.directional(20.0, 0.0)
+    counts: dict[str, int] = {}
+    deferred = scenes["ssbo"].render_rgba(_two_planes(), camera, light, (48, 48), EXPOSURE, statistics=counts)
+    forward = scenes["forward"].render_rgba(_two_planes(), camera, light, (48, 48), EXPOSURE)
+    covered = int(np.count_nonzero(deferred[..., 3] > 0))
+    assert counts["evaluations"] == counts["fragments"] == covered  # the near plane only, no pre-pass needed
+    np.testing.assert_allclose(deferred, forward, rtol=1e-5, atol=1e-7 * np.abs(forward).max())
+
+
 def test_empty_mesh_background_and_tiny_sizes(scenes):
     scene = scenes["ssbo"]
     base = plane(0.1)
