@@ -254,3 +254,13 @@ def test_render_cli_render_path_flag_and_config(ctx, tmp_path, capsys):
     assert config["render_path"] == {"path": "deferred", "reason": "requested"}
     assert main([*common, "--render-path", "fastest", "--out", str(tmp_path / "bad.png")]) == 2
     assert "render-path" in capsys.readouterr().err
+
+
+def test_compute_compile_errors_name_the_real_file_and_line(ctx, tmp_path):
+    from viewer.glsl import compile_compute
+
+    (tmp_path / "helper.glsl").write_text("float helper() {\n    return undefined_name;\n}\n")
+    (tmp_path / "broken.glsl").write_text('#ifdef COMPUTE_SHADER\nlayout(local_size_x = 1) in;\n'
+                                          '#include "helper.glsl"\nvoid main() {}\n#endif\n')
+    with pytest.raises(GratNetError, match=r"compute program 'broken'.*helper\.glsl:2:"):
+        compile_compute(ctx, "broken", {}, tmp_path)
