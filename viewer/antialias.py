@@ -16,7 +16,7 @@ import numpy as np
 
 from gratnet.errors import GratNetError
 
-__all__ = ["MAX_SAMPLES", "check_samples", "jitter_matrix", "sample_offsets", "sample_range_offsets"]
+__all__ = ["check_offsets", "MAX_SAMPLES", "check_samples", "jitter_matrix", "sample_offsets", "sample_range_offsets"]
 
 #: Largest sample count per pixel accepted anywhere (a render, the viewer's accumulation cap).
 MAX_SAMPLES = 1024
@@ -69,6 +69,14 @@ def sample_range_offsets(samples: int, first_sample: int = 0) -> np.ndarray:
         raise GratNetError(f"samples {first_sample} … {first_sample + count - 1} run past the sequence's "
                            f"{MAX_SAMPLES} samples per pixel")
     return sample_offsets(first_sample + count)[first_sample:]
+
+
+def check_offsets(offsets_px: object) -> np.ndarray:
+    """``offsets_px`` as a finite ``float64`` ``(N ≥ 1, 2)`` array of pixel offsets, else :class:`GratNetError`."""
+    offsets = np.asarray(offsets_px, dtype=np.float64)
+    if offsets.ndim != 2 or offsets.shape[1] != 2 or offsets.shape[0] < 1 or not np.all(np.isfinite(offsets)):
+        raise GratNetError(f"sample offsets must be a finite (N ≥ 1, 2) array of pixels, got shape {offsets.shape}")
+    return offsets
 
 
 def jitter_matrix(offset_px: np.ndarray | tuple[float, float], width: int, height: int) -> np.ndarray:

@@ -348,7 +348,7 @@ class ViewerApp:
     def __init__(self, ctx: Any, state: ViewerState | None = None, size: tuple[int, int] = (512, 512),
                  policy: ResolutionPolicy | None = None, clock: Callable[[], float] = time.perf_counter,
                  extra_meshes: Iterable[str] = (), weights_path: str = "auto", background: bool = False,
-                 worker: Any = None, max_samples: int = 1) -> None:
+                 worker: Any = None, max_samples: int = 1, render_path: str = "auto") -> None:
         from viewer.antialias import check_samples
         from viewer.scene import check_size
         from viewer.scene_supply import SceneSupply
@@ -363,7 +363,7 @@ class ViewerApp:
         self.message = ""  # the last problem (a material or mesh that failed to load), shown in the panel
         self.meshes = list(MESHES) + [spec for spec in extra_meshes if spec not in MESHES]
         self.weights_path = weights_path
-        self._supply = SceneSupply(ctx, weights_path, background, worker)
+        self._supply = SceneSupply(ctx, weights_path, background, worker, render_path)
         # A switch of material, mesh or mode brings that pair's default view (viewer.defaults), worked out in a
         # worker process in the background mode.
         self._defaults = DefaultViewRequests(background)
@@ -919,7 +919,8 @@ class ViewerWindow:
                  policy: ResolutionPolicy | None = None, clock: Callable[[], float] = time.perf_counter,
                  screenshot_dir: str | Path = ".", idle_wait_s: float = 0.25, extra_meshes: Iterable[str] = (),
                  weights_path: str = "auto", background: bool = True,
-                 visible: bool = True, title: str = "GratNet viewer", max_samples: int = 16) -> None:
+                 visible: bool = True, title: str = "GratNet viewer", max_samples: int = 16,
+                 render_path: str = "auto") -> None:
         from viewer.context import context_from_current
         from viewer.scene import check_size
         from viewer.scene_supply import SceneSupply, start_display_import
@@ -930,7 +931,7 @@ class ViewerWindow:
         if background:
             start_display_import()
             with contextlib.suppress(GratNetError):  # a bad material is reported by ViewerApp below
-                worker = SceneSupply.start_worker(state or ViewerState(), weights_path)
+                worker = SceneSupply.start_worker(state or ViewerState(), weights_path, render_path)
         glfw, imgui = self._glfw, self._imgui = _shell_modules()
         self.screenshot_dir = Path(screenshot_dir)
         self.idle_wait_s = float(idle_wait_s)
@@ -992,7 +993,7 @@ class ViewerWindow:
             self._gl = _GLFunctions(glfw)
             self._texture = self._picture_texture(1, 1)  # drawn by the first frame: see there
             self._app = ViewerApp(self.ctx, state, self._area_pixels(), policy, clock, extra_meshes, weights_path,
-                                  background, worker, max_samples)
+                                  background, worker, max_samples, render_path)
             worker = None  # the app owns it now
             # The first frame compiles imgui's own shaders and, drawing the 1×1 picture texture, their variant
             # for its format (0.3–0.5 s on llvmpipe with an empty shader cache): drawn while the window is

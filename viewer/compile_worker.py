@@ -97,7 +97,7 @@ class CompileWorker:
     """
 
     def __init__(self, model_path: str | os.PathLike[str], paths: Sequence[str], groups: Sequence[str],
-                 label: str = "", niceness: int = 0) -> None:
+                 label: str = "", niceness: int = 0, render_path: str = "auto") -> None:
         self.model_path = Path(model_path)
         self.paths = tuple(paths)
         self.groups = tuple(groups)
@@ -120,7 +120,8 @@ class CompileWorker:
         environment["PYTHONPATH"] = os.pathsep.join(
             [str(_REPOSITORY), *filter(None, environment.get("PYTHONPATH", "").split(os.pathsep))])
         command = [sys.executable, "-m", "viewer.compile_worker", str(self.model_path), "--paths", ",".join(self.paths),
-                   "--groups", ",".join(self.groups), "--folder", self._folder.name, "--nice", str(int(niceness))]
+                   "--groups", ",".join(self.groups), "--folder", self._folder.name, "--nice", str(int(niceness)),
+                   "--render-path", render_path]
         self._process: subprocess.Popen[bytes] | None = subprocess.Popen(
             command, stdin=subprocess.DEVNULL, stdout=subprocess.PIPE, stderr=self._stderr, env=environment,
             cwd=str(_REPOSITORY))
@@ -201,8 +202,11 @@ class CompileWorker:
             self.close()
 
 
-def _warm(model_path: Path, paths: Sequence[str], groups: Sequence[str], folder: Path) -> None:
-    """The child: warm every group of every path, reporting each on stdout once it is on disk."""
+def _warm(model_path: Path, paths: Sequence[str], groups: Sequence[str], folder: Path,
+          render_path: str = "auto") -> None:
+    """The child: warm every group of every path, reporting each on stdout once it is on disk; then, for
+    ``render_path`` ``auto`` with no cached verdict, time the two render paths (viewer.deferred) so that the
+    window (which never measures) finds the verdict from its next material or start on."""
     from gratnet.atomic import atomic_path
     from gratnet.modelfile import load_model
     from viewer.context import create_headless_context, release_headless_context
@@ -222,7 +226,8 @@ def _warm(model_path: Path, paths: Sequence[str], groups: Sequence[str], folder:
         for group in groups:
             started = time.perf_counter()
             ctx = ctx or create_headless_context()
-            scene = SceneRenderer(ctx, model, weights_path=path, baked_source=source)
+            scene = SceneRenderer(ctx, model, weights_path=path, baked_source=source, render_path=render_path,
+                                  measure_render_path=False)
             if source is None and scene.network.baked_source is not None:
                 source = scene.network.baked_source
                 with atomic_path(folder / _BAKED_SOURCE) as temporary:
@@ -236,6 +241,13 @@ def _warm(model_path: Path, paths: Sequence[str], groups: Sequence[str], folder:
             release_headless_context(ctx)
             ctx = None
             print(f"ready {path} {group} {time.perf_counter() - started:.3f}", flush=True)
+    if render_path == "auto" and "surface" in groups:
+        with contextlib.suppress(OSError):
+            os.nice(_BAKED_NICENESS)  # the window is up by now: the probe must not slow it
+        for path in done:
+            ctx = ctx or create_headless_context()
+            with SceneRenderer(ctx, model, weights_path=path, baked_source=source) as scene:
+                print(f"render-path {path} {scene.render_path}", flush=True)  # measured and cached (or read)
     if ctx is not None:
         release_headless_context(ctx)
 
@@ -248,12 +260,14 @@ def main(argv: Sequence[str] | None = None) -> int:
     parser.add_argument("--groups", default=",".join(GROUPS))
     parser.add_argument("--folder", required=True, help="where to write the baked mlp.glsl")
     parser.add_argument("--nice", type=int, default=0, help="niceness to add at start")
+    parser.add_argument("--render-path", default="auto", help="the viewer's render path (auto: measure it here)")
     arguments = parser.parse_args(argv)
     if arguments.nice > 0:
         with contextlib.suppress(OSError):
             os.nice(arguments.nice)
     try:
-        _warm(Path(arguments.model), arguments.paths.split(","), arguments.groups.split(","), Path(arguments.folder))
+        _warm(Path(arguments.model), arguments.paths.split(","), arguments.groups.split(","), Path(arguments.folder),
+              arguments.render_path)
     except GratNetError as error:
         print(f"compile worker: {error}", file=sys.stderr)
         return 2

@@ -48,6 +48,12 @@ _OUTPUT_SUFFIXES = (".png", ".exr")
 MAX_SAMPLES = 1024
 #: ``--weights-path`` choices: viewer.renderer.WEIGHTS_PATHS (repeated here: importing it loads moderngl).
 WEIGHT_PATHS = ("auto", "texture", "baked")
+#: ``--render-path`` choices: viewer.deferred.RENDER_PATHS (repeated here for the same reason).
+RENDER_PATHS = ("auto", "forward", "deferred")
+#: ``--render-path`` help, shared by every command that renders a mesh.
+RENDER_PATH_HELP = ("mesh renders: forward (the network in the fragment shader), deferred (a G-buffer pass, then the "
+                    "network in a compute shader for the pixels that need it) or auto (the faster on this GPU for "
+                    "this network's size, timed once on a small probe and cached)")
 #: sRGB / Rec. 709 primaries and D65 white (x, y pairs) for the EXR ``chromaticities`` attribute.
 _SRGB_CHROMATICITIES = (0.64, 0.33, 0.30, 0.60, 0.15, 0.06, 0.3127, 0.3290)
 
@@ -95,6 +101,7 @@ class RenderConfig(SceneConfig):
         "(literals in a generated shader: faster on a CPU rasterizer, slower first compile) or auto (baked for "
         "nets up to 32k multiply-adds (the shipped size) on a CPU rasterizer such as Mesa llvmpipe, else texture)",
         choices=WEIGHT_PATHS)
+    render_path: str = config_field("auto", RENDER_PATH_HELP, choices=RENDER_PATHS)
     skip_dark: bool = config_field(
         False, "PNG only: skip the network where exposure · A · (the model's cached output bound) cannot reach the "
         "display's smallest step; the first use per model builds the bound (minutes on a CPU)")
@@ -325,7 +332,10 @@ def run(arguments: argparse.Namespace) -> int:
     skip_threshold = DISPLAY_SKIP_THRESHOLD if config.skip_dark else None
     ctx = create_headless_context()
     try:
-        with SceneRenderer(ctx, model, weights_path=config.weights_path) as renderer:
+        with SceneRenderer(ctx, model, weights_path=config.weights_path, render_path=config.render_path) as renderer:
+            # A BRDF slice has one path (a full-screen fragment pass); a mesh takes the one chosen.
+            resolved = ({"path": "forward", "reason": "BRDF slices are rendered by the fragment pass only"}
+                        if config.slice else {"path": renderer.render_path, "reason": renderer.render_path_reason})
             if config.slice:
                 xyz = renderer.network.render_brdf_slice(config.light_theta_degrees, config.light_phi_degrees,
                                                          config.width, config.exposure, config.effective_ior,
@@ -338,7 +348,7 @@ def run(arguments: argparse.Namespace) -> int:
     if not np.all(np.isfinite(xyz)):
         raise GratNetError("the render contains NaN or inf; nothing was written (please report this)")
 
-    write_render(out, xyz, render=config, model_file=str(model_path))
+    write_render(out, xyz, render=config, model_file=str(model_path), render_path=resolved)
     what = (f"BRDF slice, light θ={config.light_theta_degrees:g}° φ={config.light_phi_degrees:g}°" if config.slice
             else f"mesh {config.mesh}")
     samples = "" if config.slice else f", {config.spp} spp"

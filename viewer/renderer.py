@@ -123,7 +123,7 @@ def skip_threshold_value(threshold: float | None) -> float:
     return value
 
 
-def _set(program: moderngl.Program, name: str, value: object) -> None:
+def _set(program: moderngl.Program | moderngl.ComputeShader, name: str, value: object) -> None:
     """Set a uniform that the program must have (a missing one means shader and renderer disagree)."""
     if name not in program:
         raise GratNetError(f"GLSL program lacks uniform {name!r}; the shaders and viewer/renderer.py disagree")
@@ -181,6 +181,9 @@ class NetworkRenderer:
     def __init__(self, ctx: moderngl.Context, model: ModelFile, shader_root: str | Path | None = None,
                  weights_path: str = "auto", baked_source: str | None = None) -> None:
         texture, layout = pack_texture(model)  # validates the model
+        #: The packed weight texture (docs/formats.md), ``float32`` ``(rows, texels per row, 4)``, on either path
+        #: (the deferred path's weight buffers hold the same texels).
+        self.packed_weights = np.ascontiguousarray(texture, dtype=np.float32)
         self.ctx = ctx
         self.model = model
         self.layout = layout
@@ -211,14 +214,20 @@ class NetworkRenderer:
     # ---------------------------------------------------------------------------------------------
     # Programs
 
-    def _model_uniforms(self, program: moderngl.Program) -> None:
-        """Everything the encoding, MLP and range-transform includes read, from the model."""
+    def _model_uniforms(self, program: moderngl.Program | moderngl.ComputeShader, weights: str | None = None) -> None:
+        """Everything the encoding, MLP and range-transform includes read, from the model. ``weights``: where
+        the program's mlp.glsl reads them (``texture``, ``baked``, or the deferred path's ``ssbo``/``shared``;
+        default: :attr:`weights_path`)."""
+        weights = self.weights_path if weights is None else weights
         layers = np.zeros((int(self.defines["MAX_LAYERS"]), 4), dtype=np.int32)
         for k, entry in enumerate(self.layout):
             layers[k, :3] = entry["row_offset"], entry["in_blocks"], entry["out_blocks"]
         model = self.model
-        if self.weights_path == "texture":  # the baked mlp.glsl has the layout and activations in its code
-            _set(program, "u_weights", 0)
+        if weights != "baked":  # the baked mlp.glsl has the layout and activations in its code
+            if weights == "texture":
+                _set(program, "u_weights", 0)
+            else:
+                _set(program, "u_weights_width", int(self.packed_weights.shape[1]))
             _set(program, "u_layer_count", len(self.layout))
             _set(program, "u_layers", layers)
             _set(program, "u_hidden_activation", _HIDDEN[model.activation])
@@ -226,7 +235,7 @@ class NetworkRenderer:
         _set(program, "u_scheme", _SCHEMES[model.scheme])
         # encoded_feature (encoding.glsl) reads the counts; the baked MLP has them in its code, so baked
         # programs that do not call encoded_feature (all but encode_keys) lack these uniforms.
-        if self.weights_path == "texture" or "u_frequencies" in program:
+        if weights != "baked" or "u_frequencies" in program:
             _set(program, "u_frequencies", model.encoding.frequencies)
             _set(program, "u_t_frequencies", model.encoding.t_frequencies)
         _set(program, "u_frequency", _frequency_table(model, int(self.defines["MAX_FREQUENCIES"])))
@@ -322,7 +331,7 @@ class NetworkRenderer:
             self._skip_texture.filter = (moderngl.NEAREST, moderngl.NEAREST)
         return self._skip_texture
 
-    def _skip_uniforms(self, program: moderngl.Program, skip_threshold: float | None
+    def _skip_uniforms(self, program: moderngl.Program | moderngl.ComputeShader, skip_threshold: float | None
                        ) -> tuple[moderngl.Texture, int]:
         """Set skip.glsl's uniforms on ``program``; returns ``(texture, unit)`` of the bound to bind."""
         threshold = skip_threshold_value(skip_threshold)

@@ -8,6 +8,10 @@ The output is **exposed CIE XYZ**, linear, ``float32`` ``(H, W, 3)`` with row 0 
 mesh does not cover are 0 (``render_rgba``'s alpha is the coverage, 1 or 0). The depth test is on, face
 culling off (back faces are covered but black).
 
+Two render paths (issue 12, ``render_path``): this module's forward path, and the deferred one of
+:mod:`viewer.deferred` (a G-buffer pass, then the network in a compute shader over the pixels that need
+it), which also takes sub-pixel sample offsets; ``_render`` dispatches between them in one place.
+
 Work skipped (issue 5): a depth pre-pass (on by default) draws the mesh's depth first, so that the shading
 pass runs the network once per visible pixel (no overdraw); back faces and A = 0 never run it; with a
 ``skip_threshold`` (:data:`~gratnet.bounds.DISPLAY_SKIP_THRESHOLD` for 8-bit display output, as
@@ -40,7 +44,7 @@ import numpy as np
 from gratnet.display import xyz_to_display_srgb8, xyz_to_linear_srgb
 from gratnet.errors import GratNetError
 from gratnet.modelfile import ModelFile
-from viewer.antialias import jitter_matrix, sample_range_offsets
+from viewer.antialias import check_offsets, jitter_matrix, sample_range_offsets
 from viewer.camera import Camera, Light
 from viewer.glsl import compile_program
 from viewer.meshes import Mesh
@@ -111,15 +115,57 @@ class SceneRenderer:
         weights_path: ``auto``, ``texture`` or ``baked``: where the shader reads the weights
             (:class:`~viewer.renderer.NetworkRenderer`; the choice is ``self.network.weights_path``).
         baked_source: as :class:`~viewer.renderer.NetworkRenderer` (a baked ``mlp.glsl`` made earlier).
+        render_path: ``forward`` (the network in the fragment shader), ``deferred`` (a G-buffer pass, then the
+            network in a compute shader over the pixels that need it: :mod:`viewer.deferred`) or ``auto``
+            (:func:`viewer.deferred.choose_render_path`: measured once per GPU and network shape, cached).
+            Both give the same images; :meth:`render_layers` (key vectors and A) and BRDF slices always run
+            forward, and ``depth_prepass`` only concerns the forward path.
+        deferred_weights: where the deferred path's compute shader reads the weights
+            (:data:`viewer.deferred.DEFERRED_WEIGHTS`).
+        measure_render_path: ``auto`` may time both paths when nothing is cached (False: ``forward`` then;
+            the viewer, whose compile process measures off the window's thread).
     """
 
     def __init__(self, ctx: moderngl.Context, model: ModelFile, shader_root: str | Path | None = None,
-                 weights_path: str = "auto", baked_source: str | None = None) -> None:
+                 weights_path: str = "auto", baked_source: str | None = None, render_path: str = "auto",
+                 deferred_weights: str = "auto", measure_render_path: bool = True) -> None:
+        from viewer.deferred import DeferredRenderer, check_render_path
+
+        self._requested_path = check_render_path(render_path)
         self.ctx = ctx
         self.network = NetworkRenderer(ctx, model, shader_root, weights_path, baked_source)
         self.model = model
         self._accumulate_program: moderngl.Program | None = None
         self._accumulate_array: moderngl.VertexArray | None = None
+        self.deferred = DeferredRenderer(self, deferred_weights)  # compiles nothing until used
+        self._render_path: tuple[str, str] | None = None
+        self._measure_render_path = measure_render_path
+
+    @property
+    def render_path(self) -> str:
+        """The path mesh renders take, ``forward`` or ``deferred`` (``auto`` measures on first use)."""
+        return self._resolved_path()[0]
+
+    @property
+    def render_path_reason(self) -> str:
+        """Why :attr:`render_path` was taken, e.g. ``requested`` or ``deferred: 12.1 ms vs forward 31.0 ms …``."""
+        return self._resolved_path()[1]
+
+    def _resolved_path(self) -> tuple[str, str]:
+        if self._render_path is None:
+            from viewer.deferred import choose_render_path
+
+            self._render_path = choose_render_path(self, self._requested_path, self._measure_render_path)
+        return self._render_path
+
+    def _render_path_probe(self, uploaded: MeshBuffers, camera: Camera, light: Light, size: tuple[int, int],
+                           path: str) -> None:
+        """One render on ``path`` (the ``auto`` probe of :func:`viewer.deferred.choose_render_path`)."""
+        saved, self._render_path = self._render_path, (path, "probe")
+        try:
+            self._render(uploaded, camera, light, size, 1.0, 1.5, 1)
+        finally:
+            self._render_path = saved
 
     @property
     def program(self) -> moderngl.Program:
@@ -211,12 +257,22 @@ class SceneRenderer:
     def _render(self, mesh: Mesh | MeshBuffers, camera: Camera, light: Light, size: tuple[int, int],
                 exposure: float, ior: float | None, layers: int, skip_threshold: float | None = None,
                 depth_prepass: bool = True, statistics: dict[str, int] | None = None, samples: int = 1,
-                first_sample: int = 0) -> list[np.ndarray]:
+                first_sample: int = 0, offsets_px: np.ndarray | None = None) -> list[np.ndarray]:
         """Every render method's checks, then the render path with the sub-pixel offsets of samples
-        ``first_sample`` … ``first_sample + samples − 1`` (:func:`viewer.antialias.sample_offsets`)."""
+        ``first_sample`` … ``first_sample + samples − 1`` (:func:`viewer.antialias.sample_offsets`), or
+        explicit ``offsets_px`` (pixels, ``(N, 2)``: tests and benchmarks)."""
         width, height = check_size(size)
         skip_threshold_value(skip_threshold)  # check before any GL work
-        offsets = sample_range_offsets(samples, first_sample)
+        offsets = sample_range_offsets(samples, first_sample) if offsets_px is None else check_offsets(offsets_px)
+        if layers == 1 and self.render_path == "deferred":
+            # The deferred path (viewer/deferred.py) takes all samples in one list; render_layers stays forward.
+            uploaded = mesh if isinstance(mesh, MeshBuffers) else self.upload(mesh)
+            try:
+                return [self.deferred.render(uploaded, camera, light, (width, height), exposure, ior, skip_threshold,
+                                             statistics, offsets)]
+            finally:
+                if uploaded is not mesh:
+                    uploaded.release()
         return self._render_forward(mesh, camera, light, (width, height), exposure, ior, layers, skip_threshold,
                                     depth_prepass, statistics, offsets)
 
@@ -389,4 +445,5 @@ class SceneRenderer:
             if owned is not None:
                 owned.release()
         self._accumulate_array = self._accumulate_program = None
+        self.deferred.release()
         self.network.release()

@@ -111,13 +111,16 @@ class SceneSupply:
     """
 
     def __init__(self, ctx: Any, weights_path: str = "auto", background: bool = False,
-                 worker: CompileWorker | None = None) -> None:
+                 worker: CompileWorker | None = None, render_path: str = "auto") -> None:
+        from viewer.deferred import check_render_path
         from viewer.renderer import WEIGHTS_PATHS
 
         if weights_path not in WEIGHTS_PATHS:
             raise GratNetError(f"weights path must be one of {', '.join(WEIGHTS_PATHS)}, got {weights_path!r}")
         self.ctx = ctx
         self.weights_path = weights_path
+        #: ``--render-path``: ``auto`` takes the cached verdict (forward until the compile child measured it).
+        self.render_path = check_render_path(render_path)
         self.background = background
         #: Problems found in the background (a mesh that failed to load, a failed child), for the panel.
         self.errors: dict[str, str] = {}
@@ -141,14 +144,15 @@ class SceneSupply:
             importlib.import_module("colour")
 
     @staticmethod
-    def start_worker(state: Any, weights_path: str = "auto") -> CompileWorker | None:
+    def start_worker(state: Any, weights_path: str = "auto", render_path: str = "auto") -> CompileWorker | None:
         """A child warming ``state``'s material (``None`` when Mesa's shader cache is off), started before
         any context exists: the quick texture path first, then what ``weights_path`` picks there."""
         if not shader_cache_enabled():
             return None
         paths = ("texture", weights_path) if weights_path == "auto" else (weights_path,)
         groups = ("slice", "surface") if state.slice_mode else GROUPS
-        return CompileWorker(resolve_material(state.material), paths, groups, state.material)
+        return CompileWorker(resolve_material(state.material), paths, groups, state.material,
+                             render_path=render_path)
 
     # -- checks (cheap, on the caller's thread) ----------------------------------------------------
 
@@ -193,7 +197,8 @@ class SceneSupply:
                 groups = ("slice", "surface") if state.slice_mode else GROUPS
                 # The window is on screen: the child yields the CPU to it (the first child, started before
                 # the window shows, runs at full priority).
-                self._worker = CompileWorker(model_path, self._paths, groups, state.material, niceness=5)
+                self._worker = CompileWorker(model_path, self._paths, groups, state.material, niceness=5,
+                                             render_path=self.render_path)
         if prestarted is not None:
             prestarted.close()
         if self._worker is None:  # a child's compile would not spare ours: the first path only, compiled here
@@ -312,7 +317,8 @@ class SceneSupply:
         if path not in self._scenes:
             source = self._worker.baked_source if (self._worker is not None and path == "baked") else None
             self._scenes[path] = SceneRenderer(self.ctx, self.model(self._material or ""), weights_path=path,
-                                               baked_source=source)
+                                               baked_source=source, render_path=self.render_path,
+                                               measure_render_path=False)
         return self._scenes[path]
 
     def _link(self, path: str, group: str) -> None:

@@ -10,6 +10,8 @@
   ``--slice``: the starting view, as in ``gratnet render``; light, camera and exposure left out are chosen
   from the material and the mesh (viewer.defaults), the same values as ``gratnet render``'s.
 - ``--weights-path auto|texture|baked``: where the shader reads the weights, as in ``gratnet render``.
+- ``--render-path auto|forward|deferred``: as in ``gratnet render``; ``auto`` takes the verdict cached for this
+  GPU and network shape, and while there is none renders forward and lets the compile process time both.
 
 Mouse: drag over the picture to orbit (in BRDF-slice mode: to move the light), wheel to zoom. The
 Screenshot button writes ``gratnet-view-NNN.png`` (display sRGB, full resolution) and its
@@ -32,7 +34,7 @@ from pathlib import Path
 from gratnet.config import add_quiet_flag, parse_float, parse_int
 from gratnet.errors import GratNetError
 from viewer.defaults import fill_scene_defaults, with_fallback
-from viewer.render_cli import WEIGHT_PATHS
+from viewer.render_cli import RENDER_PATH_HELP, RENDER_PATHS, WEIGHT_PATHS
 
 __all__ = ["register", "run"]
 
@@ -74,6 +76,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     parser.add_argument("--spp", "--samples", dest="spp", type=parse_int, default=16, metavar="N",
                         help="samples per pixel accumulated while the view stands still (progressive anti-aliasing, "
                         "as gratnet render --spp; 1: off; typical: 4 to 64; the panel changes it; default: 16)")
+    parser.add_argument("--render-path", choices=RENDER_PATHS, default="auto", help=f"{RENDER_PATH_HELP}; "
+                        "default: auto")
     parser.add_argument("--screenshot-dir", default=".", metavar="DIR",
                         help="folder for the Screenshot button's PNGs (default: the working folder)")
     parser.add_argument("--max-frames", type=parse_int, default=0, metavar="N",
@@ -138,7 +142,8 @@ def run(arguments: argparse.Namespace) -> int:
     state = _state(arguments)
     extra = [] if state.mesh in ("cd", "sphere", "plane") else [state.mesh]
     with ViewerWindow(state, size, screenshot_dir=arguments.screenshot_dir, extra_meshes=extra,
-                      weights_path=arguments.weights_path, max_samples=arguments.spp) as window:
+                      weights_path=arguments.weights_path, max_samples=arguments.spp,
+                      render_path=arguments.render_path) as window:
         window.run(arguments.max_frames)
         if window.gl_errors:
             raise GratNetError(f"OpenGL reported errors: {'; '.join(window.gl_errors[:3])} (please report this)")
