@@ -78,7 +78,7 @@ def renderer(ctx) -> Iterator[object]:
     from gratnet.modelfile import load_model
     from viewer.scene import SceneRenderer
 
-    with SceneRenderer(ctx, load_model(BLAZED), weights_path="texture") as scene:
+    with SceneRenderer(ctx, load_model(BLAZED), weights_path="texture", render_path="forward") as scene:
         buffers = scene.upload(plane())
         yield scene, buffers
         buffers.release()

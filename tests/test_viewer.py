@@ -203,7 +203,10 @@ def test_progressive_antialiasing_equals_the_k_sample_render_and_restarts_on_a_c
         scale = float(np.abs(reference).max())
         assert scale > 0 and np.abs(accumulated - single).max() > 1e-3 * scale  # the samples changed pixels
         levels = np.abs(viewer.image.pixels.astype(int) - SceneRenderer.display_srgb8(reference).astype(int))
-        if budget > 1:  # the same matrices as SceneRenderer's: float32 rounding only
+        # The deferred path rasterizes N samples as N stacked viewports: a sample's varyings are interpolated at
+        # other window coordinates than in a one-sample render (float32 rounding, amplified at sharp highlights).
+        deferred = viewer._supply.scene(viewer.state, preview=False)[0].render_path == "deferred"
+        if budget > 1 and not deferred:  # the same matrices as SceneRenderer's: float32 rounding only
             np.testing.assert_allclose(accumulated, reference, rtol=1e-5, atol=1e-6 * scale)
             assert levels.max() <= 1
         else:  # a band's clip-space crop rounds vertex positions differently (as the refinement's bands)
