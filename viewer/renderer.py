@@ -134,6 +134,12 @@ def _set(program: moderngl.Program | moderngl.ComputeShader, name: str, value: o
         member.value = value  # type: ignore[union-attr]
 
 
+def is_software_rasterizer(ctx: moderngl.Context) -> bool:
+    """Whether ``ctx`` renders on the CPU (Mesa llvmpipe, softpipe, swrast), from its GL_RENDERER string."""
+    renderer = str(ctx.info.get("GL_RENDERER", "")).lower()
+    return any(name in renderer for name in _SOFTWARE_RASTERIZERS)
+
+
 def choose_weights_path(ctx: moderngl.Context, model: ModelFile, weights_path: str = "auto") -> str:
     """``texture`` or ``baked``: ``weights_path`` itself unless it is ``auto``, which picks
 
@@ -152,8 +158,7 @@ def choose_weights_path(ctx: moderngl.Context, model: ModelFile, weights_path: s
         raise GratNetError(f"weights path must be one of {', '.join(WEIGHTS_PATHS)}, got {weights_path!r}")
     if weights_path != "auto":
         return weights_path
-    renderer = str(ctx.info.get("GL_RENDERER", "")).lower()
-    software = any(name in renderer for name in _SOFTWARE_RASTERIZERS)
+    software = is_software_rasterizer(ctx)
     return "baked" if software and model.macs_per_evaluation <= BAKED_MAX_MACS else "texture"
 
 

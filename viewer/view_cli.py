@@ -10,8 +10,10 @@
   ``--slice``: the starting view, as in ``gratnet render``; light, camera and exposure left out are chosen
   from the material and the mesh (viewer.defaults), the same values as ``gratnet render``'s.
 - ``--weights-path auto|texture|baked``: where the shader reads the weights, as in ``gratnet render``.
-- ``--render-path auto|forward|deferred``: as in ``gratnet render``; ``auto`` takes the verdict cached for this
-  GPU and network shape, and while there is none renders forward and lets the compile process time both.
+- ``--render-path auto|forward|deferred``: as in ``gratnet render``. In the window ``auto`` is forward on a CPU
+  rasterizer (llvmpipe: the deferred path's first frames after a switch cost 0.3–0.6 s of JIT work, over the
+  150 ms a frame may take); on a GPU it takes the verdict cached for this GPU and network shape, and while
+  there is none renders forward and lets the compile process time both.
 
 Mouse: drag over the picture to orbit (in BRDF-slice mode: to move the light), wheel to zoom. The
 Screenshot button writes ``gratnet-view-NNN.png`` (display sRGB, full resolution) and its
