@@ -17,7 +17,6 @@ Skip-work is off (no ``skip_threshold``): every covered pixel runs the network, 
 from __future__ import annotations
 
 import dataclasses
-import inspect
 import json
 import statistics
 import time
@@ -30,18 +29,11 @@ from gratnet.errors import GratNetError
 __all__ = ["SceneView", "available_render_paths", "check_render_paths", "json_lines", "markdown_table",
            "run_scene_bench", "scene_frame_times", "scene_view", "write_scene_outputs"]
 
-#: Render paths a SceneRenderer without a ``render_path`` argument has.
-_FORWARD_ONLY = ("forward",)
-
-
 def available_render_paths() -> tuple[str, ...]:
-    """The render paths the installed :class:`~viewer.scene.SceneRenderer` offers: ``forward`` only, or its
-    ``RENDER_PATHS`` (default ``forward, deferred, auto``) once ``__init__`` takes ``render_path``."""
-    import viewer.scene
+    """The render paths a :class:`~viewer.scene.SceneRenderer` takes (:data:`viewer.deferred.RENDER_PATHS`)."""
+    from viewer.deferred import RENDER_PATHS
 
-    if "render_path" not in inspect.signature(viewer.scene.SceneRenderer.__init__).parameters:
-        return _FORWARD_ONLY
-    return tuple(getattr(viewer.scene, "RENDER_PATHS", ("forward", "deferred", "auto")))
+    return tuple(RENDER_PATHS)
 
 
 @dataclasses.dataclass(frozen=True)
@@ -96,11 +88,8 @@ def scene_frame_times(ctx: Any, model: Any, model_path: str, view: SceneView, we
     from viewer.render_cli import build_mesh
     from viewer.scene import SceneRenderer
 
-    options: dict[str, Any] = {"weights_path": weights_path}
-    if render_path != "forward" or available_render_paths() != _FORWARD_ONLY:
-        options["render_path"] = render_path
     start = time.perf_counter()
-    renderer = SceneRenderer(ctx, model, **options)
+    renderer = SceneRenderer(ctx, model, weights_path=weights_path, render_path=render_path)
     buffers = None
     rows: list[dict[str, Any]] = []
     try:
