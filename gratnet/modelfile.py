@@ -700,7 +700,8 @@ def _read_header(source: Path, arrays: dict[str, np.ndarray]) -> dict[str, Any]:
     if version not in (FORMAT_VERSION, GRID_FORMAT_VERSION) or not _is_int(version):
         raise GratNetError(
             f"{source} is a {FORMAT_NAME} file of format version {version!r}, but this GratNet reads only "
-            f"versions {FORMAT_VERSION} and {GRID_FORMAT_VERSION}; read it with the GratNet version that wrote it, "
+            f"version {FORMAT_VERSION} (pure MLP) and version {GRID_FORMAT_VERSION} (feature grid); "
+            f"read it with the GratNet version that wrote it, "
             f"or re-train with this one"
         )
     required = _JSON_KEYS + ((_GRID_KEY,) if version == GRID_FORMAT_VERSION else ())
