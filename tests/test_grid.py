@@ -161,3 +161,103 @@ def test_grid_training_smoke_and_torch_numpy_round_trip(tmp_path):
         coordinates = torch.from_numpy(network_coordinates(u, v, w, "simple-max")).float()
         expected = range_inverse(model.predict(coordinates).double(), model_file.range).numpy()
     np.testing.assert_allclose(evaluate_keys(loaded, u, v, w), expected, rtol=2e-4, atol=1e-12)
+
+
+# ------------------------------------------------------------------------------------------------
+# GLSL (shaders/featuregrid.glsl) against the numpy evaluator
+
+
+def _random_grid_model(features: int, levels: int, dtype: str, seed: int = 5) -> ModelFile:
+    """A random feature-grid model: 2 hidden layers of 21, outputs mostly inside (0, 1)."""
+    rng = np.random.default_rng(seed)
+    spec = EncodingSpec.for_grid(101, 5, 4, 2)
+    grids = [(0.5 * rng.standard_normal((5, nodes, nodes, features))).astype(dtype) for nodes in (7, 13, 25)[:levels]]
+    sizes = [levels * features + spec.features, 21, 21, 3]
+    weights = [(rng.standard_normal((b, a)) / np.sqrt(a)).astype(np.float32) for a, b in zip(sizes[:-1], sizes[1:],
+                                                                                             strict=True)]
+    weights[-1] = (0.3 * weights[-1]).astype(np.float32)
+    biases = [(0.1 * rng.standard_normal(b)).astype(np.float32) for b in sizes[1:]]
+    biases[-1] = np.array([0.55, 0.6, 0.65], dtype=np.float32)
+    return ModelFile(sizes, weights, biases, "silu", "clamp", spec, RangeSpec(), "simple-max", grids=grids)
+
+
+def _keys(count: int = 400) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    rng = np.random.default_rng(9)
+    u, v = rng.uniform(-1.4, 1.4, (2, count))
+    w = -rng.uniform(0, 1, count) * np.sqrt(np.clip(4 - u**2 - v**2, 0, None))
+    keys = np.stack([u, v, w], -1).astype(np.float32).astype(np.float64)  # the GPU gets float32 keys
+    keys[:3] = [[0.0, 0.0, 0.0], [0.0, 0.0, -2.0], [2.0, 0.0, 0.0]]  # grid corners and faces
+    return keys[:, 0], keys[:, 1], keys[:, 2]
+
+
+@pytest.mark.parametrize(("features", "levels", "dtype"), [(2, 3, "float16"), (4, 2, "float32"), (3, 1, "float16")])
+@pytest.mark.parametrize("grid_filter", ["manual", "hardware"])
+def test_gpu_grid_model_matches_numpy(ctx, features, levels, dtype, grid_filter):
+    from viewer.renderer import NetworkRenderer
+
+    model = _random_grid_model(features, levels, dtype)
+    u, v, w = _keys()
+    expected = evaluate_keys(model, u, v, w)
+    renderer = NetworkRenderer(ctx, model, grid_filter=grid_filter)
+    try:
+        assert renderer.weights_path == "texture"
+        actual = renderer.evaluate_keys(u, v, w)
+    finally:
+        renderer.release()
+    assert np.all(expected.max(axis=0) > 0)
+    # float32 in the shader; eq. 7's inverse amplifies the outputs' rounding (~1e-7) to ~1e-5 relative.
+    np.testing.assert_allclose(actual, expected, rtol=1e-4, atol=1e-12)
+
+
+def test_gpu_grid_features_alone_match_numpy(ctx):
+    """A network that outputs three grid features: the interpolation itself, without the MLP's mixing."""
+    from gratnet.modelfile import mlp_forward, network_inputs
+    from viewer.renderer import NetworkRenderer
+
+    rng = np.random.default_rng(6)
+    spec = EncodingSpec.for_grid(101, 5, 4, 2)
+    grids = [rng.uniform(0, 1, (5, nodes, nodes, 4)).astype(np.float16) for nodes in (7, 33)]
+    weights = np.zeros((3, 8 + spec.features), np.float32)
+    weights[0, 4], weights[1, 5], weights[2, 0] = 1.0, 1.0, 1.0  # level 1 features 0, 1 and level 0 feature 0
+    model = ModelFile([8 + spec.features, 3], [weights], [np.zeros(3, np.float32)], "relu", "none", spec,
+                      RangeSpec(), "simple-max", grids=grids)
+    u, v, w = _keys(2000)
+    expected = mlp_forward(model, network_inputs(model, network_coordinates(u, v, w, "simple-max")))
+    for grid_filter in ("manual", "hardware"):
+        renderer = NetworkRenderer(ctx, model, grid_filter=grid_filter)
+        try:
+            actual = renderer.network_outputs(u, v, w)
+        finally:
+            renderer.release()
+        tolerance = 1e-5 if grid_filter == "manual" else 2e-3  # GPUs may filter with 8-bit weights
+        np.testing.assert_allclose(actual, expected, rtol=0, atol=tolerance)
+
+
+def test_gpu_grid_brdf_slice_matches_numpy(ctx):
+    from gratnet.brdf import a_term, direction, slice_view_directions
+    from viewer.renderer import NetworkRenderer
+
+    size, theta, phi, exposure = 24, 30.0, 40.0, 2.0
+    model = _random_grid_model(4, 2, "float16")
+    views, inside = slice_view_directions(size)
+    light = direction(theta, phi)
+    key = -(light + views)
+    xyz = evaluate_keys(model, key[..., 0], key[..., 1], key[..., 2]) * inside[..., None]
+    expected = exposure * a_term(light, views, 1.5)[..., None] * xyz
+    renderer = NetworkRenderer(ctx, model)
+    try:
+        exposed = renderer.render_brdf_slice(theta, phi, size, exposure, 1.5)
+    finally:
+        renderer.release()
+    np.testing.assert_allclose(exposed, expected, rtol=1e-4, atol=1e-3 * float(np.abs(expected).max()))
+
+
+def test_baked_path_refuses_grid_models_and_auto_picks_the_texture_path(ctx):
+    from viewer.renderer import NetworkRenderer, choose_weights_path
+
+    model = _random_grid_model(2, 1, "float16")
+    assert choose_weights_path(ctx, model, "auto") == "texture"
+    with pytest.raises(GratNetError, match="baked weights path is not built for feature-grid models"):
+        NetworkRenderer(ctx, model, weights_path="baked")
+    with pytest.raises(GratNetError, match="grid filter"):
+        NetworkRenderer(ctx, model, grid_filter="cubic")
