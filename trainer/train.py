@@ -117,14 +117,14 @@ def build_model(config: TrainConfig, encoding: EncodingSpec) -> FunnelMLP | Grid
     return FunnelMLP(encoding.features, hidden, config.activation, config.output_activation)
 
 
-def _optimizer(model: FunnelMLP | GridNetwork, config: TrainConfig) -> torch.optim.Optimizer:
+def make_optimizer(model: FunnelMLP | GridNetwork, config: TrainConfig) -> torch.optim.Optimizer:
     if isinstance(model, GridNetwork):  # the grids learn at their own rate
         return torch.optim.Adam([{"params": model.mlp.parameters(), "lr": config.learning_rate},
                                  {"params": model.grids.parameters(), "lr": config.grid_learning_rate}])
     return torch.optim.Adam(model.parameters(), lr=config.learning_rate)
 
 
-def _scheduler(optimizer: torch.optim.Optimizer, config: TrainConfig, steps: int,
+def make_scheduler(optimizer: torch.optim.Optimizer, config: TrainConfig, steps: int,
                grid: bool) -> torch.optim.lr_scheduler.LRScheduler:
     """Cosine from each group's rate down to ``final_learning_rate_ratio`` of it over ``steps``."""
     if grid:  # two groups: a factor, so that each ends at its own rate × the ratio
@@ -135,6 +135,19 @@ def _scheduler(optimizer: torch.optim.Optimizer, config: TrainConfig, steps: int
     return torch.optim.lr_scheduler.CosineAnnealingLR(
         optimizer, T_max=steps, eta_min=config.learning_rate * config.final_learning_rate_ratio
     )
+
+
+def train_step(model: FunnelMLP | GridNetwork, optimizer: torch.optim.Optimizer,
+               scheduler: torch.optim.lr_scheduler.LRScheduler, coordinates: torch.Tensor, targets: torch.Tensor,
+               encoding: EncodingSpec) -> torch.Tensor:
+    """One optimisation step on a batch already on the model's device; returns the loss, detached (reading
+    it is the caller's choice: on a GPU that is a host sync)."""
+    loss = log_cosh_loss(_raw_outputs(model, coordinates, encoding), targets)
+    optimizer.zero_grad(set_to_none=True)
+    loss.backward()
+    optimizer.step()
+    scheduler.step()
+    return loss.detach()
 
 
 @torch.no_grad()
@@ -177,9 +190,9 @@ def train(
     encoding, range_spec = config.encoding_for(volume), config.range_spec()
     train_samples, test_samples = split_samples(volume, config)
     model = build_model(config, encoding).to(device)
-    optimizer = _optimizer(model, config)
+    optimizer = make_optimizer(model, config)
     steps_per_epoch = math.ceil(len(train_samples) / config.batch_size)
-    scheduler = _scheduler(optimizer, config, steps_per_epoch * config.epochs, isinstance(model, GridNetwork))
+    scheduler = make_scheduler(optimizer, config, steps_per_epoch * config.epochs, isinstance(model, GridNetwork))
     history: dict[str, Any] = {"epochs": [], "train_seconds": 0.0}
     start_epoch = 0
     checkpoint_path = out_dir / "checkpoint.pt"
@@ -214,12 +227,8 @@ def train(
         )
         for step in bar:
             batch = order[step * config.batch_size : (step + 1) * config.batch_size]
-            loss = log_cosh_loss(_raw_outputs(model, coordinates_all[batch], encoding), targets_all[batch])
-            optimizer.zero_grad(set_to_none=True)
-            loss.backward()
-            optimizer.step()
-            scheduler.step()
-            value = loss.detach().double()
+            value = train_step(model, optimizer, scheduler, coordinates_all[batch], targets_all[batch],
+                               encoding).double()
             running = 0.98 * running + 0.02 * value if step else value
             if progress and step % 20 == 0:  # the only host sync of the loop, and only with a progress bar
                 bar.set_postfix(loss=f"{float(running):.3e}", lr=f"{scheduler.get_last_lr()[0]:.2e}")
