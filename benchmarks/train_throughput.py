@@ -30,6 +30,9 @@ NETWORKS: tuple[tuple[str, dict[str, object]], ...] = (
     ("mlp funnel-176", {"preset": "funnel-176"}),
     ("mlp paper", {"preset": "paper"}),
     ("grid 3×251² T11 C2, 64-32-16", {"architecture": "grid", "hidden": "64,32,16", "grid_features": 2}),
+    ("grid 3×251² T11 C2, small", {"architecture": "grid", "preset": "small", "grid_features": 2}),
+    ("grid 251²+501² T5 C2, small", {"architecture": "grid", "preset": "small", "grid_features": 2, "grid_levels": 2,
+                                     "grid_resolution": 501, "grid_t_resolution": 5}),
     ("grid 3×251² T11 C2, 64-32-16, L=8 L_t=2", {"architecture": "grid", "hidden": "64,32,16", "grid_features": 2,
                                                   "frequencies": 8, "t_frequencies": 2}),
 )
