@@ -24,7 +24,8 @@ def main() -> None:
     model = load_model(folder / "model.npz")
     state = torch.load(folder / "checkpoint.pt", map_location="cpu", weights_only=False)["model"]
     # The trainer holds each level as (C, T, R, R); the model file as (T, R, R, C).
-    model.grids = [state[f"grids.{level}"].permute(1, 2, 3, 0).contiguous().numpy() for level in range(len(model.grids))]
+    model.grids = [state[f"grids.{level}"].permute(1, 2, 3, 0).contiguous().numpy()
+                   for level in range(len(model.grids))]
     save_model(folder / "model-fp32.npz", model)
     print(f"wrote {folder / 'model-fp32.npz'}")
 
