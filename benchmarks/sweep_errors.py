@@ -16,7 +16,7 @@ import argparse
 import json
 from pathlib import Path
 
-from trainer.bench import ModelEntry
+from bench.slices import ModelEntry
 
 
 def main(argv: list[str] | None = None) -> int:

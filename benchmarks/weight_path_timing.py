@@ -1,6 +1,6 @@
 """Compile time and BRDF-slice frame time of one weight path (texture or baked) per model.
 
-For each model: ``trainer.bench.shader_frame_times`` (what ``gratnet bench`` times: a ``NetworkRenderer``
+For each model: ``bench.slices.shader_frame_times`` (what ``gratnet bench`` times: a ``NetworkRenderer``
 on ``--weights-path``, one 8×8 (30°, 0°) 5000 RU slice for the compile, link and Mesa's JIT at the first
 draw, "compile_s"; then per size a warm-up frame and the median of ``--repeats`` frames, read-back
 included, skip-work off). Prints one JSON line per model and size, with GMAC/s over the disc's pixels
@@ -21,7 +21,7 @@ import json
 import math
 from pathlib import Path
 
-from trainer.bench import BenchConfig, ModelEntry, shader_frame_times
+from bench.slices import BenchConfig, ModelEntry, shader_frame_times
 
 
 def main(argv: list[str] | None = None) -> int:

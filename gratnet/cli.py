@@ -27,7 +27,7 @@ SUBCOMMAND_MODULES: dict[str, str] = {
     "evaluate": "trainer.train_cli",
     "render": "viewer.render_cli",
     "view": "viewer.view_cli",
-    "bench": "trainer.bench_cli",
+    "bench": "bench.cli",
     "mitsuba-render": "mitsuba_plugin.render_cli",
     "sweep": "sweep.cli",
 }

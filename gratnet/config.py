@@ -1,7 +1,8 @@
 """Typed dataclass configs and their command-line flags.
 
 Every config is a dataclass whose fields carry ``metadata={"help": ...}`` (units in the text) and,
-optionally, ``"flag"`` (the public flag name, default ``--field-name``) and ``"choices"``.
+optionally, ``"flag"`` (the public flag name, default ``--field-name``), ``"aliases"`` (more names for the same
+flag) and ``"choices"``.
 ``add_arguments`` turns a config class into argparse flags, ``from_arguments`` builds the resolved
 config back, and ``save_config`` writes it as JSON beside an output (``config_text`` gives the JSON for
 writers that put an output and its config down together with :func:`gratnet.atomic.atomic_paths`).
@@ -119,9 +120,10 @@ def add_arguments(parser: argparse.ArgumentParser, config_class: type, prefix: s
         default = field.default if field.default is not dataclasses.MISSING else None
         help_text = field.metadata.get("help", "")
         destination = prefix.replace("-", "_") + field.name
+        flags = (flag, *field.metadata.get("aliases", ()))
         if kind is bool:
             group.add_argument(
-                flag, dest=destination, action=argparse.BooleanOptionalAction, default=default,
+                *flags, dest=destination, action=argparse.BooleanOptionalAction, default=default,
                 help=f"{help_text} (default: {default})",
             )
             continue
@@ -134,7 +136,7 @@ def add_arguments(parser: argparse.ArgumentParser, config_class: type, prefix: s
             kind = non_none[0]
         parse = {float: parse_float, int: parse_int}.get(kind, kind)
         group.add_argument(
-            flag, dest=destination, type=parse, choices=choices, default=default,
+            *flags, dest=destination, type=parse, choices=choices, default=default,
             help=f"{help_text} (default: {default})",
         )
 

@@ -13,6 +13,8 @@
 // tests let only the visible surface run the shading code: one MLP per pixel, no overdraw. A separate
 // program, not a uniform and an early return: llvmpipe runs straight-line code such as the baked MLP even
 // for fragments that have returned, so a uniform-selected depth pass cost a full shading pass.
+// Deferred path (issue 12): compiled with GBUFFER, the fragment stage stops before the network and writes
+// (key, exposure * irradiance * A) for shaders/deferred.glsl to evaluate; see surface_inputs below.
 // Needs the defines of mlp.glsl and encoding.glsl (and SKIP_COUNTER_BINDING with COUNT_EVALUATIONS).
 
 #ifdef VERTEX_SHADER
@@ -45,11 +47,13 @@ void main() {
 precision highp float;
 precision highp int;
 
+#include "brdf.glsl"
+#ifndef GBUFFER
 #include "encoding.glsl"
 #include "mlp.glsl"
 #include "range.glsl"
-#include "brdf.glsl"
 #include "skip.glsl"
+#endif
 
 // Depth (and stencil) tests before the shader runs: occluded fragments never evaluate the MLP. The
 // shader writes no depth and never discards, so this changes no pixel.
@@ -85,14 +89,16 @@ vec3 safe_normalize(vec3 v) {
     return length_squared > 1e-30 && length_squared < 1e30 ? v * inversesqrt(length_squared) : vec3(0.0);
 }
 
-void main() {
-    count_event(COUNTER_FRAGMENTS);
-    out_exposed = vec4(0.0, 0.0, 0.0, 1.0);  // covered, no light (yet)
-    out_key = vec4(0.0);
+// The shading inputs of this fragment: the key vector, A(wi, wo), and the factor that multiplies the
+// network's XYZ, exposure * irradiance * A (0 when nothing lights the point: back face, either direction
+// at or below the horizon, a degenerate frame, no irradiance). Returns false when the factor is 0.
+bool surface_inputs(out vec3 key, out float a, out float factor) {
+    key = vec3(0.0);
+    a = 0.0;
+    factor = 0.0;
     vec3 n = safe_normalize(v_normal);
     if (!gl_FrontFacing || n == vec3(0.0)) {
-        count_event(COUNTER_SKIPPED_A_ZERO);  // back face or no frame: A = 0
-        return;
+        return false;  // back face or no frame: A = 0
     }
     vec3 t = v_tangent - dot(v_tangent, n) * n;  // Gram-Schmidt: interpolation tilts the tangent
     t = dot(t, t) > 1e-12 ? normalize(t) : arbitrary_tangent(n);
@@ -112,20 +118,46 @@ void main() {
     vec3 wo_world = safe_normalize(u_eye - v_position);
     vec3 wi = world_to_tangent * wi_world;
     vec3 wo = world_to_tangent * wo_world;
-    vec3 key = -(wi + wo);  // physics.md "Key vector"
-    float a = a_term(wi, wo, u_ior);  // 0 below either horizon, at |w| <= 1e-6, or for a zero vector
-    out_key = vec4(key, a);
+    key = -(wi + wo);  // physics.md "Key vector"
+    a = a_term(wi, wo, u_ior);  // 0 below either horizon, at |w| <= 1e-6, or for a zero vector
     if (!(a > 0.0) || !(irradiance > 0.0)) {
+        return false;  // nothing to light
+    }
+    factor = u_exposure * irradiance * a;
+    return true;
+}
+
+#ifdef GBUFFER
+// The deferred path's G-buffer (viewer/deferred.py): (key, factor) per covered pixel; the renderer clears
+// to (0, 0, 0, -1), so factor < 0 marks the background. No network here: deferred.glsl evaluates it.
+void main() {
+    vec3 key;
+    float a;
+    float factor;
+    surface_inputs(key, a, factor);
+    out_exposed = vec4(key, factor);
+}
+#else
+void main() {
+    count_event(COUNTER_FRAGMENTS);
+    out_exposed = vec4(0.0, 0.0, 0.0, 1.0);  // covered, no light (yet)
+    vec3 key;
+    float a;
+    float factor;
+    bool lit = surface_inputs(key, a, factor);
+    out_key = vec4(key, a);
+    if (!lit) {
         count_event(COUNTER_SKIPPED_A_ZERO);
         return;  // and skip the network: nothing to light
     }
     encoding_set_key(key);
-    if (skip_by_bound(u_exposure * irradiance * a)) {
+    if (skip_by_bound(factor)) {
         count_event(COUNTER_SKIPPED_BOUND);
         return;  // the display would show 0 whatever the network says
     }
     count_event(COUNTER_EVALUATIONS);
     vec3 xyz = range_inverse(mlp_evaluate());
-    out_exposed = vec4(u_exposure * irradiance * a * xyz, 1.0);
+    out_exposed = vec4(factor * xyz, 1.0);
 }
+#endif
 #endif

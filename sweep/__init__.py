@@ -1,6 +1,6 @@
 """``gratnet sweep``: grids of ground-truth, training and evaluation runs as tasks on Ray.
 
 A tool on top of trainer/ (layers: gratnet/ ← viewer/, trainer/ ← sweep/): it calls the project's own
-functions (trainer.groundtruth, trainer.train, trainer.evaluate, trainer.bench) and adds only the grid
+functions (trainer.groundtruth, trainer.train, trainer.evaluate, bench.slices) and adds only the grid
 (sweep.spec), the task graph (sweep.runner, the only module that imports Ray) and the table (sweep.results).
 """

@@ -1,7 +1,7 @@
 """The sweep's results table (CSV, markdown, JSON) and its Pareto plot (error against multiply-adds per pixel).
 
 The rows are the runs' ``result.json`` rows (sweep/tasks.py ``result_row``), error figures read the way
-``gratnet bench`` reads them (trainer.bench.ModelEntry); the front is trainer.bench.pareto_front. For
+``gratnet bench`` reads them (bench.slices.ModelEntry); the front is bench.slices.pareto_front. For
 shader frame time on the error axis, give the sweep a ``[bench]`` table (it then runs ``gratnet bench``'s
 measurement on every model at the end) or run ``gratnet bench OUT/runs/*/model.npz`` later.
 """
@@ -25,7 +25,7 @@ _HEADERS = {"macs_per_pixel": "MACs/pixel", "train_seconds": "train (s)", "held_
 
 
 def _format(value: object) -> str:
-    from trainer.bench import _format as bench_format
+    from bench.slices import _format as bench_format
 
     return bench_format(value, 4)
 
@@ -56,7 +56,7 @@ def plot_pareto(rows: list[dict[str, Any]], output: Path) -> None:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    from trainer.bench import pareto_front
+    from bench.slices import pareto_front
 
     figure, axis = plt.subplots(figsize=(7.0, 5.0))
     rated = [row for row in rows if row.get("flip_mean") is not None]

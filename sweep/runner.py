@@ -201,8 +201,8 @@ def collect_rows(spec: SweepSpec) -> list[dict[str, Any]]:
 
 def run_bench(spec: SweepSpec, rows: list[dict[str, Any]], progress: bool) -> None:
     """``gratnet bench``'s measurement (shader frame time vs error) of every finished model, in OUT/bench."""
-    from trainer.bench import ModelEntry, write_outputs
-    from trainer.bench import run_bench as measure
+    from bench.slices import ModelEntry, write_outputs
+    from bench.slices import run_bench as measure
     from viewer.context import create_headless_context
 
     entries = [ModelEntry.load(Path(row["model"]), row["run"]) for row in rows]

@@ -144,7 +144,7 @@ class SweepSpec:
     datasets: list[DatasetSpec]
     runs: list[RunSpec]
     resources: Resources
-    bench: Any  # trainer.bench.BenchConfig, or None: no frame-time benchmark at the end
+    bench: Any  # bench.slices.BenchConfig, or None: no frame-time benchmark at the end
     document: dict[str, Any]  # the TOML as read
 
     def to_dict(self) -> dict[str, Any]:
@@ -287,7 +287,7 @@ def _dataset(entry: Any, index: int, shared: dict[str, Any], base: Path) -> Data
 
 def load_sweep(path: str | Path, out: str | Path | None = None) -> SweepSpec:
     """Read and check the sweep file ``path``; ``out`` overrides its ``out`` key (default ``out/sweep``)."""
-    from trainer.bench import BenchConfig
+    from bench.slices import BenchConfig
     from trainer.evaluate import EvaluateConfig
     from trainer.model import PRESETS
     from trainer.train_config import TrainConfig

@@ -188,7 +188,7 @@ def result_row(run: RunSpec, folder: Path) -> dict[str, Any]:
     """The run's line of the results table: size, cost and error, read as ``gratnet bench`` reads them."""
     import statistics
 
-    from trainer.bench import ModelEntry
+    from bench.slices import ModelEntry
 
     if not (folder / "model.npz").is_file():
         raise GratNetError(f"{folder} has no model.npz")

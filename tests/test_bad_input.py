@@ -484,6 +484,13 @@ def test_heightfield_field_config_and_preview_land_together(tmp_path, capsys, mo
 
 NUMBERS: dict[str, tuple[list[str], str]] = {
     "render exposure 1e39": ([*RENDER, "--exposure", "1e39"], "float32"),
+    "render spp 0": ([*RENDER, "--spp", "0"], "--spp"),
+    "render spp -1": ([*RENDER, "--spp=-1"], "--spp"),
+    "render spp 1.5": ([*RENDER, "--spp", "1.5"], "--spp"),
+    "render spp huge": ([*RENDER, "--spp", "100000"], "--spp"),
+    "render samples beyond int32": ([*RENDER, "--samples", "99999999999"], "integer range"),
+    "render spp with --slice": ([*RENDER, "--slice", "--spp", "4"], "--spp"),
+    "view spp 0": (["view", "--spp", "0"], "--spp"),
     "render exposure above the product limit": ([*RENDER, "--exposure", "1e11"], "--exposure"),
     "render exposure nan": ([*RENDER, "--exposure", "nan"], "not a number"),
     "render exposure -inf": ([*RENDER, "--exposure", "-inf"], "infinite"),

@@ -8,10 +8,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from bench.slices import BenchConfig, ModelEntry, markdown_table, pareto_front
 from gratnet.cli import main
 from gratnet.encoding import EncodingSpec, RangeSpec
 from gratnet.modelfile import ModelFile, save_model
-from trainer.bench import BenchConfig, ModelEntry, markdown_table, pareto_front
 
 REPO = Path(__file__).resolve().parents[1]
 
@@ -71,7 +71,8 @@ def test_bench_end_to_end_writes_table_plot_and_config(tmp_path, capsys):
         pytest.skip(f"no headless OpenGL: {error}")
     model = _tiny_model(tmp_path / "tiny" / "model.npz")
     out = tmp_path / "bench"
-    code = main(["bench", str(model), "--out", str(out), "--sizes", "16,24", "--repeats", "1", "--quiet"])
+    code = main(["bench", str(model), "--out", str(out), "--sizes", "16,24", "--repeats", "1", "--no-scenes",
+                 "--quiet"])
     assert code == 0
     results = json.loads((out / "bench.json").read_text())
     assert {row["size"] for row in results} == {16, 24}
@@ -96,7 +97,7 @@ def test_markdown_table_has_one_row_per_result():
 
 
 def test_paper_size_comparison_names_the_cheapest_model_at_or_below_the_paper_sizes_error():
-    from trainer.bench import paper_size_comparison
+    from bench.slices import paper_size_comparison
 
     def row(model, hidden, macs, flip, material="blazed"):
         return {"model": model, "layer_sizes": [163, *hidden, 3], "macs_per_pixel": macs, "flip_mean": flip,
@@ -109,3 +110,63 @@ def test_paper_size_comparison_names_the_cheapest_model_at_or_below_the_paper_si
     assert len(lines) == 2
     assert "cheapest model at or below that error is funnel (60,000 MACs/pixel, 20.7% of it" in lines[0]
     assert lines[1].startswith("- cd:") and "is other" in lines[1]  # only itself matches on the cd
+
+
+# --------------------------------------------------------------------------------------------------
+# Mesh scenes (bench.scenes)
+
+
+def test_scene_bench_times_every_combination_and_records_the_device(tmp_path):
+    from bench.scenes import available_render_paths
+    from gratnet.errors import GratNetError
+    from viewer.context import create_headless_context
+
+    try:
+        create_headless_context().release()
+    except GratNetError as error:
+        pytest.skip(f"no headless OpenGL: {error}")
+    model = _tiny_model(tmp_path / "tiny" / "model.npz")
+    out = tmp_path / "bench"
+    code = main(["bench", str(model), "--out", str(out), "--no-slices", "--scene-sizes", "24x16,12x12",
+                 "--spp", "1,2", "--weights-paths", "texture", "--render-paths", "all", "--repeats", "2", "--quiet"])
+    assert code == 0
+    lines = (out / "scenes.jsonl").read_text().splitlines()
+    rows = [json.loads(line) for line in lines]
+    paths = available_render_paths()
+    assert len(rows) == 2 * 2 * len(paths)  # sizes × samples × render paths
+    assert {(row["width"], row["height"], row["spp"]) for row in rows} == {(24, 16, 1), (24, 16, 2), (12, 12, 1),
+                                                                            (12, 12, 2)}
+    for row in rows:
+        assert row["gl_renderer"] and row["gl_renderer"] != "unknown" and row["weights_path"] == "texture"
+        assert len(row["times_s"]) == 2 and row["seconds"] > 0 and row["gpu_seconds"] > 0  # frames ≪ 4 s
+        assert 0 < row["covered_pixels"] <= row["width"] * row["height"]
+        # Each sample that hits the disc is one evaluation: about spp × covered pixels.
+        assert row["evaluations"] == pytest.approx(row["spp"] * row["covered_pixels"], rel=0.3)
+    table = (out / "scenes.md").read_text().splitlines()
+    assert len(table) == 2 + len(rows) and "| 24×16 |" in table[2]
+    assert not (out / "pareto.png").exists()  # --no-slices: no slice outputs
+    assert json.loads((out / "bench.config.json").read_text())["bench"]["spp"] == "1,2"
+
+
+@pytest.mark.parametrize("field, value, flag", [
+    ("scene_sizes", "1920", "--scene-sizes"), ("scene_sizes", "0x5", "--scene-sizes"), ("spp", "0", "--spp"),
+    ("spp", "1.5", "--spp"), ("spp", "2000", "--spp"), ("render_paths", "fast", "--render-paths"),
+])
+def test_bad_scene_config_is_one_clear_error(field, value, flag):
+    from gratnet.errors import GratNetError
+
+    config = BenchConfig(**{field: value})
+    with pytest.raises(GratNetError, match=flag):
+        config.scene_size_list()
+        config.spp_list()
+        config.render_path_list()
+
+
+def test_a_render_path_this_build_lacks_is_refused_before_work(monkeypatch):
+    import bench.scenes
+    from gratnet.errors import GratNetError
+
+    monkeypatch.setattr(bench.scenes, "available_render_paths", lambda: ("forward",))
+    with pytest.raises(GratNetError, match="offers forward; not deferred"):
+        BenchConfig(render_paths="forward,deferred").render_path_list()
+    assert BenchConfig(render_paths="all").render_path_list() == ["forward"]

@@ -9,6 +9,8 @@ pyproject.toml:
 - ``trainer/`` (the offline stage): core + the ``trainer`` extra.
 - ``mitsuba_plugin/`` (the Mitsuba 3 BSDF and ``gratnet mitsuba-render``): core + the ``mitsuba`` extra.
 - ``sweep/`` (``gratnet sweep`` on Ray, a tool on top of trainer/): core + the ``trainer`` and ``sweep`` extras.
+- ``bench/`` (``gratnet bench``, a tool on top of viewer/ and trainer/: it times the runtime and uses torch
+  as the reference): core + the ``trainer`` extra.
 - ``tests/`` and ``benchmarks/``: core + every extra.
 """
 
@@ -54,6 +56,7 @@ ALLOWED = {
     "trainer": CORE | EXTRAS.get("trainer", set()),
     "mitsuba_plugin": CORE | EXTRAS.get("mitsuba", set()),
     "sweep": CORE | EXTRAS.get("trainer", set()) | EXTRAS.get("sweep", set()),
+    "bench": CORE | EXTRAS.get("trainer", set()),
     "tests": CORE.union(*EXTRAS.values()),
     "benchmarks": CORE.union(*EXTRAS.values()),
 }

@@ -116,7 +116,16 @@ def check_golden(name: str, actual: np.ndarray, regenerate: bool, golden: Path =
 def scene(ctx: object) -> Iterator[object]:
     from viewer.scene import SceneRenderer
 
-    renderer = SceneRenderer(ctx, load_model(BLAZED))
+    renderer = SceneRenderer(ctx, load_model(BLAZED), render_path="forward")  # the golden images are forward's
+    yield renderer
+    renderer.release()
+
+
+@pytest.fixture(scope="module")
+def deferred_scene(ctx: object) -> Iterator[object]:
+    from viewer.scene import SceneRenderer
+
+    renderer = SceneRenderer(ctx, load_model(BLAZED), render_path="deferred")
     yield renderer
     renderer.release()
 
@@ -136,6 +145,13 @@ def test_render_matches_golden_image(scene, name, request):
     actual = render_case(scene, name)
     assert np.count_nonzero(actual.max(axis=2) > 16) >= 20, f"{name}: the render is (nearly) black"
     check_golden(name, actual, request.config.getoption("--regenerate-golden"))
+
+
+@pytest.mark.parametrize("name", [name for name, case in CASES.items() if case[0] is not None])
+def test_deferred_render_matches_the_same_golden_image(deferred_scene, name):
+    """The deferred path (viewer/deferred.py) must give the forward path's pictures: the same references."""
+    assert deferred_scene.render_path == "deferred"
+    check_golden(name, render_case(deferred_scene, name), False)
 
 
 # --------------------------------------------------------------------------------------------------

@@ -146,8 +146,8 @@ def test_grid_training_smoke_and_torch_numpy_round_trip(tmp_path):
     volume = compute_volume(generate("blazed", size_um=5.0), VolumeConfig(resolution=21, slices=5,
                             sampling="simple-max"), optics, progress=False)
     config = TrainConfig(architecture="grid", hidden="16,16", frequencies=4, t_frequencies=2, grid_levels=2,
-                         grid_resolution=11, grid_t_resolution=5, epochs=2, batch_size=256, split="all",
-                         grid_dtype="float32", seed=1)
+                         grid_resolution=11, grid_t_resolution=5, grid_features=4, epochs=2, batch_size=256,
+                         split="all", grid_dtype="float32", seed=1)
     model, model_file, history = train(volume, config, tmp_path, progress=False)
     losses = [record["train_loss"] for record in history["epochs"]]
     assert all(np.isfinite(losses)) and losses[-1] < losses[0]
@@ -261,3 +261,27 @@ def test_baked_path_refuses_grid_models_and_auto_picks_the_texture_path(ctx):
         NetworkRenderer(ctx, model, weights_path="baked")
     with pytest.raises(GratNetError, match="grid filter"):
         NetworkRenderer(ctx, model, grid_filter="cubic")
+
+
+def test_scene_renders_grid_models_on_the_forward_path(ctx):
+    """auto takes the forward path for grid models (the deferred path is not built for them) and shades the mesh;
+    asking for deferred is refused in one line."""
+    from viewer.camera import Camera, Light
+    from viewer.meshes import compact_disc
+    from viewer.scene import SceneRenderer
+
+    model = _random_grid_model(4, 2, "float16")
+    scene = SceneRenderer(ctx, model, render_path="auto")
+    try:
+        assert scene.render_path == "forward" and scene.network.weights_path == "texture"
+        image = scene.render(compact_disc(segments=32), Camera(0.2, -90.0, 50.0), Light.directional(30.0, 180.0),
+                             (24, 18), exposure=10.0)
+    finally:
+        scene.release()
+    assert image.shape == (18, 24, 3) and np.all(np.isfinite(image)) and image.max() > 0
+    deferred = SceneRenderer(ctx, model, render_path="deferred")
+    try:
+        with pytest.raises(GratNetError, match="deferred render path is not built for feature-grid models"):
+            _ = deferred.render_path
+    finally:
+        deferred.release()

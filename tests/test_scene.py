@@ -259,7 +259,8 @@ def scene(ctx, model) -> Iterator[object]:
 
     # The texture path: these tests are about the scene, and the baked path's first compile (~25 s per
     # program at this size on llvmpipe) is covered once by tests/test_golden.py and test_shipped_models.py.
-    renderer = SceneRenderer(ctx, model, weights_path="texture")
+    # The forward path (tests/test_deferred.py ties the deferred one to it).
+    renderer = SceneRenderer(ctx, model, weights_path="texture", render_path="forward")
     yield renderer
     renderer.release()
 

@@ -174,7 +174,7 @@ def test_skip_threshold_is_checked(ctx):
 def _scene(ctx, model):
     from viewer.scene import SceneRenderer
 
-    return SceneRenderer(ctx, model, weights_path=TEXTURE)
+    return SceneRenderer(ctx, model, weights_path=TEXTURE, render_path="forward")  # the deferred one: test_deferred
 
 
 def _two_planes():

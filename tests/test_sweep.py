@@ -248,10 +248,10 @@ def test_bench_table_measures_every_finished_model(swept):
     """[bench]: gratnet bench's frame time against error, for the sweep's models (texture path, 16² frames)."""
     import dataclasses
 
+    from bench.slices import BenchConfig
     from gratnet.errors import GratNetError
     from sweep.runner import collect_rows, run_bench
     from sweep.spec import load_sweep
-    from trainer.bench import BenchConfig
 
     spec = load_sweep(swept / "tiny.toml", swept / "out")
     spec = dataclasses.replace(spec, bench=BenchConfig(sizes="16", weights_paths="texture", repeats=1,

@@ -163,6 +163,84 @@ def test_banded_refinement_equals_one_full_render(ctx):
     assert np.mean(levels > 1) <= 0.002, f"{np.count_nonzero(levels > 1)} pixels differ"
 
 
+#: A sphere view whose outline and highlights change across sub-pixel offsets (anti-aliasing tests).
+SPHERE = ViewerState(mesh="sphere", camera_distance=0.2, camera_elevation=30.0, light_theta=50.0, light_phi=-60.0,
+                     exposure=2000.0)
+
+
+def _reference_render(viewer: ViewerApp, samples: int) -> np.ndarray:
+    """SceneRenderer's own ``samples``-sample render of the viewer's view, on the viewer's renderer and mesh."""
+    renderer, buffers = viewer._supply.scene(viewer.state, preview=False)
+    state = viewer.state
+    return renderer.render(buffers, state.camera(), state.light(), viewer.full_size(), state.exposure,
+                           state.effective_ior, samples=samples)
+
+
+@pytest.mark.parametrize("budget", [1e3, 1e-9], ids=["one band per sample", "one row per band"])
+def test_progressive_antialiasing_equals_the_k_sample_render_and_restarts_on_a_change(ctx, budget):
+    from viewer.scene import SceneRenderer
+
+    clock = FakeClock()
+    cap = 3 if budget > 1 else 2
+    viewer = ViewerApp(ctx, SPHERE, size=(48, 40), clock=clock, max_samples=cap,
+                       policy=ResolutionPolicy(refine_budget_s=budget, band_multiple=1))
+    try:
+        viewer.frame()
+        clock.advance(1.0)
+        while not viewer.image.complete:  # the refinement: sample 0, the pixel centre
+            viewer.frame()
+        assert viewer.samples == viewer.image.samples == 1
+        single = viewer.accumulated_xyz()
+        frames = 0
+        while viewer.next_work_in() == 0.0:  # still frames: one sample (or a band of one) each
+            assert viewer.frame() is True and viewer.image.complete
+            frames += 1
+            if budget > 1:
+                assert viewer.samples == viewer.image.samples == 1 + frames  # one sample per still frame
+        assert frames == (cap - 1) * (1 if budget > 1 else 40) and viewer.samples == cap
+        assert viewer.frame() is False and viewer.next_work_in() is None  # at the cap: nothing more
+        accumulated, reference = viewer.accumulated_xyz(), _reference_render(viewer, cap)
+        scale = float(np.abs(reference).max())
+        assert scale > 0 and np.abs(accumulated - single).max() > 1e-3 * scale  # the samples changed pixels
+        levels = np.abs(viewer.image.pixels.astype(int) - SceneRenderer.display_srgb8(reference).astype(int))
+        # The deferred path rasterizes N samples as N stacked viewports: a sample's varyings are interpolated at
+        # other window coordinates than in a one-sample render (float32 rounding, amplified at sharp highlights).
+        deferred = viewer._supply.scene(viewer.state, preview=False)[0].render_path == "deferred"
+        if budget > 1 and not deferred:  # the same matrices as SceneRenderer's: float32 rounding only
+            np.testing.assert_allclose(accumulated, reference, rtol=1e-5, atol=1e-6 * scale)
+            assert levels.max() <= 1
+        else:  # a band's clip-space crop rounds vertex positions differently (as the refinement's bands)
+            close = np.isclose(accumulated, reference, rtol=1e-3, atol=1e-5 * scale).all(axis=2)
+            assert np.mean(~close) <= 0.01, f"{np.count_nonzero(~close)} pixels differ"
+            assert np.mean(levels.max(axis=2) > 1) <= 0.002
+
+        # A higher cap continues from the samples there; a change of the view starts from 1 sample again.
+        assert viewer.set_max_samples(cap + 1) is True and viewer.next_work_in() == 0.0
+        assert viewer.set(exposure=SPHERE.exposure * 2) is True
+        assert viewer.frame() is True and not viewer.image.complete and viewer.image.samples == 1
+        assert viewer.samples == 1 and viewer.accumulated_xyz() is None
+        with pytest.raises(GratNetError, match="samples per pixel"):
+            viewer.set_max_samples(0)
+    finally:
+        viewer.release()
+
+
+def test_screenshot_of_an_accumulated_view_records_its_samples(ctx, tmp_path):
+    clock = FakeClock()
+    viewer = ViewerApp(ctx, SPHERE, size=(32, 24), clock=clock, max_samples=2,
+                       policy=ResolutionPolicy(refine_budget_s=1e3))
+    try:
+        viewer.frame()
+        clock.advance(1.0)
+        run_until_complete(viewer)
+        assert viewer.samples == 2
+        path = viewer.save_screenshot(tmp_path / "shot.png")
+    finally:
+        viewer.release()
+    config = json.loads(path.with_name("shot.config.json").read_text())["render"]
+    assert config["spp"] == 2 and config["width"] == 32
+
+
 def dataclass_replace(state: ViewerState, **changes: object) -> ViewerState:
     import dataclasses
 

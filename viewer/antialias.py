@@ -13,11 +13,10 @@ the first frames on, and N samples are the first N of the same sequence wherever
 from __future__ import annotations
 
 import numpy as np
-from scipy.stats import qmc
 
 from gratnet.errors import GratNetError
 
-__all__ = ["MAX_SAMPLES", "check_samples", "jitter_matrix", "sample_offsets"]
+__all__ = ["check_offsets", "MAX_SAMPLES", "check_samples", "jitter_matrix", "sample_offsets", "sample_range_offsets"]
 
 #: Largest sample count per pixel accepted anywhere (a render, the viewer's accumulation cap).
 MAX_SAMPLES = 1024
@@ -37,9 +36,47 @@ def sample_offsets(samples: int) -> np.ndarray:
     rest follow the Halton (2, 3) sequence (unscrambled, so the positions are the same on every run).
     """
     count = check_samples(samples)
-    points = qmc.Halton(d=2, scramble=False).random(count)  # the first point is (0, 0)
+    points = np.stack([_radical_inverse(count, 2), _radical_inverse(count, 3)], axis=1)  # the first is (0, 0)
     # A cyclic shift by half a pixel keeps the sequence's spread and maps its first point 0 to the centre.
     return np.mod(points + 0.5, 1.0) - 0.5
+
+
+def _radical_inverse(count: int, base: int) -> np.ndarray:
+    """The first ``count`` points of the van der Corput sequence in ``base`` (index 0 → 0), ``float64``.
+
+    The same numbers as ``scipy.stats.qmc.Halton(scramble=False)`` (tests/test_antialias.py checks it);
+    written out because importing scipy.stats takes 1.2–1.4 s on this machine, which the viewer (it must
+    never block) and every ``gratnet render`` would pay on first use.
+    """
+    index = np.arange(count, dtype=np.int64)
+    result = np.zeros(count, dtype=np.float64)
+    scale = 1.0 / base
+    while np.any(index > 0):
+        result += (index % base) * scale
+        index //= base
+        scale /= base
+    return result
+
+
+def sample_range_offsets(samples: int, first_sample: int = 0) -> np.ndarray:
+    """The offsets of samples ``first_sample`` … ``first_sample + samples − 1`` of :func:`sample_offsets`,
+    ``float64`` ``(samples, 2)``, pixels (progressive accumulation renders one index at a time); the range
+    must end within :data:`MAX_SAMPLES`, else :class:`GratNetError`."""
+    count = check_samples(samples)
+    if isinstance(first_sample, bool) or not isinstance(first_sample, (int, np.integer)) or first_sample < 0:
+        raise GratNetError(f"the first sample index must be an integer ≥ 0, got {first_sample!r}")
+    if first_sample + count > MAX_SAMPLES:
+        raise GratNetError(f"samples {first_sample} … {first_sample + count - 1} run past the sequence's "
+                           f"{MAX_SAMPLES} samples per pixel")
+    return sample_offsets(first_sample + count)[first_sample:]
+
+
+def check_offsets(offsets_px: object) -> np.ndarray:
+    """``offsets_px`` as a finite ``float64`` ``(N ≥ 1, 2)`` array of pixel offsets, else :class:`GratNetError`."""
+    offsets = np.asarray(offsets_px, dtype=np.float64)
+    if offsets.ndim != 2 or offsets.shape[1] != 2 or offsets.shape[0] < 1 or not np.all(np.isfinite(offsets)):
+        raise GratNetError(f"sample offsets must be a finite (N ≥ 1, 2) array of pixels, got shape {offsets.shape}")
+    return offsets
 
 
 def jitter_matrix(offset_px: np.ndarray | tuple[float, float], width: int, height: int) -> np.ndarray:

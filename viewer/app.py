@@ -38,8 +38,16 @@ Staying responsive on a CPU rasterizer (Mesa llvmpipe: a full 320×240 CD-disc p
   preview stays on show under the bands not yet done, and any change abandons the refinement.
   (BRDF-slice mode doubles the resolution per level up to full, each level in bands of rows that fit
   ``refine_budget_s``: a scissor box limits the slice render to the band's rows.)
-- When the picture is complete and nothing changes, nothing is rendered, and the window sleeps in
-  ``glfw.wait_events_timeout`` instead of spinning.
+- Progressive anti-aliasing (issue 12; ``max_samples``, the panel's "samples" choice): once a mesh view's
+  full-resolution picture is complete and the view stands still, each further step adds the next sub-pixel
+  sample (:func:`viewer.antialias.sample_offsets`, the offsets of ``gratnet render --spp``) in bands of rows
+  sized like the refinement's, into float32 sums, and shows their mean, until ``max_samples`` (not while a
+  faster program for the view still compiles in the background: that compile gets the CPU); any change
+  of the view starts again from the 1-sample preview. Previews and refinement bands are 1 sample (the pixel
+  centre), so interaction costs what it did. The mean of k samples equals ``SceneRenderer.render(...,
+  samples=k)`` (tests/test_viewer.py). BRDF-slice mode stays at 1 sample.
+- When the picture is complete (and has its samples) and nothing changes, nothing is rendered, and the
+  window sleeps in ``glfw.wait_events_timeout`` instead of spinning.
 
 Every pixel comes from :class:`SceneRenderer` (``render`` / ``render_brdf_slice``), converted with its
 ``display_srgb8`` (``gratnet.display``), so the window shows exactly what ``gratnet render`` writes.
@@ -115,14 +123,15 @@ class ViewerState:
     def light(self) -> Light:
         return Light.directional(self.light_theta, self.light_phi)
 
-    def render_config(self, width: int, height: int) -> RenderConfig:
-        """The ``gratnet render`` config that reproduces this view at ``width`` × ``height``."""
+    def render_config(self, width: int, height: int, spp: int = 1) -> RenderConfig:
+        """The ``gratnet render`` config that reproduces this view at ``width`` × ``height`` with ``spp``
+        samples per pixel."""
         return RenderConfig(
             material=self.material, mesh=self.mesh, light_theta_degrees=self.light_theta,
             light_phi_degrees=self.light_phi, camera_distance=self.camera_distance,
             camera_azimuth_degrees=self.camera_azimuth, camera_elevation_degrees=self.camera_elevation,
             fov_degrees=self.fov, exposure=self.exposure, width=width, height=height, ior=self.ior,
-            fresnel=self.fresnel, slice=self.slice_mode,
+            fresnel=self.fresnel, slice=self.slice_mode, spp=spp,
         )
 
 
@@ -232,6 +241,8 @@ class Frame:
         complete: every pixel is at full resolution.
         progress: the fraction of the full-resolution picture done (1 when complete).
         version: increases whenever ``pixels`` change (the window re-uploads its texture then).
+        samples: samples per pixel of the complete picture (progressive anti-aliasing: the mean of that many
+            full-resolution samples; while the next one is added band by band, its rows already hold it).
     """
 
     key: tuple[Any, ...]
@@ -241,6 +252,7 @@ class Frame:
     complete: bool
     progress: float
     version: int
+    samples: int = 1
 
 
 @dataclasses.dataclass
@@ -256,6 +268,7 @@ class RenderStats:
     last_preview_s: float | None = None
     last_preview_size: tuple[int, int] = (0, 0)
     last_full_s: float | None = None  # the sum of a completed refinement's renders
+    last_sample_s: float | None = None  # the last band of progressive anti-aliasing (one more sample)
     #: The window's last frame from the end of its wait for input to the buffer swap: the work of the
     #: frame (events, panel, any render, drawing), not the idle wait (set by ViewerWindow).
     last_frame_s: float = 0.0
@@ -289,6 +302,19 @@ class _Refinement:
     next_row: int = 0
     next_factor: int = 1  # slice mode: the next (smaller) reduction factor
     seconds: float = 0.0
+    xyz: np.ndarray | None = None  # mesh mode: the full-resolution exposed XYZ so far (float32)
+
+
+@dataclasses.dataclass
+class _Accumulation:
+    """Progressive anti-aliasing of a still mesh view: float32 sums of the exposed XYZ of samples 0 … k−1
+    (``sums``, ``k`` = ``samples``) and, for rows before ``next_row``, sample k (``partial``)."""
+
+    key: tuple[Any, ...]
+    sums: np.ndarray
+    samples: int = 1
+    next_row: int = 0
+    partial: np.ndarray | None = None
 
 
 # --------------------------------------------------------------------------------------------------
@@ -312,6 +338,8 @@ class ViewerApp:
             :attr:`status` says why; with ``auto`` on a CPU rasterizer the texture path shows the first
             picture and the baked path takes over once compiled. False: load and compile on first use.
         worker: a compile child started earlier for ``state`` (:meth:`SceneSupply.start_worker`), adopted.
+        max_samples: samples per pixel accumulated while a mesh view stands still (progressive
+            anti-aliasing, see the module docstring; 1: off, the default here; the window's default is 16).
 
     Raises:
         GratNetError: the initial material or mesh cannot be loaded.
@@ -320,7 +348,8 @@ class ViewerApp:
     def __init__(self, ctx: Any, state: ViewerState | None = None, size: tuple[int, int] = (512, 512),
                  policy: ResolutionPolicy | None = None, clock: Callable[[], float] = time.perf_counter,
                  extra_meshes: Iterable[str] = (), weights_path: str = "auto", background: bool = False,
-                 worker: Any = None) -> None:
+                 worker: Any = None, max_samples: int = 1, render_path: str = "auto") -> None:
+        from viewer.antialias import check_samples
         from viewer.scene import check_size
         from viewer.scene_supply import SceneSupply
 
@@ -334,7 +363,7 @@ class ViewerApp:
         self.message = ""  # the last problem (a material or mesh that failed to load), shown in the panel
         self.meshes = list(MESHES) + [spec for spec in extra_meshes if spec not in MESHES]
         self.weights_path = weights_path
-        self._supply = SceneSupply(ctx, weights_path, background, worker)
+        self._supply = SceneSupply(ctx, weights_path, background, worker, render_path)
         # A switch of material, mesh or mode brings that pair's default view (viewer.defaults), worked out in a
         # worker process in the background mode.
         self._defaults = DefaultViewRequests(background)
@@ -345,6 +374,9 @@ class ViewerApp:
         self._seen_key: tuple[Any, ...] | None = None
         self._changed_at = -math.inf
         self._refinement: _Refinement | None = None
+        self._accumulation: _Accumulation | None = None
+        #: Progressive anti-aliasing: samples per pixel accumulated while the view stands still (1: off).
+        self.max_samples = check_samples(max_samples)
         self._version = 0
         self._released = False
         #: Whether the state changed less than ``policy.idle_seconds`` before the last :meth:`frame`.
@@ -422,6 +454,44 @@ class ViewerApp:
         self.size = size
         return True
 
+    def set_max_samples(self, samples: int) -> bool:
+        """The accumulation cap (the panel's "samples" choice; 1 … viewer.antialias.MAX_SAMPLES): a still mesh
+        view gains one sample per pixel at a time, band by band, up to it. Lowering it below the samples on
+        show keeps them. Returns whether it changed."""
+        from viewer.antialias import check_samples
+
+        samples = check_samples(samples)
+        changed, self.max_samples = samples != self.max_samples, samples
+        return changed
+
+    @property
+    def samples(self) -> int:
+        """Samples per pixel of the complete picture on show (1 while previewing or refining)."""
+        accumulation = self._current_accumulation()
+        return accumulation.samples if accumulation is not None else 1
+
+    def accumulated_xyz(self) -> np.ndarray | None:
+        """The exposed XYZ mean of the :attr:`samples` complete samples of the view on show (``float32``
+        ``(H, W, 3)``; the same as ``SceneRenderer.render(..., samples=k)``), or ``None`` before the first
+        full-resolution picture of a mesh view."""
+        accumulation = self._current_accumulation()
+        if accumulation is None:
+            return None
+        return accumulation.sums / np.float32(accumulation.samples)
+
+    def _current_accumulation(self) -> _Accumulation | None:
+        accumulation = self._accumulation
+        return accumulation if accumulation is not None and accumulation.key == self.render_key() else None
+
+    def _accumulation_due(self) -> bool:
+        """A still, complete mesh view below the sample cap, with its full-resolution mesh ready and nothing
+        else on its way for it: while a faster program compiles in the background, extra samples would take
+        the CPU from that compile (and each costs several times more on the slower path)."""
+        accumulation = self._current_accumulation()
+        return (accumulation is not None and accumulation.samples < self.max_samples and not self.moving
+                and not self.state.slice_mode and self._supply.scene_ready(self.state, preview=False)
+                and not self._supply.pending(self.state))
+
     def orbit(self, dx_pixels: float, dy_pixels: float, degrees_per_pixel: float = 0.4) -> bool:
         """A mouse drag over the picture: the camera orbits (in BRDF-slice mode the light moves)."""
         if self.state.slice_mode:
@@ -452,7 +522,7 @@ class ViewerApp:
         window then sleeps until input arrives)."""
         image, key = self.image, self.render_key()
         if image is not None and image.key == key and image.complete:
-            if self._supply.step_due(self.state, self._idle()):
+            if self._supply.step_due(self.state, self._idle()) or self._accumulation_due():
                 return 0.0
             return self.POLL_SECONDS if self._supply.pending(self.state) or self._defaults.pending else None
         if self._supply.step_due(self.state, self._idle()):
@@ -487,7 +557,10 @@ class ViewerApp:
         self.moving = now - self._changed_at < self.policy.idle_seconds
         image = self.image
         if image is not None and image.key == key and image.complete:
-            return False
+            if not self._accumulation_due():
+                return False
+            self._accumulate(key)
+            return True
         if not self._supply.scene_ready(self.state):
             return False  # the picture on show stays until the new one can be rendered
         if image is None or image.key != key:
@@ -536,10 +609,12 @@ class ViewerApp:
         return (state.material, "slice" if state.slice_mode else state.mesh, self._supply.weights_path_in_use(state))
 
     def _timed_render(self, state: ViewerState, size: tuple[int, int], camera: Camera | None = None,
-                      preview: bool = False, rows: tuple[int, int] | None = None) -> tuple[np.ndarray, np.ndarray]:
+                      preview: bool = False, rows: tuple[int, int] | None = None,
+                      sample: int = 0) -> tuple[np.ndarray, np.ndarray]:
         """``(exposed XYZ, coverage)`` of ``state`` at ``size`` (a mesh, or the BRDF slice: coverage 1; with
         ``rows``, only those rows of the slice), timed and counted; the time per effective pixel feeds the
-        resolution policy."""
+        resolution policy. ``sample``: the index of the mesh render's sub-pixel offset
+        (:func:`viewer.antialias.sample_offsets`; 0 = the pixel centre)."""
         supplied = self._supply.scene(state, preview)
         if supplied is None:
             raise GratNetError(f"the shader for {state.material} is still compiling; try again in a moment")
@@ -553,7 +628,7 @@ class ViewerApp:
                 xyz = xyz[rows[0]:rows[1]]
         else:
             rgba = renderer.render_rgba(buffers, camera or state.camera(), state.light(), size, state.exposure,
-                                        state.effective_ior)
+                                        state.effective_ior, first_sample=sample)
             xyz, coverage = rgba[..., :3], rgba[..., 3]
         seconds = time.perf_counter() - started
         scene = self._scene_key(state)
@@ -569,9 +644,9 @@ class ViewerApp:
         return xyz, coverage
 
     def _publish(self, key: tuple[Any, ...], pixels: np.ndarray, rendered_size: tuple[int, int],
-                 complete: bool, progress: float) -> None:
+                 complete: bool, progress: float, samples: int = 1) -> None:
         self._version += 1
-        self.image = Frame(key, pixels, self.full_size(), rendered_size, complete, progress, self._version)
+        self.image = Frame(key, pixels, self.full_size(), rendered_size, complete, progress, self._version, samples)
 
     def _preview(self, key: tuple[Any, ...]) -> None:
         from viewer.scene import SceneRenderer
@@ -584,6 +659,7 @@ class ViewerApp:
             predicted = seconds_per_pixel * full[0] * full[1] * (covered + _UNCOVERED_COST * (1.0 - covered))
         factor = self.policy.reduced_factor(predicted)
         size = reduced_size(full, factor)  # square in slice mode (full is square)
+        self._accumulation = None  # a new view: its samples start again
         xyz, coverage = self._timed_render(self.state, size, preview=True)
         self._coverage = coverage.mean(axis=1)
         self.stats.preview_renders += 1
@@ -627,14 +703,16 @@ class ViewerApp:
             row0 = refinement.next_row
             rows = self.policy.band_rows(self._row_seconds(width, height)[row0:] * _first_band_margin(row0))
             row1 = min(height, row0 + rows)
-            camera = state.camera()
-            band = _BandCamera(camera.distance, camera.azimuth_deg, camera.elevation_deg, camera.target,
-                               camera.fov_deg, camera.near, camera.far, full_aspect=width / height,
-                               height=height, row0=row0, row1=row1)
+            band = self._band_camera(state, width, height, row0, row1)
             xyz = self._timed_render(state, (width, row1 - row0), band)[0]
             refinement.pixels[row0:row1] = SceneRenderer.display_srgb8(xyz)
+            if refinement.xyz is None:
+                refinement.xyz = np.zeros((height, width, 3), dtype=np.float32)
+            refinement.xyz[row0:row1] = xyz
             refinement.next_row = row1
             done, rendered, progress = row1 == height, (width, height), row1 / height
+            if done:  # sample 0 of the progressive anti-aliasing
+                self._accumulation = _Accumulation(key, refinement.xyz)
             self.stats.last_kind = f"refine rows {row0}-{row1}"
         refinement.seconds += time.perf_counter() - started
         self.stats.refine_renders += 1
@@ -642,6 +720,43 @@ class ViewerApp:
             self.stats.last_full_s = refinement.seconds
             self._refinement = None
         self._publish(key, refinement.pixels.copy(), rendered, done, 1.0 if done else progress)
+
+    def _band_camera(self, state: ViewerState, width: int, height: int, row0: int, row1: int) -> _BandCamera:
+        camera = state.camera()
+        return _BandCamera(camera.distance, camera.azimuth_deg, camera.elevation_deg, camera.target, camera.fov_deg,
+                           camera.near, camera.far, full_aspect=width / height, height=height, row0=row0, row1=row1)
+
+    def _accumulate(self, key: tuple[Any, ...]) -> None:
+        """Progressive anti-aliasing: the next band of rows of the next sample (one sub-pixel offset) of the
+        still mesh view, sized to ``refine_budget_s`` like a refinement band; the rows done show the mean
+        over one more sample than the rest."""
+        from viewer.scene import SceneRenderer
+
+        accumulation = self._accumulation
+        assert accumulation is not None and self.image is not None
+        state, (width, height) = self.state, self.full_size()
+        row0 = accumulation.next_row
+        row1 = min(height, row0 + self.policy.band_rows(self._row_seconds(width, height)[row0:]))
+        started = time.perf_counter()
+        xyz = self._timed_render(state, (width, row1 - row0), self._band_camera(state, width, height, row0, row1),
+                                 sample=accumulation.samples)[0]
+        if accumulation.partial is None:
+            accumulation.partial = np.zeros_like(accumulation.sums)
+        accumulation.partial[row0:row1] = xyz
+        accumulation.next_row = row1
+        if row1 == height:  # the sample is complete: into the sums (float32, as SceneRenderer's GPU sums)
+            accumulation.sums += accumulation.partial
+            accumulation.samples += 1
+            accumulation.next_row, accumulation.partial = 0, None
+            mean = accumulation.sums[row0:row1] / np.float32(accumulation.samples)
+        else:
+            mean = (accumulation.sums[row0:row1] + xyz) / np.float32(accumulation.samples + 1)
+        pixels = self.image.pixels.copy()
+        pixels[row0:row1] = SceneRenderer.display_srgb8(mean)
+        self.stats.refine_renders += 1
+        self.stats.last_kind = f"sample {accumulation.samples + (row1 < height)} rows {row0}-{row1}"
+        self.stats.last_sample_s = time.perf_counter() - started
+        self._publish(key, pixels, (width, height), True, 1.0, accumulation.samples)
 
     def _row_seconds(self, width: int, height: int) -> np.ndarray:
         """Predicted seconds of each full-resolution row, from the preview's coverage of that row."""
@@ -658,9 +773,11 @@ class ViewerApp:
         key = self.render_key()
         if self.image is not None and self.image.key == key and self.image.complete:
             return self.image.pixels
-        pixels = SceneRenderer.display_srgb8(self._timed_render(self.state, self.full_size())[0])
+        xyz = self._timed_render(self.state, self.full_size())[0]
+        pixels = SceneRenderer.display_srgb8(xyz)
         self.stats.last_kind = "full"
         self._refinement = None
+        self._accumulation = None if self.state.slice_mode else _Accumulation(key, np.array(xyz, dtype=np.float32))
         self._publish(key, pixels, self.full_size(), True, 1.0)
         return pixels
 
@@ -676,10 +793,15 @@ class ViewerApp:
         if path.suffix.lower() != ".png":
             raise GratNetError(f"a screenshot is a .png file, got {path}")
         pixels = self.render_full()
+        samples = self.samples
+        if samples > 1:  # the complete samples only (a sample being added band by band is left out)
+            from viewer.scene import SceneRenderer
+
+            pixels = SceneRenderer.display_srgb8(self.accumulated_xyz())
         with atomic_path(path) as temporary:
             Image.fromarray(pixels).save(temporary, format="PNG")
         width, height = self.full_size()
-        save_config(path, render=self.state.render_config(width, height),
+        save_config(path, render=self.state.render_config(width, height, samples),
                     model_file=str(resolve_material(self.state.material)))
         return path
 
@@ -783,18 +905,22 @@ class ViewerWindow:
         extra_meshes, weights_path, background: as :class:`ViewerApp` (here ``background`` is on by
             default: the window opens, shows its panel and handles input at once, whatever compiles).
         visible: show the window (tests under Xvfb may hide it; rendering is the same).
+        max_samples: as :class:`ViewerApp` (progressive anti-aliasing; here 16 by default).
 
     Raises:
         GratNetError: no display, or no OpenGL 4.3 core context for a window.
     """
 
     PANEL_WIDTH = 300
+    #: The panel's choices of samples per pixel accumulated while the view stands still.
+    SAMPLE_CHOICES = (1, 4, 16, 64)
 
     def __init__(self, state: ViewerState | None = None, size: tuple[int, int] = (512, 512),
                  policy: ResolutionPolicy | None = None, clock: Callable[[], float] = time.perf_counter,
                  screenshot_dir: str | Path = ".", idle_wait_s: float = 0.25, extra_meshes: Iterable[str] = (),
                  weights_path: str = "auto", background: bool = True,
-                 visible: bool = True, title: str = "GratNet viewer") -> None:
+                 visible: bool = True, title: str = "GratNet viewer", max_samples: int = 16,
+                 render_path: str = "auto") -> None:
         from viewer.context import context_from_current
         from viewer.scene import check_size
         from viewer.scene_supply import SceneSupply, start_display_import
@@ -805,7 +931,7 @@ class ViewerWindow:
         if background:
             start_display_import()
             with contextlib.suppress(GratNetError):  # a bad material is reported by ViewerApp below
-                worker = SceneSupply.start_worker(state or ViewerState(), weights_path)
+                worker = SceneSupply.start_worker(state or ViewerState(), weights_path, render_path)
         glfw, imgui = self._glfw, self._imgui = _shell_modules()
         self.screenshot_dir = Path(screenshot_dir)
         self.idle_wait_s = float(idle_wait_s)
@@ -867,7 +993,7 @@ class ViewerWindow:
             self._gl = _GLFunctions(glfw)
             self._texture = self._picture_texture(1, 1)  # drawn by the first frame: see there
             self._app = ViewerApp(self.ctx, state, self._area_pixels(), policy, clock, extra_meshes, weights_path,
-                                  background, worker)
+                                  background, worker, max_samples, render_path)
             worker = None  # the app owns it now
             # The first frame compiles imgui's own shaders and, drawing the 1×1 picture texture, their variant
             # for its format (0.3–0.5 s on llvmpipe with an empty shader cache): drawn while the window is
@@ -1097,6 +1223,11 @@ class ViewerWindow:
         imgui.end_disabled()
         imgui.separator_text("display")
         self._slider("exposure")
+        # Progressive anti-aliasing while the view stands still (1: off); the count shows under "performance".
+        choices = sorted({*self.SAMPLE_CHOICES, app.max_samples})
+        changed, index = imgui.combo("samples (still)", choices.index(app.max_samples), [str(c) for c in choices])
+        if changed:
+            app.set_max_samples(choices[index])
         changed, value = imgui.checkbox("Fresnel", state.fresnel)
         if changed:
             app.set(fresnel=value)
@@ -1119,7 +1250,8 @@ class ViewerWindow:
             imgui.text(f"full picture {stats.last_full_s * 1000:.0f} ms")
         if image is not None:
             status = "complete" if image.complete else f"refining {image.progress:.0%}"
-            imgui.text(f"{image.full_size[0]}×{image.full_size[1]}: {status}")
+            samples = "" if state.slice_mode else f", {image.samples}/{app.max_samples} samples"
+            imgui.text(f"{image.full_size[0]}×{image.full_size[1]}: {status}{samples}")
         imgui.text(f"renders: {stats.renders}")
 
         imgui.separator()

@@ -57,6 +57,14 @@ def shader_cache_enabled(environment: dict[str, str] | None = None) -> bool:
     return True
 
 
+def window_render_path(requested: str, software: bool) -> str:
+    """The render path the viewer's window takes (and so the one to warm for it). ``auto`` is forward on a
+    software rasterizer: there the deferred path's first frames after each switch cost 0.3–0.6 s of one
+    frame in JIT work even with Mesa's cache warm (measured under test_window_never_blocks), over the
+    150 ms a frame may take; on a GPU ``auto`` is the cached, measured verdict. An explicit path is kept."""
+    return "forward" if requested == "auto" and software else requested
+
+
 def warm_group(scene: Any, group: str, buffers: Any = None) -> None:
     """Compile ``group``'s programs on ``scene`` (a :class:`~viewer.scene.SceneRenderer`) and draw them once
     at 1×1 pixel, as the viewer draws them (llvmpipe compiles a program's draw code at its first draw).
@@ -72,7 +80,10 @@ def warm_group(scene: Any, group: str, buffers: Any = None) -> None:
 
             uploaded = scene.upload(plane())
         try:
-            scene.render_rgba(uploaded, Camera(0.18, -90.0, 50.0), Light.directional(20.0, 90.0), (1, 1), 1.0, 1.5)
+            # Twice: on the deferred path the first render at a size above 1×1 still cost 0.35 s of JIT work
+            # (measured, tiny net on llvmpipe) when only a 1×1 render had warmed it; a 2×2 one takes it.
+            for size in ((1, 1), (2, 2)):
+                scene.render_rgba(uploaded, Camera(0.18, -90.0, 50.0), Light.directional(20.0, 90.0), size, 1.0, 1.5)
         finally:
             if buffers is None:
                 uploaded.release()
@@ -97,7 +108,7 @@ class CompileWorker:
     """
 
     def __init__(self, model_path: str | os.PathLike[str], paths: Sequence[str], groups: Sequence[str],
-                 label: str = "", niceness: int = 0) -> None:
+                 label: str = "", niceness: int = 0, render_path: str = "auto") -> None:
         self.model_path = Path(model_path)
         self.paths = tuple(paths)
         self.groups = tuple(groups)
@@ -120,7 +131,8 @@ class CompileWorker:
         environment["PYTHONPATH"] = os.pathsep.join(
             [str(_REPOSITORY), *filter(None, environment.get("PYTHONPATH", "").split(os.pathsep))])
         command = [sys.executable, "-m", "viewer.compile_worker", str(self.model_path), "--paths", ",".join(self.paths),
-                   "--groups", ",".join(self.groups), "--folder", self._folder.name, "--nice", str(int(niceness))]
+                   "--groups", ",".join(self.groups), "--folder", self._folder.name, "--nice", str(int(niceness)),
+                   "--render-path", render_path]
         self._process: subprocess.Popen[bytes] | None = subprocess.Popen(
             command, stdin=subprocess.DEVNULL, stdout=subprocess.PIPE, stderr=self._stderr, env=environment,
             cwd=str(_REPOSITORY))
@@ -201,19 +213,24 @@ class CompileWorker:
             self.close()
 
 
-def _warm(model_path: Path, paths: Sequence[str], groups: Sequence[str], folder: Path) -> None:
-    """The child: warm every group of every path, reporting each on stdout once it is on disk."""
+def _warm(model_path: Path, paths: Sequence[str], groups: Sequence[str], folder: Path,
+          render_path: str = "auto") -> None:
+    """The child: warm every group of every path, reporting each on stdout once it is on disk; then, for
+    ``render_path`` ``auto`` on a GPU with no cached verdict, time the two render paths (viewer.deferred) so
+    that the window (which never measures) finds the verdict from its next material or start on."""
     from gratnet.atomic import atomic_path
     from gratnet.modelfile import load_model
     from viewer.context import create_headless_context, release_headless_context
-    from viewer.renderer import choose_weights_path
+    from viewer.renderer import choose_weights_path, is_software_rasterizer
     from viewer.scene import SceneRenderer
 
     model = load_model(model_path)
     ctx = None
     done: set[str] = set()
+    software = False
     for requested in paths:
         ctx = ctx or create_headless_context()
+        software = is_software_rasterizer(ctx)
         path = choose_weights_path(ctx, model, requested)
         if path in done:
             continue
@@ -222,7 +239,9 @@ def _warm(model_path: Path, paths: Sequence[str], groups: Sequence[str], folder:
         for group in groups:
             started = time.perf_counter()
             ctx = ctx or create_headless_context()
-            scene = SceneRenderer(ctx, model, weights_path=path, baked_source=source)
+            scene = SceneRenderer(ctx, model, weights_path=path, baked_source=source,
+                                  render_path=window_render_path(render_path, software),
+                                  measure_render_path=False)
             if source is None and scene.network.baked_source is not None:
                 source = scene.network.baked_source
                 with atomic_path(folder / _BAKED_SOURCE) as temporary:
@@ -236,6 +255,13 @@ def _warm(model_path: Path, paths: Sequence[str], groups: Sequence[str], folder:
             release_headless_context(ctx)
             ctx = None
             print(f"ready {path} {group} {time.perf_counter() - started:.3f}", flush=True)
+    if render_path == "auto" and "surface" in groups and not software:  # the window's auto on a CPU is forward
+        with contextlib.suppress(OSError):
+            os.nice(_BAKED_NICENESS)  # the window is up by now: the probe must not slow it
+        for path in done:
+            ctx = ctx or create_headless_context()
+            with SceneRenderer(ctx, model, weights_path=path, baked_source=source) as scene:
+                print(f"render-path {path} {scene.render_path}", flush=True)  # measured and cached (or read)
     if ctx is not None:
         release_headless_context(ctx)
 
@@ -248,12 +274,14 @@ def main(argv: Sequence[str] | None = None) -> int:
     parser.add_argument("--groups", default=",".join(GROUPS))
     parser.add_argument("--folder", required=True, help="where to write the baked mlp.glsl")
     parser.add_argument("--nice", type=int, default=0, help="niceness to add at start")
+    parser.add_argument("--render-path", default="auto", help="the viewer's render path (auto: measure it here)")
     arguments = parser.parse_args(argv)
     if arguments.nice > 0:
         with contextlib.suppress(OSError):
             os.nice(arguments.nice)
     try:
-        _warm(Path(arguments.model), arguments.paths.split(","), arguments.groups.split(","), Path(arguments.folder))
+        _warm(Path(arguments.model), arguments.paths.split(","), arguments.groups.split(","), Path(arguments.folder),
+              arguments.render_path)
     except GratNetError as error:
         print(f"compile worker: {error}", file=sys.stderr)
         return 2

@@ -1,10 +1,11 @@
 """A small GLSL preprocessor and compiler front end: ``#include``, defines and file/line-exact errors.
 
 A program is one file ``shaders/NAME.glsl`` holding both stages, selected with ``#ifdef VERTEX_SHADER``
-/ ``#ifdef FRAGMENT_SHADER``. :func:`load_program_source` emits, in this order:
+/ ``#ifdef FRAGMENT_SHADER`` (a compute program, :func:`compile_compute`: one stage, ``#ifdef COMPUTE_SHADER``).
+:func:`load_program_source` emits, in this order:
 
 1. ``#version 430 core``;
-2. ``#define VERTEX_SHADER`` or ``#define FRAGMENT_SHADER``;
+2. ``#define VERTEX_SHADER``, ``#define FRAGMENT_SHADER`` or ``#define COMPUTE_SHADER``;
 3. one ``#define NAME VALUE`` per entry of ``defines`` (ints and floats only — array capacities and
    constants that come from the model file; values are never substituted into the shader text);
 4. the program file with every ``#include "x.glsl"`` replaced by that file (resolved relative to the
@@ -40,6 +41,7 @@ __all__ = [
     "SHADER_ROOT",
     "GeneratedSource",
     "ProgramSource",
+    "compile_compute",
     "compile_program",
     "load_program_source",
     "map_error_log",
@@ -52,6 +54,7 @@ SHADER_ROOT = PACKAGED_SHADER_ROOT  # shaders/ is a package whose data are the .
 LINE_STRIDE = 100_000
 GLSL_VERSION = "#version 430 core"
 _STAGES = {"vertex": "VERTEX_SHADER", "fragment": "FRAGMENT_SHADER"}
+_ALL_STAGES = {**_STAGES, "compute": "COMPUTE_SHADER"}
 _HEADER_NAME = "<generated header>"
 _INCLUDE = re.compile(r"^\s*#\s*include\b(.*)$")
 _INCLUDE_ARGUMENT = re.compile(r'^\s*"([^"]+)"\s*(//.*)?$')
@@ -102,7 +105,7 @@ def _define_lines(defines: Defines) -> list[str]:
     for name, value in defines.items():
         if not isinstance(name, str) or not _IDENTIFIER.match(name) or name.startswith(("GL_", "__")):
             raise GratNetError(f"invalid GLSL define name {name!r}: use letters, digits and _, not starting GL_ or __")
-        if name in _STAGES.values():
+        if name in _ALL_STAGES.values():
             raise GratNetError(f"define {name} is reserved: the preprocessor sets it from the stage")
         if isinstance(value, bool) or not isinstance(value, (int, float)):
             raise GratNetError(f"GLSL define {name} must be an int or a float, got {value!r}")
@@ -192,7 +195,8 @@ def preprocess(
     name: str, stage: str, defines: Defines, shader_root: str | os.PathLike[str] | None = None,
     overrides: Overrides | None = None,
 ) -> ProgramSource:
-    """Preprocess program ``name`` for ``stage`` (``"vertex"`` or ``"fragment"``); see the module docstring.
+    """Preprocess program ``name`` for ``stage`` (``"vertex"``, ``"fragment"`` or ``"compute"``); see the module
+    docstring.
 
     ``overrides`` maps an include argument (``"mlp.glsl"``) to the :class:`GeneratedSource` included instead.
 
@@ -201,9 +205,9 @@ def preprocess(
             malformed include, a ``#version`` line in a shader file, or a ``#version``/``#include`` line
             in a generated source.
     """
-    stage_define = _STAGES.get(str(stage).lower())
+    stage_define = _ALL_STAGES.get(str(stage).lower())
     if stage_define is None:
-        raise GratNetError(f"unknown shader stage {stage!r}; choose vertex or fragment")
+        raise GratNetError(f"unknown shader stage {stage!r}; choose vertex, fragment or compute")
     root = Path(shader_root) if shader_root is not None else SHADER_ROOT
     path = _program_path(name, root).resolve()
     if not path.is_file():
@@ -261,7 +265,7 @@ def map_error_log(log: str, files: tuple[Path | str, ...]) -> list[str]:
         text = raw.strip()
         if not text or set(text) <= {"="} or text in ("GLSL Compiler failed", "GLSL Linker failed"):
             continue
-        if text in ("vertex_shader", "fragment_shader", "Program"):
+        if text in ("vertex_shader", "fragment_shader", "compute_shader", "Program"):
             continue
         text, found = _MESA_LOCATION.subn(mesa, text, count=1)
         if not found:
@@ -295,3 +299,22 @@ def compile_program(
         messages = map_error_log(log, files) or [" ".join(log.split())]
         shown = "; ".join(messages[:5]) + (f"; … ({len(messages) - 5} more)" if len(messages) > 5 else "")
         raise GratNetError(f"cannot compile GLSL program {name!r} ({failed}): {shown}") from error
+
+
+def compile_compute(
+    ctx: moderngl.Context, name: str, defines: Defines, shader_root: str | os.PathLike[str] | None = None,
+    overrides: Overrides | None = None,
+) -> moderngl.ComputeShader:
+    """Preprocess and compile the compute stage of program ``name`` (``#ifdef COMPUTE_SHADER``), as
+    :func:`compile_program` does the other two.
+
+    Raises:
+        GratNetError: preprocessing failed or the driver rejected the shader (one line, real files and lines).
+    """
+    source = preprocess(name, "compute", defines, shader_root, overrides)
+    try:
+        return ctx.compute_shader(source.text)
+    except moderngl.Error as error:
+        messages = map_error_log(str(error), source.files) or [" ".join(str(error).split())]
+        shown = "; ".join(messages[:5]) + (f"; … ({len(messages) - 5} more)" if len(messages) > 5 else "")
+        raise GratNetError(f"cannot compile GLSL compute program {name!r}: {shown}") from error

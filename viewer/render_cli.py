@@ -12,6 +12,8 @@
   ``--point-light X,Y,Z`` (metres; irradiance 1 at 1 m, falling as 1/d²).
 - ``--camera DIST,AZIMUTH,ELEVATION``: an orbit camera around the origin (metres, degrees).
 - ``--slice``: instead of a mesh, the network's BRDF slice for the light θ,φ (physics.md "BRDF slice").
+- ``--spp N``: N samples per pixel (anti-aliasing: the mean of N renders at sub-pixel offsets, each its own
+  key vector; the same flag and meaning as ``gratnet mitsuba-render``); default 1.
 - Output: ``.png`` = display sRGB, 8-bit (``gratnet.display``, like every GratNet PNG); ``.exr`` = linear
   sRGB, float32 channels R, G, B, exposure applied, unclipped. The resolved config is saved beside it
   (``NAME.config.json``); both are written atomically.
@@ -42,8 +44,16 @@ ASSETS = Path(__file__).resolve().parents[1] / "assets"
 #: Built-in meshes for ``--mesh``.
 MESHES = ("cd", "sphere", "plane")
 _OUTPUT_SUFFIXES = (".png", ".exr")
+#: Largest --spp of ``gratnet render``: viewer.antialias.MAX_SAMPLES (repeated: this module defers numpy).
+MAX_SAMPLES = 1024
 #: ``--weights-path`` choices: viewer.renderer.WEIGHTS_PATHS (repeated here: importing it loads moderngl).
 WEIGHT_PATHS = ("auto", "texture", "baked")
+#: ``--render-path`` choices: viewer.deferred.RENDER_PATHS (repeated here for the same reason).
+RENDER_PATHS = ("auto", "forward", "deferred")
+#: ``--render-path`` help, shared by every command that renders a mesh.
+RENDER_PATH_HELP = ("mesh renders: forward (the network in the fragment shader), deferred (a G-buffer pass, then the "
+                    "network in a compute shader for the pixels that need it) or auto (the faster on this GPU for "
+                    "this network's size, timed once on a small probe and cached)")
 #: sRGB / Rec. 709 primaries and D65 white (x, y pairs) for the EXR ``chromaticities`` attribute.
 _SRGB_CHROMATICITIES = (0.64, 0.33, 0.30, 0.60, 0.15, 0.06, 0.3127, 0.3290)
 
@@ -91,9 +101,14 @@ class RenderConfig(SceneConfig):
         "(literals in a generated shader: faster on a CPU rasterizer, slower first compile) or auto (baked for "
         "nets up to 32k multiply-adds (the shipped size) on a CPU rasterizer such as Mesa llvmpipe, else texture)",
         choices=WEIGHT_PATHS)
+    render_path: str = config_field("auto", RENDER_PATH_HELP, choices=RENDER_PATHS)
     skip_dark: bool = config_field(
         False, "PNG only: skip the network where exposure · A · (the model's cached output bound) cannot reach the "
         "display's smallest step; the first use per model builds the bound (minutes on a CPU)")
+    spp: int = config_field(
+        1, f"samples per pixel (anti-aliasing; 1 … {MAX_SAMPLES}, typical: 1, 4, 16, 64): the mean of renders at "
+        "sub-pixel offsets (Halton 2,3; the first at the pixel centre); costs about spp × one render. As "
+        "mitsuba-render's --spp", aliases=("--samples",))
 
 
 def _numbers(text: str, count: int | tuple[int, ...], flag: str, form: str) -> list[float]:
@@ -283,6 +298,10 @@ def _resolve_config(arguments: argparse.Namespace) -> RenderConfig:
         raise GratNetError(f"--slice renders a square image; give --size N,N (got {config.width},{config.height})")
     if config.slice and config.point_light is not None:
         raise GratNetError("--slice takes a directional light (--light θ,φ), not --point-light")
+    if isinstance(config.spp, bool) or not 1 <= config.spp <= MAX_SAMPLES:
+        raise GratNetError(f"--spp (samples per pixel) must be an integer in 1 … {MAX_SAMPLES}, got {config.spp}")
+    if config.slice and config.spp != 1:
+        raise GratNetError("--spp applies to mesh renders; --slice renders the BRDF slice at one sample per pixel")
     return config
 
 
@@ -313,24 +332,28 @@ def run(arguments: argparse.Namespace) -> int:
     skip_threshold = DISPLAY_SKIP_THRESHOLD if config.skip_dark else None
     ctx = create_headless_context()
     try:
-        with SceneRenderer(ctx, model, weights_path=config.weights_path) as renderer:
+        with SceneRenderer(ctx, model, weights_path=config.weights_path, render_path=config.render_path) as renderer:
+            # A BRDF slice has one path (a full-screen fragment pass); a mesh takes the one chosen.
+            resolved = ({"path": "forward", "reason": "BRDF slices are rendered by the fragment pass only"}
+                        if config.slice else {"path": renderer.render_path, "reason": renderer.render_path_reason})
             if config.slice:
                 xyz = renderer.network.render_brdf_slice(config.light_theta_degrees, config.light_phi_degrees,
                                                          config.width, config.exposure, config.effective_ior,
                                                          skip_threshold=skip_threshold)
             else:
                 xyz = renderer.render(mesh, camera, light, (config.width, config.height), config.exposure,
-                                      config.effective_ior, skip_threshold=skip_threshold)
+                                      config.effective_ior, skip_threshold=skip_threshold, samples=config.spp)
     finally:
         ctx.release()
     if not np.all(np.isfinite(xyz)):
         raise GratNetError("the render contains NaN or inf; nothing was written (please report this)")
 
-    write_render(out, xyz, render=config, model_file=str(model_path))
+    write_render(out, xyz, render=config, model_file=str(model_path), render_path=resolved)
     what = (f"BRDF slice, light θ={config.light_theta_degrees:g}° φ={config.light_phi_degrees:g}°" if config.slice
             else f"mesh {config.mesh}")
+    samples = "" if config.slice else f", {config.spp} spp"
     print(f"wrote {out}: {Path(model_path).parent.name if model_path.name == 'model.npz' else model_path.name}, "
-          f"{what}, {config.width}×{config.height}, exposure {config.exposure:g}")
+          f"{what}, {config.width}×{config.height}{samples}, exposure {config.exposure:g}")
     warn_if_black(xyz, config.exposure)
     return 0
 

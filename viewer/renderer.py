@@ -130,7 +130,7 @@ def skip_threshold_value(threshold: float | None) -> float:
     return value
 
 
-def _set(program: moderngl.Program, name: str, value: object) -> None:
+def _set(program: moderngl.Program | moderngl.ComputeShader, name: str, value: object) -> None:
     """Set a uniform that the program must have (a missing one means shader and renderer disagree)."""
     if name not in program:
         raise GratNetError(f"GLSL program lacks uniform {name!r}; the shaders and viewer/renderer.py disagree")
@@ -139,6 +139,12 @@ def _set(program: moderngl.Program, name: str, value: object) -> None:
         member.write(value.tobytes())  # type: ignore[union-attr]
     else:
         member.value = value  # type: ignore[union-attr]
+
+
+def is_software_rasterizer(ctx: moderngl.Context) -> bool:
+    """Whether ``ctx`` renders on the CPU (Mesa llvmpipe, softpipe, swrast), from its GL_RENDERER string."""
+    renderer = str(ctx.info.get("GL_RENDERER", "")).lower()
+    return any(name in renderer for name in _SOFTWARE_RASTERIZERS)
 
 
 def choose_weights_path(ctx: moderngl.Context, model: ModelFile, weights_path: str = "auto") -> str:
@@ -165,8 +171,7 @@ def choose_weights_path(ctx: moderngl.Context, model: ModelFile, weights_path: s
         return "texture"
     if weights_path != "auto":
         return weights_path
-    renderer = str(ctx.info.get("GL_RENDERER", "")).lower()
-    software = any(name in renderer for name in _SOFTWARE_RASTERIZERS)
+    software = is_software_rasterizer(ctx)
     return "baked" if software and model.macs_per_evaluation <= BAKED_MAX_MACS else "texture"
 
 
@@ -197,6 +202,9 @@ class NetworkRenderer:
         if grid_filter not in GRID_FILTERS:
             raise GratNetError(f"grid filter must be one of {', '.join(GRID_FILTERS)}, got {grid_filter!r}")
         self.grid_filter = grid_filter
+        #: The packed weight texture (docs/formats.md), ``float32`` ``(rows, texels per row, 4)``, on either path
+        #: (the deferred path's weight buffers hold the same texels).
+        self.packed_weights = np.ascontiguousarray(texture, dtype=np.float32)
         self.ctx = ctx
         self.model = model
         self.layout = layout
@@ -235,14 +243,20 @@ class NetworkRenderer:
     # ---------------------------------------------------------------------------------------------
     # Programs
 
-    def _model_uniforms(self, program: moderngl.Program) -> None:
-        """Everything the encoding, MLP and range-transform includes read, from the model."""
+    def _model_uniforms(self, program: moderngl.Program | moderngl.ComputeShader, weights: str | None = None) -> None:
+        """Everything the encoding, MLP and range-transform includes read, from the model. ``weights``: where
+        the program's mlp.glsl reads them (``texture``, ``baked``, or the deferred path's ``ssbo``/``shared``;
+        default: :attr:`weights_path`)."""
+        weights = self.weights_path if weights is None else weights
         layers = np.zeros((int(self.defines["MAX_LAYERS"]), 4), dtype=np.int32)
         for k, entry in enumerate(self.layout):
             layers[k, :3] = entry["row_offset"], entry["in_blocks"], entry["out_blocks"]
         model = self.model
-        if self.weights_path == "texture":  # the baked mlp.glsl has the layout and activations in its code
-            _set(program, "u_weights", 0)
+        if weights != "baked":  # the baked mlp.glsl has the layout and activations in its code
+            if weights == "texture":
+                _set(program, "u_weights", 0)
+            else:
+                _set(program, "u_weights_width", int(self.packed_weights.shape[1]))
             _set(program, "u_layer_count", len(self.layout))
             _set(program, "u_layers", layers)
             _set(program, "u_hidden_activation", _HIDDEN[model.activation])
@@ -253,7 +267,7 @@ class NetworkRenderer:
         _set(program, "u_scheme", _SCHEMES[model.scheme])
         # encoded_feature (encoding.glsl) reads the counts; the baked MLP has them in its code, so baked
         # programs that do not call encoded_feature (all but encode_keys) lack these uniforms.
-        if self.weights_path == "texture" or "u_frequencies" in program:
+        if weights != "baked" or "u_frequencies" in program:
             _set(program, "u_frequencies", model.encoding.frequencies)
             _set(program, "u_t_frequencies", model.encoding.t_frequencies)
         _set(program, "u_frequency", _frequency_table(model, int(self.defines["MAX_FREQUENCIES"])))
@@ -352,7 +366,7 @@ class NetworkRenderer:
             self._skip_texture.filter = (moderngl.NEAREST, moderngl.NEAREST)
         return self._skip_texture
 
-    def _skip_uniforms(self, program: moderngl.Program, skip_threshold: float | None
+    def _skip_uniforms(self, program: moderngl.Program | moderngl.ComputeShader, skip_threshold: float | None
                        ) -> tuple[moderngl.Texture, int]:
         """Set skip.glsl's uniforms on ``program``; returns ``(texture, unit)`` of the bound to bind."""
         threshold = skip_threshold_value(skip_threshold)

@@ -30,7 +30,7 @@ from pathlib import Path
 from typing import Any
 
 from gratnet.errors import GratNetError
-from viewer.compile_worker import GROUPS, CompileWorker, shader_cache_enabled, warm_group
+from viewer.compile_worker import GROUPS, CompileWorker, shader_cache_enabled, warm_group, window_render_path
 from viewer.render_cli import MESHES, build_mesh, resolve_material
 
 __all__ = ["PREVIEW_MESHES", "SceneSupply", "check_mesh_spec", "start_display_import"]
@@ -111,13 +111,16 @@ class SceneSupply:
     """
 
     def __init__(self, ctx: Any, weights_path: str = "auto", background: bool = False,
-                 worker: CompileWorker | None = None) -> None:
+                 worker: CompileWorker | None = None, render_path: str = "auto") -> None:
+        from viewer.deferred import check_render_path
         from viewer.renderer import WEIGHTS_PATHS
 
         if weights_path not in WEIGHTS_PATHS:
             raise GratNetError(f"weights path must be one of {', '.join(WEIGHTS_PATHS)}, got {weights_path!r}")
         self.ctx = ctx
         self.weights_path = weights_path
+        #: ``--render-path``: ``auto`` takes the cached verdict (forward until the compile child measured it).
+        self.render_path = check_render_path(render_path)
         self.background = background
         #: Problems found in the background (a mesh that failed to load, a failed child), for the panel.
         self.errors: dict[str, str] = {}
@@ -126,6 +129,8 @@ class SceneSupply:
         self._paths: tuple[str, ...] = ()  # the material's weights paths, slowest first
         self._scenes: dict[str, Any] = {}  # weights path -> SceneRenderer of _material
         self._linked: set[tuple[str, str]] = set()  # (path, group) linked in this context
+        #: (path, group) → the link steps still to run (:meth:`_link`, one per frame in the background).
+        self._pending_links: dict[tuple[str, str], list[Callable[[], object]]] = {}
         self._active: set[tuple[str, str]] = set()  # ... and drawn once: ready to render
         self._worker: CompileWorker | None = None
         self._prestarted = worker
@@ -141,14 +146,15 @@ class SceneSupply:
             importlib.import_module("colour")
 
     @staticmethod
-    def start_worker(state: Any, weights_path: str = "auto") -> CompileWorker | None:
+    def start_worker(state: Any, weights_path: str = "auto", render_path: str = "auto") -> CompileWorker | None:
         """A child warming ``state``'s material (``None`` when Mesa's shader cache is off), started before
         any context exists: the quick texture path first, then what ``weights_path`` picks there."""
         if not shader_cache_enabled():
             return None
         paths = ("texture", weights_path) if weights_path == "auto" else (weights_path,)
         groups = ("slice", "surface") if state.slice_mode else GROUPS
-        return CompileWorker(resolve_material(state.material), paths, groups, state.material)
+        return CompileWorker(resolve_material(state.material), paths, groups, state.material,
+                             render_path=render_path)
 
     # -- checks (cheap, on the caller's thread) ----------------------------------------------------
 
@@ -193,7 +199,8 @@ class SceneSupply:
                 groups = ("slice", "surface") if state.slice_mode else GROUPS
                 # The window is on screen: the child yields the CPU to it (the first child, started before
                 # the window shows, runs at full priority).
-                self._worker = CompileWorker(model_path, self._paths, groups, state.material, niceness=5)
+                self._worker = CompileWorker(model_path, self._paths, groups, state.material, niceness=5,
+                                             render_path=self.render_path)
         if prestarted is not None:
             prestarted.close()
         if self._worker is None:  # a child's compile would not spare ours: the first path only, compiled here
@@ -240,7 +247,7 @@ class SceneSupply:
             if not self._ready(path, group):
                 continue
             if (path, group) not in self._linked:
-                self._link(path, group)
+                self._link(path, group, every_step=False)
                 return "linked"
             self._first_draw(path, group)
             return "took over" if best is not None else "drawn"
@@ -307,22 +314,43 @@ class SceneSupply:
         return None
 
     def _scene_for(self, path: str) -> Any:
+        from viewer.renderer import is_software_rasterizer
         from viewer.scene import SceneRenderer
 
         if path not in self._scenes:
             source = self._worker.baked_source if (self._worker is not None and path == "baked") else None
             self._scenes[path] = SceneRenderer(self.ctx, self.model(self._material or ""), weights_path=path,
-                                               baked_source=source)
+                                               baked_source=source,
+                                               render_path=window_render_path(
+                                                   self.render_path, is_software_rasterizer(self.ctx)),
+                                               measure_render_path=False)
         return self._scenes[path]
 
-    def _link(self, path: str, group: str) -> None:
-        network = self._scene_for(path).network
+    def _link_steps(self, path: str, group: str) -> list[Callable[[], object]]:
+        """The programs ``group`` needs on ``path``, one callable each (each one link from Mesa's cache)."""
+        scene = self._scene_for(path)
+        network = scene.network
         if group == "slice":
-            network.program("brdf_slice")
-        else:
-            network.program("surface")
-            network.depth_only_program("surface")
+            return [lambda: network.program("brdf_slice")]
+        steps: list[Callable[[], object]] = [lambda: network.program("surface"),
+                                             lambda: network.depth_only_program("surface")]
+        if scene.render_path == "deferred":  # the cached verdict (the window never measures)
+            steps += scene.deferred.compile_steps()
+        return steps
+
+    def _link(self, path: str, group: str, every_step: bool = True) -> bool:
+        """Link ``group``'s programs on ``path``: all of them, or with ``every_step`` False the next one only
+        (one per frame keeps the window's frames short). Returns whether all are linked now."""
+        pending = self._pending_links.setdefault((path, group), self._link_steps(path, group))
+        while pending:
+            pending.pop(0)()
+            if not every_step:
+                break
+        if pending:
+            return False
+        del self._pending_links[(path, group)]
         self._linked.add((path, group))
+        return True
 
     def _first_draw(self, path: str, group: str) -> None:
         warm_group(self._scenes[path], group)  # llvmpipe compiles (here: loads) the draw code at the first draw
@@ -415,6 +443,7 @@ class SceneSupply:
             scene.release()
         self._scenes.clear()
         self._linked.clear()
+        self._pending_links.clear()
         self._active.clear()
         self._material = None
 

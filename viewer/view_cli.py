@@ -10,6 +10,10 @@
   ``--slice``: the starting view, as in ``gratnet render``; light, camera and exposure left out are chosen
   from the material and the mesh (viewer.defaults), the same values as ``gratnet render``'s.
 - ``--weights-path auto|texture|baked``: where the shader reads the weights, as in ``gratnet render``.
+- ``--render-path auto|forward|deferred``: as in ``gratnet render``. In the window ``auto`` is forward on a CPU
+  rasterizer (llvmpipe: the deferred path's first frames after a switch cost 0.3–0.6 s of JIT work, over the
+  150 ms a frame may take); on a GPU it takes the verdict cached for this GPU and network shape, and while
+  there is none renders forward and lets the compile process time both.
 
 Mouse: drag over the picture to orbit (in BRDF-slice mode: to move the light), wheel to zoom. The
 Screenshot button writes ``gratnet-view-NNN.png`` (display sRGB, full resolution) and its
@@ -32,7 +36,7 @@ from pathlib import Path
 from gratnet.config import add_quiet_flag, parse_float, parse_int
 from gratnet.errors import GratNetError
 from viewer.defaults import fill_scene_defaults, with_fallback
-from viewer.render_cli import WEIGHT_PATHS
+from viewer.render_cli import RENDER_PATH_HELP, RENDER_PATHS, WEIGHT_PATHS
 
 __all__ = ["register", "run"]
 
@@ -71,6 +75,11 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                         help="where the shader reads the network's weights: texture, baked (literals in a generated "
                         "shader) or auto (baked for nets up to 32k multiply-adds on a CPU rasterizer, else texture; "
                         "default: auto)")
+    parser.add_argument("--spp", "--samples", dest="spp", type=parse_int, default=16, metavar="N",
+                        help="samples per pixel accumulated while the view stands still (progressive anti-aliasing, "
+                        "as gratnet render --spp; 1: off; typical: 4 to 64; the panel changes it; default: 16)")
+    parser.add_argument("--render-path", choices=RENDER_PATHS, default="auto", help=f"{RENDER_PATH_HELP}; "
+                        "default: auto")
     parser.add_argument("--screenshot-dir", default=".", metavar="DIR",
                         help="folder for the Screenshot button's PNGs (default: the working folder)")
     parser.add_argument("--max-frames", type=parse_int, default=0, metavar="N",
@@ -98,9 +107,11 @@ def _state(arguments: argparse.Namespace) -> object:
     from gratnet.atomic import check_output_folder
     from gratnet.modelfile import load_model
     from viewer.app import SLIDERS, ViewerState
-    from viewer.render_cli import MESHES, build_mesh, resolve_material
+    from viewer.render_cli import MAX_SAMPLES, MESHES, build_mesh, resolve_material
 
     check_output_folder(arguments.screenshot_dir, "--screenshot-dir")
+    if not 1 <= arguments.spp <= MAX_SAMPLES:
+        raise GratNetError(f"--spp (samples per pixel) must be an integer in 1 … {MAX_SAMPLES}, got {arguments.spp}")
     _scene_numbers(with_fallback(arguments))  # the flags given are checked before the defaults read the model
     fill_scene_defaults(arguments)  # the unset --light, --camera, --exposure, from the material and mesh
     theta, phi, distance, azimuth, elevation = _scene_numbers(arguments)
@@ -133,7 +144,8 @@ def run(arguments: argparse.Namespace) -> int:
     state = _state(arguments)
     extra = [] if state.mesh in ("cd", "sphere", "plane") else [state.mesh]
     with ViewerWindow(state, size, screenshot_dir=arguments.screenshot_dir, extra_meshes=extra,
-                      weights_path=arguments.weights_path) as window:
+                      weights_path=arguments.weights_path, max_samples=arguments.spp,
+                      render_path=arguments.render_path) as window:
         window.run(arguments.max_frames)
         if window.gl_errors:
             raise GratNetError(f"OpenGL reported errors: {'; '.join(window.gl_errors[:3])} (please report this)")

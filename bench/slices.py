@@ -1,5 +1,8 @@
 """Run time against error: the shader's frame time and MLP throughput beside torch's, for trained models.
 
+(``gratnet bench``'s BRDF-slice part; :mod:`bench.scenes` times mesh scenes. A tool on top of viewer/ and
+trainer/: the offline stage does not time the runtime.)
+
 For every model file the benchmark measures, on one BRDF-slice view (docs/physics.md "BRDF slice"):
 
 - the GLSL program's wall time per frame at each requested size (``NetworkRenderer.render_brdf_slice``,
@@ -60,6 +63,49 @@ class BenchConfig:
         "takes minutes)")
     torch_devices: str = config_field("auto", "torch devices for the reference: auto (cpu, plus cuda if present)")
     torch_threads: int = config_field(0, "torch CPU threads (0: torch's default, one per core)")
+    slices: bool = config_field(True, "time the BRDF-slice program against torch (--no-slices: scenes only)")
+    scenes: bool = config_field(True, "time mesh scenes (--scene-mesh as gratnet render sets it up) per weights "
+                                "path, render path and samples per pixel (--no-scenes: slices only)")
+    scene_mesh: str = config_field("cd", "mesh of the timed scenes: cd, sphere, plane or an .obj file")
+    scene_sizes: str = config_field(
+        "1920x1080,512x512", "scene image sizes, WxH comma-separated (1920x1080: full HD; 512x512: gratnet view's "
+        "default picture)")
+    render_paths: str = config_field(
+        "all", "scene render paths, comma-separated: forward, deferred, auto, or all (every path this build's "
+        "renderer offers)")
+    spp: str = config_field("1,4", "scene samples per pixel (anti-aliasing), comma-separated, each 1 … 1024",
+                            aliases=("--samples",))
+
+    def scene_size_list(self) -> list[tuple[int, int]]:
+        sizes = []
+        for part in (part.strip() for part in self.scene_sizes.split(",") if part.strip()):
+            pieces = part.lower().replace("×", "x").split("x")
+            if len(pieces) != 2 or not all(piece.strip().isdigit() for piece in pieces):
+                raise GratNetError(f"--scene-sizes expects WxH,… such as 1920x1080,512x512; got {self.scene_sizes!r}")
+            width, height = (int(piece) for piece in pieces)
+            if not (1 <= width <= 16384 and 1 <= height <= 16384):
+                raise GratNetError(f"--scene-sizes must lie in 1 … 16384 per side, got {part!r}")
+            sizes.append((width, height))
+        if not sizes:
+            raise GratNetError(f"--scene-sizes expects WxH,… such as 1920x1080,512x512; got {self.scene_sizes!r}")
+        return sizes
+
+    def render_path_list(self) -> list[str]:
+        from bench.scenes import available_render_paths, check_render_paths
+
+        paths = [part.strip() for part in self.render_paths.split(",") if part.strip()]
+        if paths == ["all"]:
+            return list(available_render_paths())
+        if not paths or any(path not in ("forward", "deferred", "auto") for path in paths):
+            raise GratNetError(f"--render-paths takes forward, deferred, auto or all; got {self.render_paths!r}")
+        check_render_paths(paths)
+        return paths
+
+    def spp_list(self) -> list[int]:
+        counts = _int_list(self.spp, "--spp")
+        if any(not 1 <= count <= 1024 for count in counts):
+            raise GratNetError(f"--spp (samples per pixel) must lie in 1 … 1024, got {self.spp!r}")
+        return counts
 
     def size_list(self) -> list[int]:
         sizes = _int_list(self.sizes, "--sizes")

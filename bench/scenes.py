@@ -1,0 +1,221 @@
+"""Frame times of mesh scenes: what a user of ``gratnet render`` and ``gratnet view`` waits for (issue 12).
+
+For every model, the mesh (the CD disc by default) is set up as ``gratnet render --mesh cd`` sets it up
+(light, camera and exposure from :func:`viewer.defaults.resolve_defaults`, Fresnel at n = 1.5) and
+rendered with :meth:`viewer.scene.SceneRenderer.render_rgba` at each requested size, per weights path
+(``texture``, ``baked``), per render path (``forward``; ``deferred`` and ``auto`` where the installed
+SceneRenderer takes a ``render_path``) and per sample count (anti-aliasing: ``samples`` per pixel). A
+frame is one ``render_rgba`` call, read-back of the float image included (a window or a file needs it),
+after a warm-up frame at the same size that pays for compilation, Mesa's JIT and allocations. Two times
+per frame: the wall time (the read-back waits for the GPU, so it includes all GPU work) and the GL timer
+query's GPU time of the same commands (none for frames over ~3.9 s: moderngl reads the timer as 32 bits of
+nanoseconds). Every row records ``GL_RENDERER``.
+
+Skip-work is off (no ``skip_threshold``): every covered pixel runs the network, as for an EXR file.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import inspect
+import json
+import statistics
+import time
+from typing import Any
+
+import numpy as np
+
+from gratnet.errors import GratNetError
+
+__all__ = ["SceneView", "available_render_paths", "check_render_paths", "json_lines", "markdown_table",
+           "run_scene_bench", "scene_frame_times", "scene_view", "write_scene_outputs"]
+
+#: Render paths a SceneRenderer without a ``render_path`` argument has.
+_FORWARD_ONLY = ("forward",)
+
+
+def available_render_paths() -> tuple[str, ...]:
+    """The render paths the installed :class:`~viewer.scene.SceneRenderer` offers: ``forward`` only, or its
+    ``RENDER_PATHS`` (default ``forward, deferred, auto``) once ``__init__`` takes ``render_path``."""
+    import viewer.scene
+
+    if "render_path" not in inspect.signature(viewer.scene.SceneRenderer.__init__).parameters:
+        return _FORWARD_ONLY
+    return tuple(getattr(viewer.scene, "RENDER_PATHS", ("forward", "deferred", "auto")))
+
+
+@dataclasses.dataclass(frozen=True)
+class SceneView:
+    """A mesh, its camera, light and exposure, as ``gratnet render`` chooses them."""
+
+    mesh: str
+    camera: Any  # viewer.camera.Camera
+    light: Any  # viewer.camera.Light
+    exposure: float
+    ior: float | None = 1.5
+
+
+def scene_view(model_path: str, mesh: str) -> SceneView:
+    """``gratnet render --material MODEL --mesh MESH``'s view (its defaults for that pair)."""
+    from viewer.camera import Camera, Light
+    from viewer.defaults import FOV_DEGREES, resolve_defaults
+
+    defaults = resolve_defaults(model_path, mesh)
+    camera = Camera(defaults.camera_distance, defaults.camera_azimuth_degrees, defaults.camera_elevation_degrees,
+                    fov_deg=FOV_DEGREES)
+    light = Light.directional(defaults.light_theta_degrees, defaults.light_phi_degrees)
+    return SceneView(mesh, camera, light, defaults.exposure)
+
+
+#: moderngl reads GL_TIME_ELAPSED as a 32-bit count of nanoseconds: frames longer than this (llvmpipe at full HD)
+#: have no GPU time (``None``); their wall time stands.
+_TIMER_LIMIT_S = (2**32 - 1) * 1e-9
+
+
+def _timed(frame: Any, ctx: Any, repeats: int, max_seconds: float) -> tuple[list[float], list[float | None]]:
+    """Wall and GL-timer seconds of ``frame()`` calls: ``repeats`` of them, fewer once ``max_seconds`` is spent."""
+    walls: list[float] = []
+    gpus: list[float | None] = []
+    query = ctx.query(time=True)  # moderngl 5 frees queries with the context (they have no release())
+    while len(walls) < repeats and sum(walls) < max_seconds:
+        start = time.perf_counter()
+        with query:
+            frame()
+        ctx.finish()
+        walls.append(time.perf_counter() - start)
+        elapsed = query.elapsed * 1e-9  # nanoseconds; waits for the result
+        gpus.append(elapsed if walls[-1] < 0.9 * _TIMER_LIMIT_S else None)
+    return walls, gpus
+
+
+def scene_frame_times(ctx: Any, model: Any, model_path: str, view: SceneView, weights_path: str,
+                      render_path: str, sizes: list[tuple[int, int]], samples: list[int], repeats: int,
+                      max_seconds: float) -> list[dict[str, Any]]:
+    """One row per (size, samples) for one model on one weights path and render path (see the module
+    docstring); ``model_path`` only labels the rows."""
+    from viewer.render_cli import build_mesh
+    from viewer.scene import SceneRenderer
+
+    options: dict[str, Any] = {"weights_path": weights_path}
+    if render_path != "forward" or available_render_paths() != _FORWARD_ONLY:
+        options["render_path"] = render_path
+    start = time.perf_counter()
+    renderer = SceneRenderer(ctx, model, **options)
+    buffers = None
+    rows: list[dict[str, Any]] = []
+    try:
+        buffers = renderer.upload(build_mesh(view.mesh))
+
+        def frame(size: tuple[int, int], count: int) -> np.ndarray:
+            return renderer.render_rgba(buffers, view.camera, view.light, size, view.exposure, view.ior,
+                                        samples=count)
+
+        frame((8, 8), 1)  # compile, link and first draw (Mesa JITs on first use)
+        setup_seconds = time.perf_counter() - start
+        for size in sizes:
+            for count in samples:
+                coverage = frame(size, count)[..., 3]  # warm-up at this size and sample count
+                walls, gpus = _timed(lambda size=size, count=count: frame(size, count), ctx, repeats, max_seconds)
+                seconds = statistics.median(walls)
+                evaluations = float(np.sum(coverage)) * count  # samples that hit the mesh, each one evaluation
+                rows.append({
+                    "kind": "scene", "mesh": view.mesh, "width": size[0], "height": size[1], "spp": count,
+                    "requested_weights_path": weights_path, "weights_path": renderer.network.weights_path,
+                    "requested_render_path": render_path,
+                    "render_path": str(getattr(renderer, "render_path", render_path)),
+                    "setup_s": setup_seconds, "times_s": walls, "seconds": seconds, "gpu_times_s": gpus,
+                    "gpu_seconds": statistics.median(gpus) if None not in gpus else None, "fps": 1.0 / seconds,
+                    "covered_pixels": int(np.count_nonzero(coverage)), "evaluations": evaluations,
+                    "gmac_per_s": model.macs_per_evaluation * evaluations / seconds / 1e9,
+                    "model_file": model_path,
+                })
+    finally:
+        if buffers is not None:
+            buffers.release()
+        renderer.release()
+    return rows
+
+
+def _format(value: object, digits: int = 3) -> str:
+    if value is None:
+        return "—"
+    if isinstance(value, float):
+        return f"{value:.{digits}g}" if value == 0 or 1e-3 <= abs(value) < 1e5 else f"{value:.2e}"
+    return str(value)
+
+
+def _milliseconds(seconds: float | None) -> str:
+    if seconds is None:
+        return "—"
+    milliseconds = seconds * 1e3
+    return f"{milliseconds:.0f}" if milliseconds >= 100 else f"{milliseconds:.3g}"
+
+
+def markdown_table(rows: list[dict[str, Any]]) -> str:
+    """One row per (model, size, weights path, render path, samples per pixel)."""
+    header = ("| model | MACs/pixel | mesh | size | weights | render path | spp | frame (ms, wall) | GPU (ms, timer) "
+              "| fps | covered pixels | GMAC/s | GL_RENDERER |")
+    lines = [header, "|" + "---|" * (header.count("|") - 1)]
+    for row in rows:
+        render_path = row["render_path"]
+        if row["requested_render_path"] != render_path:
+            render_path = f"{row['requested_render_path']} → {render_path}"
+        lines.append("| " + " | ".join(_format(value) for value in (
+            row["model"], row["macs_per_pixel"], row["mesh"], f"{row['width']}×{row['height']}", row["weights_path"],
+            render_path, row["spp"], _milliseconds(row["seconds"]), _milliseconds(row["gpu_seconds"]), row["fps"],
+            row["covered_pixels"], row["gmac_per_s"], row["gl_renderer"])) + " |")
+    return "\n".join(lines) + "\n"
+
+
+def json_lines(rows: list[dict[str, Any]]) -> str:
+    """One JSON object per line (strict JSON: no NaN)."""
+    from gratnet.jsontext import strict_json
+
+    return "".join(json.dumps(json.loads(strict_json(row, "bench scene row"))) + "\n" for row in rows)
+
+
+def check_render_paths(requested: list[str]) -> None:
+    """Refuse (one line) a render path the installed SceneRenderer does not offer."""
+    available = available_render_paths()
+    missing = [path for path in requested if path not in available]
+    if missing:
+        raise GratNetError(f"--render-paths: this build's renderer offers {', '.join(available)}; "
+                           f"not {', '.join(missing)}")
+
+
+def run_scene_bench(ctx: Any, entries: list[Any], config: Any, progress: bool = True) -> list[dict[str, Any]]:
+    """Every model (``bench.slices.ModelEntry``) × weights path × render path × size × samples per pixel of
+    ``config`` (``bench.slices.BenchConfig``); nets above ``baked_max_macs`` skip the baked path."""
+    from tqdm import tqdm
+
+    sizes, paths, samples = config.scene_size_list(), config.path_list(), config.spp_list()
+    render_paths = config.render_path_list()
+    gl_renderer = str(ctx.info.get("GL_RENDERER", "unknown"))
+    gl_version = str(ctx.info.get("GL_VERSION", "unknown"))
+    rows: list[dict[str, Any]] = []
+    for entry in tqdm(entries, desc="bench scenes", unit="model", disable=not progress):
+        view = scene_view(str(entry.path), config.scene_mesh)
+        macs = entry.model.macs_per_evaluation
+        for weights_path in paths:
+            if weights_path == "baked" and macs > config.baked_max_macs:
+                continue
+            for render_path in render_paths:
+                for row in scene_frame_times(ctx, entry.model, str(entry.path), view, weights_path, render_path, sizes,
+                                             samples, config.repeats, config.max_seconds):
+                    row = {"model": entry.label, "material": entry.material, "macs_per_pixel": macs,
+                           "gl_renderer": gl_renderer, "gl_version": gl_version, **row}
+                    rows.append(row)
+                    if progress:
+                        tqdm.write(json.dumps({key: row[key] for key in (
+                            "model", "width", "height", "weights_path", "render_path", "spp", "seconds",
+                            "gpu_seconds")}))
+    return rows
+
+
+def write_scene_outputs(rows: list[dict[str, Any]], out_dir: Any) -> None:
+    """``scenes.jsonl`` (one JSON object per row) and ``scenes.md`` (the table) in ``out_dir``, atomically."""
+    from gratnet.atomic import write_text_atomic
+
+    out_dir.mkdir(parents=True, exist_ok=True)
+    write_text_atomic(out_dir / "scenes.jsonl", json_lines(rows))
+    write_text_atomic(out_dir / "scenes.md", markdown_table(rows))

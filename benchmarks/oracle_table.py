@@ -1,0 +1,115 @@
+"""The interpolation oracle of every ground-truth volume in a folder: what its training grid supports.
+
+For each VOLUME.exr: the volume interpolated trilinearly at the exact key vectors of the paper's five BRDF
+slices (trainer/diagnostics.py VolumeOracle), scored against the exact ground-truth slices with the
+project's own metrics (mean FLIP, PSNR of CIE XYZ inside the view disc) and split by region. No network is
+involved: this is the floor a network trained on that grid could reach if it interpolated perfectly.
+
+    python benchmarks/oracle_table.py VOLUME_DIR [--size 256] [--cache-dir out/cache] [--json out.json]
+        [--figure docs/images/oracle_slices.png]
+
+Prints one JSON line per volume and a markdown table (FLIP per slice) on stdout. The ground-truth slices
+are cached in --cache-dir (the same cache `gratnet evaluate` uses), so a second run is cheap.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+import time
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from tqdm import tqdm
+
+from gratnet.atomic import atomic_path, write_text_atomic
+from gratnet.volume import read_volume
+from trainer.brdfslice import SliceConfig, slice_view_directions
+from trainer.diagnostics import REGIONS, VolumeOracle, region_errors, region_labels
+from trainer.evaluate import STANDARD_SLICES, _slice_label, ground_truth_brdf_slice
+from trainer.fourier import OpticsConfig
+from trainer.loaders import LoadOptions, load_heightfield
+from trainer.metrics import image_metrics
+from trainer.report import comparison_figure
+
+
+def oracle_rows(volume_path: Path, size: int, cache_dir: str, progress: bool) -> tuple[dict[str, Any], list]:
+    """Oracle metrics of one volume (one dict) and its figure rows (label, reference, oracle)."""
+    started = time.perf_counter()
+    volume = read_volume(volume_path)
+    metadata = volume.metadata
+    source = str(metadata.get("source", ""))
+    if not source.startswith(("generator:", "dataset:")):
+        raise SystemExit(f"oracle_table: {volume_path} was not made from a built-in generator or dataset "
+                         f"(source {source!r}): its ground-truth slices cannot be recomputed")
+    field = load_heightfield(source, LoadOptions())
+    optics = OpticsConfig.from_volume_metadata(metadata)
+    oracle = VolumeOracle(volume)
+    _, inside = slice_view_directions(size)
+    slices, figure = [], []
+    for theta, phi, exposure in STANDARD_SLICES:
+        config = SliceConfig(theta, phi, size=size, exposure=exposure)
+        reference = ground_truth_brdf_slice(field, optics, config, cache_dir, progress)
+        predicted = oracle.brdf_slice(config)
+        labels = region_labels(reference, config, optics.sigma_s_um)
+        label = _slice_label(theta, phi, exposure)
+        slices.append({"slice": label, **image_metrics(reference, predicted, mask=inside),
+                       "regions": region_errors(reference, predicted, labels)})
+        figure.append((f"{volume_path.stem} {label}", reference, predicted))
+    row = {
+        "volume": volume_path.name, "source": source, "resolution": volume.resolution, "slices": volume.slices,
+        "scheme": metadata.get("scheme"), "sigma_s_um": optics.sigma_s_um, "size": size,
+        "volume_bytes": int(volume.xyz.astype(np.float32).nbytes), "brdf_slices": slices,
+        "seconds": round(time.perf_counter() - started, 1),
+    }
+    return row, figure
+
+
+def markdown(rows: list[dict[str, Any]]) -> str:
+    """FLIP per slice (and PSNR of the (0°, 0°) slice) of every volume's oracle."""
+    labels = [slice_["slice"] for slice_ in rows[0]["brdf_slices"]]
+    lines = ["| volume | grid | " + " | ".join(labels) + " | PSNR (0°, 0°) dB | lit-region FLIP (0°, 0°) |",
+             "|---|---|" + "---|" * (len(labels) + 2)]
+    for row in rows:
+        flips = " | ".join(f"{slice_['flip']:.4f}" for slice_ in row["brdf_slices"])
+        first = row["brdf_slices"][0]
+        lit = {name: first["regions"][name]["flip"] for name in REGIONS if name != "dark"
+               and first["regions"][name]["fraction"] > 0}
+        lit_text = ", ".join(f"{name} {value:.3f}" for name, value in lit.items())
+        lines.append(f"| {row['volume']} | {row['resolution']}² × {row['slices']} | {flips} | "
+                     f"{first['psnr_xyz']:.1f} | {lit_text} |")
+    return "\n".join(lines) + "\n"
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("volumes", type=Path, help="folder of ground-truth volumes (*.exr)")
+    parser.add_argument("--size", type=int, default=256, help="BRDF-slice width and height (pixels)")
+    parser.add_argument("--cache-dir", default="out/cache", help="ground-truth slice cache (as gratnet evaluate)")
+    parser.add_argument("--json", type=Path, help="write all rows as one JSON file")
+    parser.add_argument("--figure", type=Path, help="PNG: ground truth | oracle | FLIP for every slice")
+    parser.add_argument("--quiet", action="store_true", help="no progress bars")
+    arguments = parser.parse_args(argv)
+    paths = sorted(arguments.volumes.glob("*.exr"))
+    if not paths:
+        print(f"oracle_table: no *.exr in {arguments.volumes}", file=sys.stderr)
+        return 2
+    rows, figure_rows = [], []
+    for path in tqdm(paths, desc="volumes", disable=arguments.quiet):
+        row, figure = oracle_rows(path, arguments.size, arguments.cache_dir, not arguments.quiet)
+        print(json.dumps(row), flush=True)
+        rows.append(row)
+        figure_rows.extend(figure)
+    if arguments.json:
+        write_text_atomic(arguments.json, json.dumps(rows, indent=1) + "\n")
+    if arguments.figure:
+        with atomic_path(arguments.figure) as temporary:
+            comparison_figure(temporary, figure_rows, title="interpolation oracle: ground truth | oracle | FLIP")
+    print(markdown(rows))
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

@@ -1,0 +1,67 @@
+#!/usr/bin/env bash
+# One-command GPU bench of mesh scenes (issue 12): the shipped CD model on the CD disc at 1920×1080, as
+# `gratnet render --material cd --mesh cd` sets it up, texture and baked weights, every render path this
+# build offers (forward; deferred and auto once the renderer has them), 1 and 4 samples per pixel.
+# Writes $OUT/scenes.md (the table), $OUT/scenes.jsonl (every frame time), $OUT/bench.config.json and
+# $OUT/log.txt. Every row names the GL_RENDERER it ran on.
+#
+# On a lent device machine (facts: docs/benchmarks.md "GPU bench", ../shared/notes/opengl-on-a-gpu.md):
+#   1. here, once, with the network:   scripts/gpu_bench.sh --prepare
+#      (EGL/GL loader .deb files into .gl/, the Python wheels the image lacks into .whl/; both git-ignored
+#      through .git/info/exclude)
+#   2. there: the device tool's run with command "bash scripts/gpu_bench.sh" and carry [".gl", ".whl"].
+# Anywhere else it runs on whatever EGL gives (Mesa llvmpipe on a machine without a GPU: slow; set
+# SIZES=512x512 to try it). Settings: OUT (default out/gpu-bench), SIZES, SPP, WEIGHTS, RENDER_PATHS,
+# REPEATS, MATERIAL.
+set -euo pipefail
+cd "$(dirname "$0")/.."
+
+WHEELS="moderngl glcontext colour-science pyrr openexr array-api-compat pypng flip-evaluator"
+DEBS="libegl1 libglvnd0 libopengl0 libgl1 libglx0 libgles2"
+
+if [[ "${1:-}" == "--prepare" ]]; then
+    python=${PYTHON:-.venv/bin/python}
+    [[ -x "$python" ]] || python=python3
+    exclude=$(git rev-parse --git-path info/exclude)
+    mkdir -p "$(dirname "$exclude")"
+    for folder in /.gl/ /.whl/; do grep -qx "$folder" "$exclude" 2>/dev/null || echo "$folder" >>"$exclude"; done
+    mkdir -p .gl .whl /tmp/amd64/partial
+    apt_options=(-oAPT::Architecture=amd64 -oAPT::Architectures=amd64 -oDir::State::Lists=/tmp/amd64)
+    apt-get "${apt_options[@]}" update -qq
+    (cd .gl && apt-get "${apt_options[@]}" download $DEBS)
+    for name in $WHEELS; do  # the versions installed here, for CPython 3.12 on x86-64 (the image's)
+        version=$("$python" -c "import importlib.metadata as m, sys; print(m.version(sys.argv[1]))" "$name")
+        "$python" -m pip download -q --no-deps --only-binary=:all: --python-version 3.12 --implementation cp \
+            --platform manylinux_2_28_x86_64 --platform manylinux_2_17_x86_64 --platform manylinux2014_x86_64 \
+            --platform manylinux1_x86_64 --platform any -d .whl "$name==$version"
+    done
+    du -sh .gl .whl
+    exit 0
+fi
+
+OUT=${OUT:-out/gpu-bench}
+mkdir -p "$OUT"
+if compgen -G ".gl/*.deb" >/dev/null; then  # the GL loaders (glvnd) the bare image lacks
+    for f in .gl/*.deb; do dpkg -x "$f" /; done
+    ldconfig
+fi
+vendor=/usr/local/nvidia/share/glvnd/egl_vendor.d/10_nvidia.json
+if [[ -f $vendor && -z "${__EGL_VENDOR_LIBRARY_FILENAMES:-}" ]]; then
+    export __EGL_VENDOR_LIBRARY_FILENAMES=$vendor
+fi
+if compgen -G ".whl/*.whl" >/dev/null; then
+    python3 -m pip install -q --no-index --no-deps --no-compile --no-cache-dir --upgrade --target /tmp/gratnet-site \
+        .whl/*.whl
+    export PYTHONPATH=/tmp/gratnet-site:$PWD
+else
+    export PYTHONPATH=$PWD${PYTHONPATH:+:$PYTHONPATH}
+fi
+python=${PYTHON:-python3}
+export PYTHONUNBUFFERED=1
+{
+    nvidia-smi --query-gpu=name,driver_version --format=csv,noheader 2>/dev/null || true
+    "$python" -m gratnet.cli bench "${MATERIAL:-cd}" --no-slices --scene-mesh cd --scene-sizes "${SIZES:-1920x1080}" \
+        --weights-paths "${WEIGHTS:-texture,baked}" --render-paths "${RENDER_PATHS:-all}" --spp "${SPP:-1,4}" \
+        --repeats "${REPEATS:-5}" --max-seconds 60 --out "$OUT"
+    cat "$OUT/scenes.md"
+} 2>&1 | tee "$OUT/log.txt"

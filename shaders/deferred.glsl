@@ -1,0 +1,130 @@
+// Compute programs of the deferred render path (viewer/deferred.py, issue 12), one kernel per define:
+//
+//   COMPACT  over every texel of the G-buffer (surface.glsl compiled with GBUFFER: (key, factor) per
+//            covered texel, factor = exposure * irradiance * A, cleared to (0, 0, 0, -1) = background):
+//            texels that need the network (factor > 0 and not excluded by skip.glsl's bound) are appended
+//            to the list; every other texel is finished here: (0, 0, 0, coverage).
+//   ARGS     one invocation: the list length -> the indirect dispatch size of SHADE (groups of
+//            SHADE_GROUP, spread over x and y: at most 65535 groups per dimension).
+//   SHADE    one invocation per list entry: encoding -> MLP -> inverse range (the same encoding.glsl,
+//            mlp.glsl and range.glsl as the forward path's surface.glsl) and the texel becomes
+//            (factor * XYZ, 1): exposed CIE XYZ and coverage, as the forward path writes.
+//   RESOLVE  per pixel: the mean of its u_samples texels (sample k at row y + k * u_height) times u_scale,
+//            added to the output when u_accumulate is set (samples in several chunks).
+//
+// So background, A = 0 and bound-dark pixels never reach the MLP: the skip rules of the forward path
+// become the list's length. Needs the defines of mlp.glsl and encoding.glsl (SHADE), skip.glsl's (COMPACT),
+// DEFERRED_LIST_BINDING and SHADE_GROUP.
+
+#ifdef COMPUTE_SHADER
+precision highp float;
+precision highp int;
+
+// The list: the indirect dispatch arguments (written by ARGS), the entry count, then one packed texel
+// coordinate (x | y << 16) per entry.
+layout(std430, binding = DEFERRED_LIST_BINDING) buffer DeferredList {
+    uint dispatch_x;
+    uint dispatch_y;
+    uint dispatch_z;
+    uint entry_count;
+    uint entries[];
+};
+
+// The preprocessor includes each file once, whatever the #ifdefs around it: a file two kernels need is
+// included here, outside them.
+#include "encoding.glsl"
+
+#ifdef COMPACT
+#include "skip.glsl"
+
+layout(local_size_x = 8, local_size_y = 8) in;
+layout(rgba32f, binding = 0) uniform restrict image2D u_gbuffer;
+
+void main() {
+    ivec2 texel = ivec2(gl_GlobalInvocationID.xy);
+    if (any(greaterThanEqual(texel, imageSize(u_gbuffer)))) {
+        return;
+    }
+    vec4 value = imageLoad(u_gbuffer, texel);
+    float factor = value.w;
+    if (factor < 0.0) {
+        imageStore(u_gbuffer, texel, vec4(0.0));  // background: no coverage
+        return;
+    }
+    count_event(COUNTER_FRAGMENTS);
+    if (!(factor > 0.0)) {
+        count_event(COUNTER_SKIPPED_A_ZERO);  // back face, below a horizon, no irradiance
+        imageStore(u_gbuffer, texel, vec4(0.0, 0.0, 0.0, 1.0));
+        return;
+    }
+    encoding_set_key(value.xyz);
+    if (skip_by_bound(factor)) {
+        count_event(COUNTER_SKIPPED_BOUND);  // the display would show 0 whatever the network says
+        imageStore(u_gbuffer, texel, vec4(0.0, 0.0, 0.0, 1.0));
+        return;
+    }
+    count_event(COUNTER_EVALUATIONS);
+    uint index = atomicAdd(entry_count, 1u);
+    entries[index] = uint(texel.x) | (uint(texel.y) << 16);
+}
+#endif
+
+#ifdef ARGS
+layout(local_size_x = 1) in;
+
+void main() {
+    uint groups = (entry_count + uint(SHADE_GROUP) - 1u) / uint(SHADE_GROUP);
+    dispatch_x = min(groups, 65535u);
+    dispatch_y = groups == 0u ? 0u : (groups + 65534u) / 65535u;
+    dispatch_z = 1u;
+}
+#endif
+
+#ifdef SHADE
+layout(local_size_x = SHADE_GROUP) in;  // before mlp.glsl, whose shared-memory copy reads gl_WorkGroupSize
+#include "mlp.glsl"
+#include "range.glsl"
+
+layout(rgba32f, binding = 0) uniform restrict image2D u_gbuffer;
+
+void main() {
+#ifdef WEIGHTS_SHARED
+    mlp_load_shared_weights();  // the whole group, before any invocation leaves
+#endif
+    uint index = (gl_WorkGroupID.y * gl_NumWorkGroups.x + gl_WorkGroupID.x) * uint(SHADE_GROUP)
+                 + gl_LocalInvocationIndex;
+    if (index >= entry_count) {
+        return;
+    }
+    uint entry = entries[index];
+    ivec2 texel = ivec2(int(entry & 0xffffu), int(entry >> 16));
+    vec4 value = imageLoad(u_gbuffer, texel);
+    encoding_set_key(value.xyz);
+    vec3 xyz = range_inverse(mlp_evaluate());
+    imageStore(u_gbuffer, texel, vec4(value.w * xyz, 1.0));  // value.w: exposure * irradiance * A
+}
+#endif
+
+#ifdef RESOLVE
+layout(local_size_x = 8, local_size_y = 8) in;
+layout(rgba32f, binding = 0) uniform restrict readonly image2D u_gbuffer;
+layout(rgba32f, binding = 1) uniform restrict image2D u_output;
+uniform int u_samples;     // samples in this chunk of the G-buffer
+uniform int u_height;      // image rows per sample
+uniform float u_scale;     // 1 / (all samples of the pixel)
+uniform bool u_accumulate; // add to the output (a later chunk) instead of replacing it
+
+void main() {
+    ivec2 pixel = ivec2(gl_GlobalInvocationID.xy);
+    if (any(greaterThanEqual(pixel, imageSize(u_output)))) {
+        return;
+    }
+    vec4 sum = vec4(0.0);
+    for (int k = 0; k < u_samples; ++k) {
+        sum += imageLoad(u_gbuffer, ivec2(pixel.x, pixel.y + k * u_height));
+    }
+    vec4 mean = sum * u_scale;
+    imageStore(u_output, pixel, u_accumulate ? imageLoad(u_output, pixel) + mean : mean);
+}
+#endif
+#endif

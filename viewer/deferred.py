@@ -1,0 +1,455 @@
+"""The deferred render path (issue 12): a cheap G-buffer pass, then the network in a compute shader.
+
+:class:`~viewer.scene.SceneRenderer` renders a mesh on one of two paths with the same output (exposed CIE
+XYZ and coverage, ``float32`` ``(H, W, 4)``, row 0 at the top):
+
+* ``forward``: ``shaders/surface.glsl`` runs the network in the fragment shader (depth pre-pass first);
+* ``deferred`` (this module):
+
+  1. **G-buffer**: ``surface.glsl`` compiled with ``GBUFFER`` rasterizes the mesh with the depth test and
+     writes, per pixel, the key vector and the factor ``exposure · irradiance · A`` (RGBA32F; cleared to
+     ``(0, 0, 0, −1)``, so a negative factor is background). No network there: overdraw costs little.
+  2. **Compaction** (``shaders/deferred.glsl`` ``COMPACT``): the pixels that need the network — covered,
+     factor > 0, not excluded by the skip bound (``shaders/skip.glsl``) when a ``skip_threshold`` is given
+     — are appended to a list in an SSBO with an atomic counter; the others are finished in place
+     (``(0, 0, 0, coverage)``). Background, A = 0 and bound-dark pixels cost nothing afterwards.
+  3. **Shading** (``SHADE``): one invocation per list entry, dispatched indirectly
+     (``glDispatchComputeIndirect``: the list length never comes back to the CPU), evaluates the same
+     ``encoding.glsl``/``mlp.glsl``/``range.glsl`` as the forward path and writes ``factor · XYZ`` into
+     the G-buffer texel.
+  4. **Resolve** (``RESOLVE``, only for several samples): the mean of a pixel's samples.
+
+Samples: ``offsets_px`` (``(N, 2)`` pixels, :func:`viewer.antialias.sample_offsets`) renders N G-buffers
+stacked in one texture (sample k in rows ``k·H … k·H + H − 1``, each drawn with
+``view_projection @ jitter_matrix(offset)``), then one compaction and one MLP dispatch over the N-times-longer
+list, then the per-pixel mean (coverage averaged too). N = 1 at offset (0, 0) is the un-jittered render.
+Where ``N · H`` exceeds the largest texture, the samples are taken in chunks, each accumulated.
+
+Weights of the compute pass (:data:`DEFERRED_WEIGHTS`): ``texture`` (the packed RGBA32F texture, as the
+forward path), ``ssbo`` (the same texels in a std430 buffer), ``shared`` (that buffer copied into each work
+group's shared memory: only nets whose texels fit the driver's shared memory, 32 KiB on llvmpipe, i.e.
+not the shipped 28k-MAC nets) or ``baked`` (viewer/baked.py's literals, the fastest form on llvmpipe).
+``ssbo-fp16`` / ``shared-fp16``: the same with each weight stored as an IEEE half (``unpackHalf2x16``, GL
+4.3 core; the sums stay float32): half the memory traffic, at an error measured in docs/benchmarks.md.
+``auto``: ``baked`` when the :class:`~viewer.renderer.NetworkRenderer` bakes; else ``texture`` on a
+software rasterizer (llvmpipe: 1.2–1.3× faster than ``ssbo``, docs/benchmarks.md "Render paths") and
+``ssbo`` on a GPU (the fastest form of the H100 micro-benchmark, shared/notes/opengl-on-a-gpu.md; the
+compute pass itself is not measured on a GPU yet).
+
+Choosing the path (:func:`choose_render_path`): ``auto`` times both paths on a probe scene (the CD disc at
+:data:`PROBE_SIZE`) on the current context for this network's shape, and caches the verdict in
+``$XDG_CACHE_HOME/gratnet/render_path.json`` (else ``~/.cache/…``), keyed by ``GL_RENDERER`` and the
+network shape, so later runs do not measure again.
+
+Rendering only: no glfw, no imgui, no torch.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import os
+import time
+from collections.abc import Callable
+from pathlib import Path
+from typing import TYPE_CHECKING
+
+import moderngl
+import numpy as np
+
+from gratnet.errors import GratNetError
+from viewer.antialias import check_offsets
+from viewer.glsl import compile_compute, compile_program
+from viewer.renderer import _LOG, _SOFTWARE_RASTERIZERS, _set, skip_threshold_value
+
+if TYPE_CHECKING:
+    from viewer.camera import Camera, Light
+    from viewer.scene import MeshBuffers, SceneRenderer
+
+__all__ = ["DEFERRED_WEIGHTS", "PROBE_SIZE", "RENDER_PATHS", "DeferredRenderer", "check_render_path",
+           "choose_render_path", "render_path_cache_file"]
+
+#: ``render_path`` values of :class:`~viewer.scene.SceneRenderer` and ``--render-path``.
+RENDER_PATHS = ("auto", "forward", "deferred")
+#: Where the compute pass reads the weights (see the module docstring).
+DEFERRED_WEIGHTS = ("auto", "texture", "ssbo", "shared", "baked", "ssbo-fp16", "shared-fp16")
+#: Largest finite IEEE half: a weight beyond it cannot be stored as fp16.
+FP16_MAX = 65504.0
+#: The documented error of the fp16 weight sources against fp32: relative, per XYZ channel, on pixels at
+#: least 1e-3 of the image's peak. Measured ≤ 0.41 % on the shipped cd and blazed nets
+#: (docs/benchmarks.md); tests/test_deferred.py holds it for a random net.
+FP16_RELATIVE_ERROR = 0.01
+#: The ``auto`` probe: the CD disc at this size (pixels), each path timed as the best of two renders (one
+#: when it is already 1.5× slower than the other's best), after one untimed render that compiles it.
+PROBE_SIZE = (128, 128)
+_PROBE_RENDERS = 2
+_PROBE_CLEAR_RATIO = 1.5
+_PROGRAM = "deferred"
+_SHADE_GROUP = 64  # invocations per SHADE work group
+_TILE = 8  # COMPACT / RESOLVE work groups: 8×8 texels
+_LIST_BINDING = 7  # SSBO bindings: skip counters 5 (renderer.py), weights 6, the list 7
+_WEIGHTS_BINDING = 6
+_CACHE_VERSION = 1
+_CHUNK_TEXELS = 1 << 26  # G-buffer texels per chunk of samples at most (1 GiB of RGBA32F)
+
+
+def check_render_path(render_path: object) -> str:
+    """``render_path`` if it is one of :data:`RENDER_PATHS`, else :class:`GratNetError` (one line)."""
+    if not isinstance(render_path, str) or render_path not in RENDER_PATHS:
+        raise GratNetError(f"render path must be one of {', '.join(RENDER_PATHS)}, got {render_path!r}")
+    return render_path
+
+
+def _groups(count: int, size: int) -> int:
+    return max(1, -(-count // size))
+
+
+class DeferredRenderer:
+    """The deferred path of a :class:`~viewer.scene.SceneRenderer` (see the module docstring).
+
+    Args:
+        scene: the owner; its :class:`~viewer.renderer.NetworkRenderer` gives the defines, model uniforms,
+            weights and skip bound, its uniform setter the camera and light.
+        weights: one of :data:`DEFERRED_WEIGHTS`.
+
+    Attributes:
+        weights: the weights source chosen (never ``auto``).
+    """
+
+    def __init__(self, scene: SceneRenderer, weights: str = "auto") -> None:
+        if weights not in DEFERRED_WEIGHTS:
+            raise GratNetError(f"deferred weights must be one of {', '.join(DEFERRED_WEIGHTS)}, got {weights!r}")
+        network = scene.network
+        if weights == "auto":
+            renderer = str(scene.ctx.info.get("GL_RENDERER", "")).lower()
+            software = any(name in renderer for name in _SOFTWARE_RASTERIZERS)
+            weights = "baked" if network.weights_path == "baked" else "texture" if software else "ssbo"
+        if weights == "baked" and network.weights_path != "baked":
+            raise GratNetError("deferred weights 'baked' need a SceneRenderer with weights_path='baked'")
+        if weights.endswith("-fp16") and not np.all(np.abs(network.packed_weights) <= FP16_MAX):
+            raise GratNetError(f"deferred weights {weights!r}: the net has weights beyond fp16's range (±{FP16_MAX:g})")
+        self.scene = scene
+        self.ctx = scene.ctx
+        self.network = network
+        self.weights = weights
+        self._programs: dict[str, moderngl.Program | moderngl.ComputeShader] = {}
+        self._weight_buffer: moderngl.Buffer | None = None
+        self._list: moderngl.Buffer | None = None
+        self._targets: tuple[tuple[int, int], moderngl.Texture, moderngl.Renderbuffer, moderngl.Framebuffer] | None
+        self._targets = None
+        self._output: moderngl.Texture | None = None
+
+    # ---------------------------------------------------------------------------------------------
+    # Programs
+
+    def _defines(self) -> dict[str, int | float]:
+        return {**self.network.defines, "DEFERRED_LIST_BINDING": _LIST_BINDING, "SHADE_GROUP": _SHADE_GROUP}
+
+    def _gbuffer_program(self) -> moderngl.Program:
+        if "gbuffer" not in self._programs:
+            self._programs["gbuffer"] = compile_program(self.ctx, "surface", {**self.network.defines, "GBUFFER": 1},
+                                                        self.network.shader_root)
+        return self._programs["gbuffer"]  # type: ignore[return-value]
+
+    def _compute(self, kernel: str, counting: bool = False) -> moderngl.ComputeShader:
+        key = kernel + ("#count" if counting else "")
+        if key not in self._programs:
+            defines = {**self._defines(), kernel: 1}
+            overrides = None
+            if kernel == "SHADE":
+                overrides = self.network._overrides if self.weights == "baked" else None
+                if self.weights not in ("texture", "baked"):
+                    defines["WEIGHTS_BINDING"] = _WEIGHTS_BINDING
+                    texels = int(np.prod(self.network.packed_weights.shape[:2]))
+                    if self.weights.startswith("ssbo"):
+                        defines["WEIGHTS_SSBO"] = 1
+                    else:
+                        defines["WEIGHTS_SHARED"] = texels
+                    if self.weights.endswith("-fp16"):
+                        defines["WEIGHTS_FP16"] = 1
+                if self.weights == "baked":
+                    _LOG.info("deferred shading program with baked weights (%d MACs per pixel): the first dispatch "
+                              "JIT-compiles it (~25 s at 28k MACs on llvmpipe; Mesa's shader cache keeps it)",
+                              self.network.model.macs_per_evaluation)
+            if counting:
+                defines.update(COUNT_EVALUATIONS=1, SKIP_COUNTER_BINDING=5)
+            try:
+                program = compile_compute(self.ctx, _PROGRAM, defines, self.network.shader_root, overrides)
+            except GratNetError as error:
+                if self.weights.startswith("shared") and kernel == "SHADE":
+                    bytes_needed = (8 if self.weights.endswith("-fp16") else 16) * int(
+                        np.prod(self.network.packed_weights.shape[:2]))
+                    raise GratNetError(f"deferred weights 'shared': the net's {bytes_needed} bytes of weights must fit "
+                                       f"the GPU's compute shared memory (32 KiB on llvmpipe): {error}") from error
+                raise
+            if kernel == "SHADE":
+                self.network._model_uniforms(program, "ssbo" if self.weights.endswith("-fp16") else self.weights)
+            self._programs[key] = program
+        return self._programs[key]  # type: ignore[return-value]
+
+    def _bind_weights(self) -> None:
+        if self.weights == "texture":
+            self.network.use_weights(0)
+        elif self.weights != "baked":
+            if self._weight_buffer is None:
+                texels = self.network.packed_weights
+                if self.weights.endswith("-fp16"):  # four halves per texel, in packHalf2x16 order (little-endian)
+                    texels = texels.astype("<f2")
+                self._weight_buffer = self.ctx.buffer(np.ascontiguousarray(texels).tobytes())
+            self._weight_buffer.bind_to_storage_buffer(_WEIGHTS_BINDING)
+
+    def compile_steps(self) -> list[Callable[[], object]]:
+        """One callable per program, each compiling (or linking from the driver's cache) that program: the
+        viewer runs one per frame, since linking them all at once from Mesa's cache blocked a frame 0.6 s."""
+        steps: list[Callable[[], object]] = [self._gbuffer_program]
+        kernels = ("COMPACT", "ARGS", "SHADE", "RESOLVE")
+        return steps + [lambda kernel=kernel: self._compute(kernel) for kernel in kernels]
+
+    def compile(self) -> None:
+        """Compile every program now (the first render would otherwise)."""
+        for step in self.compile_steps():
+            step()
+
+    # ---------------------------------------------------------------------------------------------
+    # Buffers (kept between renders of the same size: a view renders many frames)
+
+    def _gbuffer(self, width: int, rows: int) -> tuple[moderngl.Texture, moderngl.Framebuffer]:
+        if self._targets is None or self._targets[0] != (width, rows):
+            self._release_targets()
+            texture = self.ctx.texture((width, rows), 4, dtype="f4")
+            depth = self.ctx.depth_renderbuffer((width, rows))
+            framebuffer = self.ctx.framebuffer(color_attachments=[texture], depth_attachment=depth)
+            self._targets = ((width, rows), texture, depth, framebuffer)
+        return self._targets[1], self._targets[3]
+
+    def _list_buffer(self, entries: int) -> moderngl.Buffer:
+        size = 16 + 4 * entries
+        if self._list is None or self._list.size < size:
+            if self._list is not None:
+                self._list.release()
+            self._list = self.ctx.buffer(reserve=size)
+        return self._list
+
+    def _output_texture(self, width: int, height: int) -> moderngl.Texture:
+        if self._output is None or self._output.size != (width, height):
+            if self._output is not None:
+                self._output.release()
+            self._output = self.ctx.texture((width, height), 4, dtype="f4")
+        return self._output
+
+    # ---------------------------------------------------------------------------------------------
+    # Rendering
+
+    def render(self, uploaded: MeshBuffers, camera: Camera, light: Light, size: tuple[int, int], exposure: float,
+               ior: float | None, skip_threshold: float | None = None, statistics: dict[str, int] | None = None,
+               offsets_px: np.ndarray | None = None) -> np.ndarray:
+        """Exposed CIE XYZ and coverage, ``float32`` ``(H, W, 4)``, row 0 at the top: the mean over the
+        samples at ``offsets_px`` (``(N, 2)`` pixels, x right, y up; ``None``: one sample at the centre).
+
+        ``statistics`` receives the counters of ``viewer.renderer.STATISTICS_KEYS`` summed over the samples
+        (``evaluations`` = the list's length)."""
+        width, height = size
+        offsets = np.zeros((1, 2)) if offsets_px is None else check_offsets(offsets_px)
+        threshold = skip_threshold_value(skip_threshold)
+        max_rows = int(self.ctx.info.get("GL_MAX_TEXTURE_SIZE", 16384))
+        per_chunk = max(1, min(len(offsets), max_rows // height, _CHUNK_TEXELS // (width * height)))
+        gbuffer_program = self._gbuffer_program()
+        self.scene._set_uniforms(camera, light, width, height, float(exposure), ior, gbuffer_program)
+        compact = self._compute("COMPACT", counting=statistics is not None)
+        bound, unit = self.network._skip_uniforms(compact, threshold)
+        args, shade, resolve = self._compute("ARGS"), self._compute("SHADE"), self._compute("RESOLVE")
+        view_projection = np.ascontiguousarray(camera.view_projection(width / height), dtype=np.float32)
+        vertex_array = None
+        if uploaded.vertex_array is not None:
+            vertex_array = self.scene._vertex_array(gbuffer_program, uploaded.buffers, uploaded.index_buffer)
+        if statistics is not None:
+            self.network._reset_counters()
+        chunks = [offsets[k:k + per_chunk] for k in range(0, len(offsets), per_chunk)]
+        texture, framebuffer = self._gbuffer(width, height * len(chunks[0]))
+        list_buffer = self._list_buffer(width * height * len(chunks[0]))
+        several = len(offsets) > 1
+        output = self._output_texture(width, height) if several else None
+        scope = self.ctx.scope(framebuffer, enable_only=moderngl.DEPTH_TEST)
+        try:
+            with scope:
+                for number, chunk in enumerate(chunks):
+                    self._draw_gbuffer(framebuffer, gbuffer_program, vertex_array, view_projection, chunk, width,
+                                       height)
+                    rows = height * len(chunk)
+                    list_buffer.write(np.array([0, 1, 1, 0], dtype=np.uint32).tobytes())
+                    list_buffer.bind_to_storage_buffer(_LIST_BINDING)
+                    texture.bind_to_image(0, read=True, write=True)
+                    bound.use(location=unit)
+                    compact.run(_groups(width, _TILE), _groups(rows, _TILE))
+                    self.ctx.memory_barrier()
+                    args.run(1)
+                    self.ctx.memory_barrier()
+                    self._bind_weights()
+                    shade.run_indirect(list_buffer, 0)
+                    self.ctx.memory_barrier()
+                    if output is not None:
+                        _set(resolve, "u_samples", len(chunk))
+                        _set(resolve, "u_height", height)
+                        _set(resolve, "u_scale", 1.0 / len(offsets))
+                        _set(resolve, "u_accumulate", number > 0)
+                        texture.bind_to_image(0, read=True, write=False)
+                        output.bind_to_image(1, read=True, write=True)
+                        resolve.run(_groups(width, _TILE), _groups(height, _TILE))
+                        self.ctx.memory_barrier()
+                if statistics is not None:
+                    self.network._read_counters(statistics)
+                result = (output if output is not None else texture).read(alignment=1)
+        finally:
+            scope.release()
+            if vertex_array is not None:
+                vertex_array.release()
+        pixels = np.frombuffer(result, dtype=np.float32)[:width * height * 4].reshape(height, width, 4)
+        return pixels[::-1].copy()  # GL rows start at the bottom; ours at the top
+
+    def _draw_gbuffer(self, framebuffer: moderngl.Framebuffer, program: moderngl.Program,
+                      vertex_array: moderngl.VertexArray | None, view_projection: np.ndarray, chunk: np.ndarray,
+                      width: int, height: int) -> None:
+        """Sample k of ``chunk`` into rows ``k·height …`` of the G-buffer, with its jittered projection."""
+        framebuffer.use()
+        framebuffer.clear(0.0, 0.0, 0.0, -1.0, depth=1.0)  # factor −1: background
+        if vertex_array is None:
+            return
+        try:
+            for k, offset in enumerate(chunk):
+                matrix = view_projection
+                if offset[0] != 0.0 or offset[1] != 0.0:  # (0, 0): the forward path's matrix, bit for bit
+                    from viewer.antialias import jitter_matrix  # here: it imports scipy.stats (~1 s)
+
+                    matrix = np.ascontiguousarray(view_projection @ jitter_matrix(offset, width, height))
+                _set(program, "u_view_projection", matrix.astype(np.float32))
+                box = (0, k * height, width, height)
+                self.ctx.viewport = box
+                self.ctx.scissor = box  # the viewport does not clip every implementation's guard band
+                vertex_array.render(moderngl.TRIANGLES)
+        finally:
+            self.ctx.scissor = None
+
+    def release(self) -> None:
+        """Free the GL objects (the programs, buffers and targets of this path)."""
+        for program in self._programs.values():
+            program.release()
+        self._programs.clear()
+        self._release_targets()
+        for resource in (self._weight_buffer, self._list, self._output):
+            if resource is not None:
+                resource.release()
+        self._weight_buffer = self._list = self._output = None
+
+    def _release_targets(self) -> None:
+        if self._targets is not None:
+            _, texture, depth, framebuffer = self._targets
+            framebuffer.release()
+            depth.release()
+            texture.release()
+            self._targets = None
+
+
+# -------------------------------------------------------------------------------------------------
+# Choosing the path by measurement
+
+
+def render_path_cache_file() -> Path:
+    """The JSON file of measured ``auto`` verdicts: ``$XDG_CACHE_HOME/gratnet/render_path.json`` (else
+    ``~/.cache/gratnet/render_path.json``)."""
+    base = os.environ.get("XDG_CACHE_HOME")
+    return (Path(base) if base else Path.home() / ".cache") / "gratnet" / "render_path.json"
+
+
+def _cache_key(scene: SceneRenderer) -> str:
+    """GL_RENDERER, the network's shape and where both paths read the weights: what the verdict depends on."""
+    network = scene.network
+    model = network.model
+    return (f"v{_CACHE_VERSION}|{scene.ctx.info.get('GL_RENDERER', '?')}|{'-'.join(map(str, model.layer_sizes))}|"
+            f"{model.activation}|{model.encoding.frequencies},{model.encoding.t_frequencies}|{network.weights_path}|"
+            f"{scene.deferred.weights}")
+
+
+def _read_cache(path: Path) -> dict[str, dict[str, object]]:
+    try:
+        entries = json.loads(path.read_text(encoding="utf-8"))
+    except (OSError, ValueError):
+        return {}
+    return entries if isinstance(entries, dict) else {}
+
+
+def _write_cache(path: Path, key: str, entry: dict[str, object]) -> None:
+    """Add ``entry`` under ``key``, atomically; a cache that cannot be written only costs a later probe."""
+    from gratnet.atomic import write_text_atomic
+
+    entries = _read_cache(path)
+    entries[key] = entry
+    try:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        write_text_atomic(path, json.dumps(entries, indent=1, sort_keys=True) + "\n")
+    except (OSError, GratNetError) as error:
+        _LOG.info("cannot write the render-path cache %s: %s", path, error)
+
+
+def _probe_ms(render: Callable[[], None], rival_ms: float = math.inf) -> float:
+    """Best wall time (ms) of up to :data:`_PROBE_RENDERS` renders after one untimed render that compiles the
+    programs; stops early once a render is clearly slower than ``rival_ms`` (the verdict is clear)."""
+    render()
+    best = math.inf
+    for _ in range(_PROBE_RENDERS):
+        start = time.perf_counter()
+        render()
+        best = min(best, 1e3 * (time.perf_counter() - start))
+        if best > _PROBE_CLEAR_RATIO * rival_ms:
+            break
+    return best
+
+
+def choose_render_path(scene: SceneRenderer, render_path: str = "auto", measure: bool = True) -> tuple[str, str]:
+    """``(path, reason)``: ``render_path`` itself unless ``auto``, which takes the cached verdict for this
+    ``GL_RENDERER`` and network shape, or measures both paths on the probe scene (the CD disc at
+    :data:`PROBE_SIZE`, default light and camera) and caches the faster (:func:`render_path_cache_file`).
+    ``measure=False``: no probe; ``forward`` while nothing is cached (the viewer: its compile process measures)."""
+    check_render_path(render_path)
+    if scene.network.model.grids:  # the deferred path binds no feature grids: feature-grid models render forward
+        if render_path == "deferred":
+            raise GratNetError("the deferred render path is not built for feature-grid models; use the forward path "
+                               "(render path 'forward' or 'auto')")
+        return "forward", "feature-grid model: the forward path (the deferred path is not built for grids)"
+    if render_path != "auto":
+        return render_path, "requested"
+    cache = render_path_cache_file()
+    key = _cache_key(scene)
+    entry = _read_cache(cache).get(key)
+    if isinstance(entry, dict) and entry.get("path") in ("forward", "deferred") and isinstance(entry.get("reason"),
+                                                                                               str):
+        return str(entry["path"]), f"{entry['reason']} (cached)"
+    if not measure:
+        return "forward", "auto: not measured yet on this GPU for this network shape (forward until it is)"
+
+    from viewer.camera import Camera, Light
+    from viewer.defaults import FALLBACK
+    from viewer.meshes import compact_disc
+
+    _LOG.info("render path auto: timing the forward and deferred paths on a %d×%d probe (once per GPU and network "
+              "shape; cached in %s)", *PROBE_SIZE, cache)
+    camera = Camera(FALLBACK.camera_distance, FALLBACK.camera_azimuth_degrees, FALLBACK.camera_elevation_degrees)
+    light = Light.directional(FALLBACK.light_theta_degrees, FALLBACK.light_phi_degrees)
+    uploaded = scene.upload(compact_disc())
+    times: dict[str, float] = {}
+    try:
+        for path in ("deferred", "forward"):
+            def render(path: str = path) -> None:
+                scene._render_path_probe(uploaded, camera, light, PROBE_SIZE, path)
+                scene.ctx.finish()
+
+            times[path] = _probe_ms(render, min(times.values(), default=math.inf))
+    finally:
+        uploaded.release()
+    path = min(times, key=lambda name: times[name])
+    other = "forward" if path == "deferred" else "deferred"
+    renderer = scene.ctx.info.get("GL_RENDERER", "?")
+    reason = (f"{path}: {times[path]:.1f} ms vs {other} {times[other]:.1f} ms at {PROBE_SIZE[0]}×{PROBE_SIZE[1]} "
+              f"(CD disc probe) on {renderer}")
+    _write_cache(cache, key, {"path": path, "reason": reason, "forward_ms": round(times["forward"], 3),
+                              "deferred_ms": round(times["deferred"], 3)})
+    return path, reason
