@@ -18,16 +18,17 @@ from gratnet.modelfile import ModelFile
 from viewer.context import create_headless_context
 from viewer.renderer import NetworkRenderer
 
-GRID_LEVELS = (63, 126, 251)  # nodes per u*/v* axis, 11 along t, 2 features: 3.6 MB as float16
+GRID_LEVELS = (63, 126, 251)  # nodes per u*/v* axis of the three levels
 
 
-def random_model(frequencies: int, t_frequencies: int, hidden: list[int], grid: bool, seed: int = 0) -> ModelFile:
+def random_model(frequencies: int, t_frequencies: int, hidden: list[int], grid: bool, seed: int = 0,
+                 t_nodes: int = 11, features: int = 2) -> ModelFile:
     """Random weights (and float16 grids) of the given sizes, for the paper's 1001² × 11 grid."""
     rng = np.random.default_rng(seed)
     spec = EncodingSpec.for_grid(1001, 11, frequencies, t_frequencies)
-    grids = [(0.1 * rng.standard_normal((11, nodes, nodes, 2))).astype(np.float16) for nodes in GRID_LEVELS] \
-        if grid else []
-    sizes = [spec.features + 2 * len(grids), *hidden, 3]
+    grids = [(0.1 * rng.standard_normal((t_nodes, nodes, nodes, features))).astype(np.float16)
+             for nodes in GRID_LEVELS] if grid else []
+    sizes = [spec.features + features * len(grids), *hidden, 3]
     weights = [(rng.standard_normal((b, a)) / np.sqrt(a)).astype(np.float32) for a, b in zip(sizes[:-1], sizes[1:],
                                                                                              strict=True)]
     biases = [np.full(b, 0.1, np.float32) for b in sizes[1:]]
@@ -44,7 +45,9 @@ def main() -> None:
     small = random_model(19, 4, [108, 66, 40, 24], grid=False)
     full = random_model(19, 4, [64, 32, 16], grid=True)
     reduced = random_model(8, 2, [64, 32, 16], grid=True)
-    cases = [("mlp small", small, "manual"), ("grid L=19 manual", full, "manual"),
+    wide = random_model(19, 4, [108, 66, 40, 24], grid=True, t_nodes=6, features=4)
+    cases = [("mlp small", small, "manual"), ("grid C=4 T=6 small manual", wide, "manual"),
+             ("grid C=4 T=6 small hardware", wide, "hardware"), ("grid L=19 manual", full, "manual"),
              ("grid L=19 hardware", full, "hardware"), ("grid L=8 manual", reduced, "manual"),
              ("grid L=8 hardware", reduced, "hardware")]
     renderers = {name: NetworkRenderer(ctx, model, weights_path="texture", grid_filter=grid_filter)
