@@ -31,6 +31,8 @@ NETWORKS: tuple[tuple[str, dict[str, object]], ...] = (
     ("mlp paper", {"preset": "paper"}),
     ("grid 3×251² T11 C2, 64-32-16", {"architecture": "grid", "hidden": "64,32,16", "grid_features": 2}),
     ("grid 3×251² T11 C2, small", {"architecture": "grid", "preset": "small", "grid_features": 2}),
+    ("grid 3×251² T6 C4, small", {"architecture": "grid", "preset": "small", "grid_features": 4,
+                                  "grid_t_resolution": 6}),
     ("grid 251²+501² T5 C2, small", {"architecture": "grid", "preset": "small", "grid_features": 2, "grid_levels": 2,
                                      "grid_resolution": 501, "grid_t_resolution": 5}),
     ("grid 3×251² T11 C2, 64-32-16, L=8 L_t=2", {"architecture": "grid", "hidden": "64,32,16", "grid_features": 2,
