@@ -159,6 +159,21 @@ def _region_summary(assets: Path = Path("assets")) -> list[str]:
     return lines
 
 
+def _kept_sections(path: Path) -> list[str]:
+    """The existing page's hand-written experiment sections (a ``## `` heading ending in "(experiment)", up to
+    the next ``## ``), kept as they are: their figures come from runs outside assets/ (each with its command)."""
+    if not path.exists():
+        return []
+    kept: list[str] = []
+    keeping = False
+    for line in path.read_text(encoding="utf-8").splitlines():
+        if line.startswith("## "):
+            keeping = line.rstrip().endswith("(experiment)")
+        if keeping:
+            kept.append(line)
+    return kept + ([""] if kept and kept[-1] else [])
+
+
 def main() -> None:
     """Write the results page."""
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
@@ -265,6 +280,7 @@ def main() -> None:
         "      stops being the limit.",
         "",
         *_presets_section(),
+        *_kept_sections(Path(arguments.out)),
         "## Every slice",
         "",
         *details,

@@ -50,9 +50,16 @@ from pathlib import Path
 import numpy as np
 
 from gratnet.atomic import atomic_path
-from gratnet.encoding import encode, range_inverse
+from gratnet.encoding import range_inverse
 from gratnet.errors import GratNetError
-from gratnet.modelfile import ModelFile, _hidden_activation, _output_activation, load_model, mlp_forward
+from gratnet.modelfile import (
+    ModelFile,
+    _hidden_activation,
+    _output_activation,
+    load_model,
+    mlp_forward,
+    network_inputs,
+)
 
 __all__ = [
     "DISPLAY_SKIP_THRESHOLD",
@@ -227,6 +234,8 @@ def compute_output_bounds(model: ModelFile, parameters: BoundParameters | None =
     """Compute the bound table of ``model`` (no cache; see :func:`output_bounds`). Tens of seconds at R = 1001."""
     params = (parameters or BoundParameters()).resolved(model)
     assert params.resolution is not None and params.t_cells is not None
+    if model.grids:  # the first-layer tables below assume the encoding alone feeds the network
+        raise GratNetError("skip-work bounds are not built for feature-grid models; render them with skipping off")
     if model.layer_sizes[0] != model.encoding.features:
         raise GratNetError("model input width does not match its encoding")
     resolution, cells, t_cells = params.resolution, params.cells_uv, params.t_cells
@@ -293,7 +302,7 @@ def _dilate(values: np.ndarray, radius: int) -> np.ndarray:
 
 def _model_digest(model: ModelFile, params: BoundParameters) -> str:
     digest = hashlib.sha256()
-    for array in (*model.weights, *model.biases):
+    for array in (*model.weights, *model.biases, *model.grids):
         digest.update(np.ascontiguousarray(array, dtype=np.float32).tobytes())
     contract = {"layer_sizes": list(model.layer_sizes), "activation": model.activation,
                 "output_activation": model.output_activation, "scheme": model.scheme,
@@ -372,7 +381,7 @@ def validate_output_bounds(model: ModelFile, bounds: OutputBounds, samples: int 
     for start in range(0, samples, batch):
         count = min(batch, samples - start)
         coordinates = rng.uniform(-1.0, 1.0, size=(count, 3))
-        xyz = np.asarray(range_inverse(mlp_forward(model, encode(coordinates, model.encoding)), model.range))
+        xyz = np.asarray(range_inverse(mlp_forward(model, network_inputs(model, coordinates)), model.range))
         bound = bounds.lookup(coordinates).astype(np.float64)
         violations += int(np.count_nonzero(np.any(xyz > bound, axis=-1)))
         positive = xyz > 0.0

@@ -125,10 +125,13 @@ def encode(coordinates: Any, spec: EncodingSpec) -> Any:
     omega = xp.asarray(omega, dtype=coordinates.dtype, device=array_api_compat.device(coordinates))
     omega_t = xp.asarray(omega_t, dtype=coordinates.dtype, device=array_api_compat.device(coordinates))
     c_u, c_v, c_t = coordinates[..., 0:1], coordinates[..., 1:2], coordinates[..., 2:3]
-    parts = [coordinates]
-    for c in (c_u, c_v, c_u + c_v, c_u - c_v):
-        phase = c * omega
-        parts += [xp.sin(phase), xp.cos(phase)]
+    # All four groups in one (…, 4, L) phase array, sines and cosines stacked as (…, 4, 2, L): the same
+    # elementwise products as one group at a time (bit-identical), in far fewer ops and copies (the trainer
+    # encodes every batch).
+    groups = xp.stack([c_u, c_v, c_u + c_v, c_u - c_v], axis=-2)  # (…, 4, 1)
+    phase = groups * omega
+    spatial = xp.stack([xp.sin(phase), xp.cos(phase)], axis=-2)  # (…, 4, 2, L)
+    parts = [coordinates, xp.reshape(spatial, (*coordinates.shape[:-1], 8 * spec.frequencies))]
     if spec.t_frequencies:
         phase_t = c_t * omega_t
         parts += [xp.sin(phase_t), xp.cos(phase_t)]

@@ -17,6 +17,13 @@ File layout (a contract; also documented in ``docs/formats.md``, section "Model 
   ``layer_sizes``, ``activation``, ``output_activation``, ``encoding``, ``range``, ``scheme``,
   ``texture_layout`` and ``metadata``.
 
+A *feature-grid* model (docs/physics.md "Feature-grid network") has, in addition, ``grid_0``, ``grid_1``, …
+(coarse to fine; ``float16`` or ``float32``, all of one dtype; ``(T_l, R_l, R_l, C)``: axes c_t, c_v, c_u,
+feature, ``1 ≤ C ≤ 4`` the same for every level, every axis ≥ 2 nodes) and the JSON key ``grid``
+(``{"levels": [[T_l, R_l, R_l, C], …], "dtype": "float16"|"float32"}``); such files have ``format_version``
+2 (a GratNet that reads only version 1 then says so), and ``layer_sizes[0]`` is ``L·C`` grid features plus
+the encoding's features, grid features first. Pure-MLP files stay version 1, unchanged.
+
 Texture layout (a contract with the GLSL shader), for layer ``k`` with ``inputs`` → ``outputs``:
 ``in_blocks = ceil(inputs / 4)``, ``out_blocks = ceil(outputs / 4)``; the layer occupies rows
 ``row_offset_k … row_offset_k + out_blocks − 1``. Row ``row_offset_k + o`` holds output block ``o``
@@ -45,6 +52,7 @@ import numpy as np
 from gratnet.atomic import atomic_path
 from gratnet.encoding import EncodingSpec, RangeSpec, encode, network_coordinates, range_inverse
 from gratnet.errors import GratNetError, read_magic
+from gratnet.featuregrid import MAX_FEATURES, grid_features
 from gratnet.jsontext import strict_json
 
 __all__ = [
@@ -58,6 +66,7 @@ __all__ = [
     "evaluate_keys",
     "load_model",
     "mlp_forward",
+    "network_inputs",
     "pack_texture",
     "save_model",
     "texture_forward",
@@ -65,6 +74,10 @@ __all__ = [
 
 FORMAT_NAME = "gratnet-model"
 FORMAT_VERSION = 1
+#: The format version of feature-grid model files (pure-MLP files keep :data:`FORMAT_VERSION`).
+GRID_FORMAT_VERSION = 2
+#: Storage dtypes of feature grids.
+GRID_DTYPES = ("float16", "float32")
 
 #: Hidden-layer activations. ``leaky_relu`` has negative slope :data:`LEAKY_RELU_SLOPE`.
 ACTIVATIONS = ("relu", "leaky_relu", "silu")
@@ -93,6 +106,7 @@ _JSON_KEYS = (
     "texture_layout",
     "metadata",
 )
+_GRID_KEY = "grid"
 _LAYOUT_KEYS = ("row_offset", "in_blocks", "out_blocks", "inputs", "outputs")
 
 
@@ -113,6 +127,8 @@ class ModelFile:
         scheme: the source volume's sampling scheme (``regular``, ``simple`` or ``simple-max``),
             which defines the key vector → network coordinate transform.
         metadata: JSON-able dict: the source volume's physical parameters, training information, …
+        grids: the feature grids of a feature-grid network, coarse to fine, each ``(T, R, R, C)`` ``float16``
+            or ``float32`` (see the module docstring); empty (the default) for the paper's pure MLP.
 
     Two model files compare equal when every field is equal and the arrays are bit-identical.
     """
@@ -126,6 +142,17 @@ class ModelFile:
     range: RangeSpec
     scheme: str
     metadata: dict[str, Any] = field(default_factory=dict)
+    grids: list[np.ndarray] = field(default_factory=list)
+
+    @property
+    def grid_feature_count(self) -> int:
+        """Grid features at the network's input: Σ C over the levels (0 for a pure MLP)."""
+        return sum(int(np.shape(grid)[-1]) for grid in self.grids)
+
+    @property
+    def grid_bytes(self) -> int:
+        """Bytes of the stored feature grids (0 for a pure MLP)."""
+        return sum(int(np.asarray(grid).nbytes) for grid in self.grids)
 
     @property
     def parameter_count(self) -> int:
@@ -150,6 +177,7 @@ class ModelFile:
             and self.range == other.range
             and self.scheme == other.scheme
             and self.metadata == other.metadata
+            and _arrays_equal(self.grids, other.grids)
         )
 
     __hash__ = None  # type: ignore[assignment]  # mutable (holds arrays)
@@ -299,10 +327,13 @@ def _validated(model: object, where: str = "model", *, from_file: bool = False) 
         raise GratNetError(f"{where}: range must be a gratnet.encoding.RangeSpec")
     encoding = _encoding_from_dict(dataclasses.asdict(model.encoding), where)
     range_spec = _range_from_dict(dataclasses.asdict(model.range), where)
-    if sizes[0] != encoding.features:
+    grids = _check_grids(model.grids, where, from_file=from_file)
+    grid_width = sum(grid.shape[-1] for grid in grids)
+    if sizes[0] != encoding.features + grid_width:
+        extra = f" plus {grid_width} grid features" if grids else ""
         raise GratNetError(
             f"{where}: layer_sizes[0] is {sizes[0]} but the encoding (L = {encoding.frequencies}, "
-            f"L_t = {encoding.t_frequencies}) produces {encoding.features} features"
+            f"L_t = {encoding.t_frequencies}) produces {encoding.features} features{extra}"
         )
     layers = len(sizes) - 1
     for name, values in (("weights", model.weights), ("biases", model.biases)):
@@ -327,7 +358,35 @@ def _validated(model: object, where: str = "model", *, from_file: bool = False) 
         range=range_spec,
         scheme=scheme,
         metadata=_plain_metadata(model.metadata, where),
+        grids=grids,
     )
+
+
+def _check_grids(grids: object, where: str, *, from_file: bool) -> list[np.ndarray]:
+    """Check the feature grids (module docstring); return them C-contiguous, dtype kept."""
+    if not isinstance(grids, (list, tuple)):
+        raise GratNetError(f"{where}: grids must be a list of arrays, got {type(grids).__name__}")
+    checked = []
+    for level, values in enumerate(grids):
+        array = np.asarray(values)
+        label = f"grid_{level}"
+        if array.dtype.name not in GRID_DTYPES:
+            corrupt = "; the file is corrupt" if from_file else ""
+            raise GratNetError(f"{where}: {label} must be float16 or float32, got {array.dtype}{corrupt}")
+        if array.ndim != 4 or min(array.shape[:3]) < 2 or not 1 <= array.shape[3] <= MAX_FEATURES:
+            raise GratNetError(f"{where}: {label} has shape {array.shape}; a feature grid is (T, R, R, C) with "
+                               f"T, R ≥ 2 nodes and 1 ≤ C ≤ {MAX_FEATURES} features")
+        if array.shape[1] != array.shape[2]:
+            raise GratNetError(f"{where}: {label} has shape {array.shape}; u* and v* need the same node count")
+        if checked and (array.dtype != checked[0].dtype or array.shape[3] != checked[0].shape[3]):
+            raise GratNetError(f"{where}: {label} is {array.dtype} with {array.shape[3]} features, but grid_0 is "
+                               f"{checked[0].dtype} with {checked[0].shape[3]}: every level must match")
+        finite = np.isfinite(array)
+        if not finite.all():
+            raise GratNetError(f"{where}: {label} has {int(finite.size - np.count_nonzero(finite))} non-finite "
+                               f"value(s) (NaN or inf)")
+        checked.append(np.ascontiguousarray(array))
+    return checked
 
 
 # --------------------------------------------------------------------------------------------------
@@ -517,10 +576,20 @@ def texture_forward(
     return x[:, :outputs].reshape(*batch_shape, outputs)
 
 
+def network_inputs(model: ModelFile, coordinates: np.ndarray) -> np.ndarray:
+    """The network's input at network coordinates ``(…, 3)``: the grid features (feature-grid models;
+    :func:`gratnet.featuregrid.grid_features`) followed by the encoding (:func:`gratnet.encoding.encode`)."""
+    encoded = encode(coordinates, model.encoding)
+    if not model.grids:
+        return encoded
+    return np.concatenate([grid_features(model.grids, coordinates), encoded], axis=-1)
+
+
 def evaluate_keys(model: ModelFile, u: np.ndarray, v: np.ndarray, w: np.ndarray) -> np.ndarray:
     """CIE XYZ predicted for key vectors ``(u, v, w)``: the whole runtime pipeline, in ``float64``.
 
-    ``network_coordinates(u, v, w, scheme)`` → ``encode`` → :func:`mlp_forward` → ``range_inverse``.
+    ``network_coordinates(u, v, w, scheme)`` → :func:`network_inputs` (``encode``, after the grid
+    features of a feature-grid model) → :func:`mlp_forward` → ``range_inverse``.
 
     Args:
         u, v, w: key vector components (dimensionless direction-cosine sums as in docs/physics.md;
@@ -533,8 +602,7 @@ def evaluate_keys(model: ModelFile, u: np.ndarray, v: np.ndarray, w: np.ndarray)
     valid = _validated(model)
     u, v, w = np.broadcast_arrays(*(np.asarray(c, dtype=np.float64) for c in (u, v, w)))
     coordinates = network_coordinates(u, v, w, valid.scheme)  # type: ignore[arg-type]
-    encoded = encode(coordinates, valid.encoding)
-    return range_inverse(_forward(valid, encoded), valid.range)
+    return range_inverse(_forward(valid, network_inputs(valid, coordinates)), valid.range)
 
 
 # --------------------------------------------------------------------------------------------------
@@ -543,9 +611,9 @@ def evaluate_keys(model: ModelFile, u: np.ndarray, v: np.ndarray, w: np.ndarray)
 
 
 def _header(model: ModelFile, layout: list[dict[str, int]]) -> dict[str, Any]:
-    return {
+    header = {
         "format": FORMAT_NAME,
-        "format_version": FORMAT_VERSION,
+        "format_version": GRID_FORMAT_VERSION if model.grids else FORMAT_VERSION,
         "layer_sizes": list(model.layer_sizes),
         "activation": model.activation,
         "output_activation": model.output_activation,
@@ -555,6 +623,9 @@ def _header(model: ModelFile, layout: list[dict[str, int]]) -> dict[str, Any]:
         "texture_layout": layout,
         "metadata": model.metadata,
     }
+    if model.grids:
+        header[_GRID_KEY] = {"levels": [list(grid.shape) for grid in model.grids], "dtype": model.grids[0].dtype.name}
+    return header
 
 
 def save_model(path: str | os.PathLike[str], model: ModelFile) -> None:
@@ -578,6 +649,8 @@ def save_model(path: str | os.PathLike[str], model: ModelFile) -> None:
         arrays[f"weight_{k}"] = weight
         arrays[f"bias_{k}"] = bias
     arrays[_TEXTURE_ARRAY] = _pack(valid.weights, valid.biases, layout)
+    for level, grid in enumerate(valid.grids):
+        arrays[f"grid_{level}"] = grid
     with atomic_path(target) as temporary:
         try:
             with temporary.open("wb") as handle:
@@ -624,15 +697,36 @@ def _read_header(source: Path, arrays: dict[str, np.ndarray]) -> dict[str, Any]:
             f"{source} is not a GratNet model file (format is {header.get('format')!r}, expected {FORMAT_NAME!r})"
         )
     version = header.get("format_version")
-    if version != FORMAT_VERSION or not _is_int(version):
+    if version not in (FORMAT_VERSION, GRID_FORMAT_VERSION) or not _is_int(version):
         raise GratNetError(
             f"{source} is a {FORMAT_NAME} file of format version {version!r}, but this GratNet reads only "
-            f"version {FORMAT_VERSION}; read it with the GratNet version that wrote it, or re-train with this one"
+            f"version {FORMAT_VERSION} (pure MLP) and version {GRID_FORMAT_VERSION} (feature grid); "
+            f"read it with the GratNet version that wrote it, "
+            f"or re-train with this one"
         )
-    missing = [key for key in _JSON_KEYS if key not in header]
+    required = _JSON_KEYS + ((_GRID_KEY,) if version == GRID_FORMAT_VERSION else ())
+    missing = [key for key in required if key not in header]
     if missing:
         raise GratNetError(f"{source}: '{_METADATA_ARRAY}' lacks key(s) {', '.join(missing)}; the file is corrupt")
     return header
+
+
+def _grid_header(header: dict[str, Any], where: str) -> list[list[int]]:
+    """The grid levels' shapes from the header's ``grid`` (version 2), or [] for a pure-MLP file."""
+    if header["format_version"] == FORMAT_VERSION:
+        if _GRID_KEY in header:
+            raise GratNetError(f"{where}: a format version {FORMAT_VERSION} file has a 'grid' entry; "
+                               f"the file is corrupt")
+        return []
+    grid = header[_GRID_KEY]
+    levels = grid.get("levels") if isinstance(grid, dict) else None
+    if (not isinstance(grid, dict) or sorted(grid) != ["dtype", "levels"] or grid["dtype"] not in GRID_DTYPES
+            or not isinstance(levels, list) or not levels
+            or not all(isinstance(shape, list) and len(shape) == 4 and all(_is_int(n) for n in shape)
+                       for shape in levels)):
+        raise GratNetError(f"{where}: 'grid' must be {{\"levels\": [[T, R, R, C], …], \"dtype\": \"float16\" or "
+                           f"\"float32\"}} with at least one level, got {grid!r}; the file is corrupt")
+    return [[int(n) for n in shape] for shape in levels]
 
 
 def load_model(path: str | os.PathLike[str]) -> ModelFile:
@@ -658,6 +752,8 @@ def load_model(path: str | os.PathLike[str]) -> ModelFile:
     sizes = _check_layer_sizes(header["layer_sizes"], where)
     layers = len(sizes) - 1
     expected = {_METADATA_ARRAY, _TEXTURE_ARRAY} | {f"{kind}_{k}" for kind in ("weight", "bias") for k in range(layers)}
+    grid_shapes = _grid_header(header, where)
+    expected |= {f"grid_{level}" for level in range(len(grid_shapes))}
     missing = sorted(expected - set(arrays))
     if missing:
         raise GratNetError(f"{where}: lacks array(s) {', '.join(missing)} required by layer_sizes {sizes}")
@@ -677,10 +773,15 @@ def load_model(path: str | os.PathLike[str]) -> ModelFile:
             range=_range_from_dict(header["range"], where),
             scheme=header["scheme"],
             metadata=header["metadata"],
+            grids=[arrays[f"grid_{level}"] for level in range(len(grid_shapes))],
         ),
         where,
         from_file=True,
     )
+    stored_shapes = [list(grid.shape) for grid in model.grids]
+    if stored_shapes != grid_shapes or (model.grids and model.grids[0].dtype.name != header[_GRID_KEY]["dtype"]):
+        raise GratNetError(f"{where}: the grid arrays ({stored_shapes}) do not match the header's grid "
+                           f"{header[_GRID_KEY]!r}; the file is corrupt")
     layout = texture_layout(sizes)
     if header["texture_layout"] != layout:
         raise GratNetError(

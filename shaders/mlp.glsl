@@ -17,6 +17,8 @@
 //   WEIGHTS_FP16     with either buffer: each texel stored as four IEEE halves (uvec2, packHalf2x16 order),
 //                    unpacked to float32 before the arithmetic (fp16 storage, fp32 sums).
 
+#include "featuregrid.glsl"
+
 const int HIDDEN_RELU = 0;
 const int HIDDEN_LEAKY_RELU = 1;
 const int HIDDEN_SILU = 2;
@@ -102,8 +104,9 @@ vec3 mlp_evaluate() {
     vec4 x[MAX_BLOCKS];  // the current layer's inputs, whole vec4 blocks
     vec4 y[MAX_BLOCKS];  // its outputs, copied back into x for the next layer
     int input_blocks = u_layers[0].y;
+    grid_set_key();  // a feature-grid model's features (featuregrid.glsl); nothing for the pure MLP
     for (int i = 0; i < input_blocks; ++i) {
-        x[i] = encoded_block(i);  // encode once per fragment, not once per output block
+        x[i] = network_input_block(i);  // encode once per fragment, not once per output block
     }
     for (int k = 0; k < u_layer_count; ++k) {
         ivec4 layer = u_layers[k];

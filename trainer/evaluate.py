@@ -195,6 +195,10 @@ def evaluate_model(
         },
         **(extra or {}),
     }
+    if model.grids:  # a feature-grid network: its grids count in bytes, and 8 weighted taps per feature
+        results["model"].update({"grid_levels": [list(grid.shape) for grid in model.grids],
+                                 "grid_bytes": model.grid_bytes,
+                                 "grid_interpolation_macs": 8 * model.grid_feature_count})
     table: list[dict[str, Any]] = []
     if volume is not None and volume_slices:
         results["volume_slices"] = evaluate_volume_slices(model, volume, volume_slices, out_dir)

@@ -12,6 +12,7 @@ import numpy as np
 import torch
 from torch import nn
 
+from gratnet.encoding import EncodingSpec, encode
 from gratnet.errors import GratNetError
 from gratnet.modelfile import ModelFile
 
@@ -122,6 +123,71 @@ class FunnelMLP(nn.Module):
             output_activation=self.output_activation,
             **fields,  # type: ignore[arg-type]
         )
+
+
+class GridNetwork(nn.Module):
+    """Learned feature grids → (features, encoding) → a funnel MLP (docs/physics.md "Feature-grid network").
+
+    Each level is a dense grid of ``C`` features over the network coordinates, stored ``(C, T, R, R)`` for
+    ``grid_sample`` (``align_corners=True``: node ``i`` of ``N`` sits at ``c = −1 + 2i/(N − 1)``, as in
+    :mod:`gratnet.featuregrid`, which the runtime uses and a parity test ties to this). Unlike
+    :class:`FunnelMLP`, ``forward`` and ``predict`` take network coordinates ``(N, 3)``, not encoded inputs.
+    """
+
+    def __init__(self, encoding: EncodingSpec, shapes: list[tuple[int, int, int, int]], hidden: list[int],
+                 activation: str = "silu", output_activation: str = "clamp", init: float = 1e-4,
+                 grid_dtype: str = "float16") -> None:
+        super().__init__()
+        self.encoding = encoding
+        self.grid_dtype = grid_dtype
+        self.grids = nn.ParameterList(
+            [nn.Parameter(torch.empty(c, t, r_v, r_u).uniform_(-init, init)) for t, r_v, r_u, c in shapes]
+        )
+        self.mlp = FunnelMLP(sum(shape[3] for shape in shapes) + encoding.features, hidden, activation,
+                             output_activation)
+        self.sizes = self.mlp.sizes
+        self.activation = activation
+        self.output_activation = output_activation
+
+    def features(self, coordinates: torch.Tensor) -> torch.Tensor:
+        """Trilinearly interpolated features of every level, level 0 first: (N, 3) → (N, Σ C)."""
+        # grid_sample's (x, y, z) index (W, H, D) = (u, v, t): exactly the order of the network coordinates.
+        points = coordinates.reshape(1, -1, 1, 1, 3)
+        parts = [
+            nn.functional.grid_sample(grid[None], points, mode="bilinear", padding_mode="border",
+                                      align_corners=True)[0, :, :, 0, 0].T
+            for grid in self.grids
+        ]
+        return torch.cat(parts, dim=-1)
+
+    def inputs(self, coordinates: torch.Tensor) -> torch.Tensor:
+        """The MLP's input: grid features, then the sinusoidal encoding."""
+        return torch.cat([self.features(coordinates), encode(coordinates, self.encoding)], dim=-1)
+
+    def forward(self, coordinates: torch.Tensor) -> torch.Tensor:
+        """Raw outputs (…, 3) at network coordinates (…, 3) (see :meth:`FunnelMLP.forward`)."""
+        return self.mlp(self.inputs(coordinates))
+
+    def predict(self, coordinates: torch.Tensor) -> torch.Tensor:
+        """Outputs as the runtime computes them (see :meth:`FunnelMLP.predict`)."""
+        return self.mlp.predict(self.inputs(coordinates))
+
+    @property
+    def parameter_count(self) -> int:
+        """Trainable parameters of the MLP (the grids are counted in bytes: :attr:`grid_bytes`)."""
+        return self.mlp.parameter_count
+
+    @property
+    def grid_bytes(self) -> int:
+        """Bytes of the grids as stored in the model file (``grid_dtype``)."""
+        return sum(grid.numel() for grid in self.grids) * np.dtype(self.grid_dtype).itemsize
+
+    def to_model_file(self, **fields: object) -> ModelFile:
+        """A runtime model file: the MLP's weights and the grids, ``(T, R, R, C)`` in ``grid_dtype``."""
+        model_file = self.mlp.to_model_file(**fields)
+        model_file.grids = [grid.detach().cpu().permute(1, 2, 3, 0).contiguous().numpy().astype(self.grid_dtype)
+                            for grid in self.grids]
+        return model_file
 
 
 def log_cosh_loss(prediction: torch.Tensor, target: torch.Tensor) -> torch.Tensor:

@@ -26,7 +26,7 @@ from gratnet.encoding import EncodingSpec, RangeSpec, encode, network_coordinate
 from gratnet.errors import GratNetError
 from gratnet.modelfile import ModelFile
 from gratnet.volume import Volume, volume_axes
-from trainer.model import FunnelMLP, log_cosh_loss, parse_hidden
+from trainer.model import FunnelMLP, GridNetwork, log_cosh_loss, parse_hidden
 from trainer.sampling import grid_to_key, slice_w
 from trainer.train_config import TrainConfig
 
@@ -103,9 +103,56 @@ def pick_device(name: str) -> torch.device:
     return torch.device(name)
 
 
+def _raw_outputs(model: FunnelMLP | GridNetwork, coordinates: torch.Tensor, encoding: EncodingSpec) -> torch.Tensor:
+    """The network's raw outputs at network coordinates: a grid network takes them as they are, the MLP encoded."""
+    return model(coordinates) if isinstance(model, GridNetwork) else model(encode(coordinates, encoding))
+
+
+def build_model(config: TrainConfig, encoding: EncodingSpec) -> FunnelMLP | GridNetwork:
+    """The network of ``config.architecture`` (torch's global seed must be set before)."""
+    hidden = parse_hidden(config.preset, config.hidden)
+    if config.architecture == "grid":
+        return GridNetwork(encoding, config.grid_shapes(), hidden, config.activation, config.output_activation,
+                           config.grid_init, config.grid_dtype)
+    return FunnelMLP(encoding.features, hidden, config.activation, config.output_activation)
+
+
+def make_optimizer(model: FunnelMLP | GridNetwork, config: TrainConfig) -> torch.optim.Optimizer:
+    if isinstance(model, GridNetwork):  # the grids learn at their own rate
+        return torch.optim.Adam([{"params": model.mlp.parameters(), "lr": config.learning_rate},
+                                 {"params": model.grids.parameters(), "lr": config.grid_learning_rate}])
+    return torch.optim.Adam(model.parameters(), lr=config.learning_rate)
+
+
+def make_scheduler(optimizer: torch.optim.Optimizer, config: TrainConfig, steps: int,
+               grid: bool) -> torch.optim.lr_scheduler.LRScheduler:
+    """Cosine from each group's rate down to ``final_learning_rate_ratio`` of it over ``steps``."""
+    if grid:  # two groups: a factor, so that each ends at its own rate × the ratio
+        ratio = config.final_learning_rate_ratio
+        return torch.optim.lr_scheduler.LambdaLR(
+            optimizer, lambda step: ratio + (1.0 - ratio) * 0.5 * (1.0 + math.cos(math.pi * min(step, steps) / steps))
+        )
+    return torch.optim.lr_scheduler.CosineAnnealingLR(
+        optimizer, T_max=steps, eta_min=config.learning_rate * config.final_learning_rate_ratio
+    )
+
+
+def train_step(model: FunnelMLP | GridNetwork, optimizer: torch.optim.Optimizer,
+               scheduler: torch.optim.lr_scheduler.LRScheduler, coordinates: torch.Tensor, targets: torch.Tensor,
+               encoding: EncodingSpec) -> torch.Tensor:
+    """One optimisation step on a batch already on the model's device; returns the loss, detached (reading
+    it is the caller's choice: on a GPU that is a host sync)."""
+    loss = log_cosh_loss(_raw_outputs(model, coordinates, encoding), targets)
+    optimizer.zero_grad(set_to_none=True)
+    loss.backward()
+    optimizer.step()
+    scheduler.step()
+    return loss.detach()
+
+
 @torch.no_grad()
 def held_out_loss(
-    model: FunnelMLP,
+    model: FunnelMLP | GridNetwork,
     samples: Samples,
     encoding: EncodingSpec,
     device: torch.device,
@@ -119,7 +166,8 @@ def held_out_loss(
         stop = min(count, start + batch_size)
         coordinates = torch.from_numpy(samples.coordinates[start:stop]).to(device)
         targets = torch.from_numpy(samples.targets[start:stop]).to(device)
-        total += float(log_cosh_loss(model.predict(encode(coordinates, encoding)), targets)) * (stop - start)
+        inputs = coordinates if isinstance(model, GridNetwork) else encode(coordinates, encoding)
+        total += float(log_cosh_loss(model.predict(inputs), targets)) * (stop - start)
     return total / max(count, 1)
 
 
@@ -130,7 +178,7 @@ def train(
     resume: bool = False,
     progress: bool = True,
     per_epoch: Callable[[ModelFile], dict[str, Any]] | None = None,
-) -> tuple[FunnelMLP, ModelFile, dict[str, Any]]:
+) -> tuple[FunnelMLP | GridNetwork, ModelFile, dict[str, Any]]:
     """Train on ``volume``; writes checkpoint.pt (every epoch), model.npz and history.json to ``out_dir``.
 
     ``per_epoch`` (optional) gets the model file of the weights after each epoch; what it returns (e.g. a
@@ -141,16 +189,10 @@ def train(
     torch.manual_seed(config.seed)
     encoding, range_spec = config.encoding_for(volume), config.range_spec()
     train_samples, test_samples = split_samples(volume, config)
-    model = FunnelMLP(
-        encoding.features, parse_hidden(config.preset, config.hidden), config.activation, config.output_activation
-    ).to(device)
-    optimizer = torch.optim.Adam(model.parameters(), lr=config.learning_rate)
+    model = build_model(config, encoding).to(device)
+    optimizer = make_optimizer(model, config)
     steps_per_epoch = math.ceil(len(train_samples) / config.batch_size)
-    scheduler = torch.optim.lr_scheduler.CosineAnnealingLR(
-        optimizer,
-        T_max=steps_per_epoch * config.epochs,
-        eta_min=config.learning_rate * config.final_learning_rate_ratio,
-    )
+    scheduler = make_scheduler(optimizer, config, steps_per_epoch * config.epochs, isinstance(model, GridNetwork))
     history: dict[str, Any] = {"epochs": [], "train_seconds": 0.0}
     start_epoch = 0
     checkpoint_path = out_dir / "checkpoint.pt"
@@ -169,12 +211,13 @@ def train(
         history, start_epoch = state["history"], state["epoch"]
         torch.set_rng_state(state["torch_rng"])
     generator = torch.Generator().manual_seed(config.seed + start_epoch)
-    coordinates_all = torch.from_numpy(train_samples.coordinates)
-    targets_all = torch.from_numpy(train_samples.targets)
+    # The whole data set resident on the device, indexed there: no per-step host gather or copy.
+    coordinates_all = torch.from_numpy(train_samples.coordinates).to(device)
+    targets_all = torch.from_numpy(train_samples.targets).to(device)
     for epoch in range(start_epoch, config.epochs):
         started = time.perf_counter()
-        order = torch.randperm(len(train_samples), generator=generator)
-        running = 0.0
+        order = torch.randperm(len(train_samples), generator=generator).to(device)
+        running = torch.zeros((), dtype=torch.float64, device=device)  # on the device: no per-step sync
         bar = tqdm(
             range(steps_per_epoch),
             desc=f"epoch {epoch + 1}/{config.epochs}",
@@ -184,21 +227,15 @@ def train(
         )
         for step in bar:
             batch = order[step * config.batch_size : (step + 1) * config.batch_size]
-            coordinates = coordinates_all[batch].to(device, non_blocking=True)
-            targets = targets_all[batch].to(device, non_blocking=True)
-            loss = log_cosh_loss(model(encode(coordinates, encoding)), targets)
-            optimizer.zero_grad(set_to_none=True)
-            loss.backward()
-            optimizer.step()
-            scheduler.step()
-            value = loss.item()
+            value = train_step(model, optimizer, scheduler, coordinates_all[batch], targets_all[batch],
+                               encoding).double()
             running = 0.98 * running + 0.02 * value if step else value
-            if step % 20 == 0:
-                bar.set_postfix(loss=f"{running:.3e}", lr=f"{scheduler.get_last_lr()[0]:.2e}")
+            if progress and step % 20 == 0:  # the only host sync of the loop, and only with a progress bar
+                bar.set_postfix(loss=f"{float(running):.3e}", lr=f"{scheduler.get_last_lr()[0]:.2e}")
         seconds = time.perf_counter() - started
         record = {
             "epoch": epoch + 1,
-            "train_loss": running,
+            "train_loss": float(running),
             "seconds": round(seconds, 2),
             "learning_rate": scheduler.get_last_lr()[0],
         }
@@ -232,8 +269,13 @@ def train(
             "device": str(device),
             "train_samples": len(train_samples),
             "held_out_samples": len(test_samples or []),
+            "samples_per_second": round(len(train_samples) * len(history["epochs"]) / max(history["train_seconds"],
+                                                                                         1e-9)),
         }
     )
+    if isinstance(model, GridNetwork):
+        history.update({"grid_shapes": [list(shape) for shape in config.grid_shapes()],
+                        "grid_bytes": model.grid_bytes, "volume_bytes": int(volume.xyz.size * 4)})
     model_file = model.cpu().to_model_file(
         encoding=encoding,
         range=range_spec,

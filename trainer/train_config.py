@@ -15,6 +15,10 @@ from gratnet.volume import Volume
 class TrainConfig:
     """Network, encoding, range transform and optimisation of one training run."""
 
+    architecture: Literal["mlp", "grid"] = config_field(
+        "mlp", "network: mlp (the paper's funnel MLP on the encoding) or grid (learned feature grids over "
+        "(u*, v*, t) interpolated trilinearly, then the encoding, into a small funnel MLP; docs/physics.md)"
+    )
     preset: str = config_field("small", "network size preset: paper, funnel-176, medium, small, tiny")
     hidden: str = config_field("", "explicit hidden widths, comma-separated (overrides --preset)")
     activation: str = config_field("silu", "hidden activation: silu (measured best), relu, leaky_relu")
@@ -29,6 +33,15 @@ class TrainConfig:
     )
     test_slices: str = config_field("4,7,10", "held-out slice indices for --split slices")
     test_fraction: float = config_field(0.1, "held-out fraction for --split random")
+    grid_levels: int = config_field(3, "grid: levels, each half the u*/v* node intervals of the next")
+    grid_resolution: int = config_field(251, "grid: nodes per u*/v* axis of the finest level (251 = every 4th of a "
+                                        "1001² volume's samples)")
+    grid_t_resolution: int = config_field(11, "grid: nodes along t of every level (11 = the volume's slices)")
+    grid_features: int = config_field(2, "grid: features per level (1 to 4: one RGBA texture per level; 2 keeps the "
+                                      "default grid at 3.65 MB as float16)")
+    grid_init: float = config_field(1e-4, "grid: initial features uniform in ±this")
+    grid_learning_rate: float = config_field(1e-2, "grid: Adam's initial learning rate of the grids (same schedule)")
+    grid_dtype: Literal["float16", "float32"] = config_field("float16", "grid: storage dtype in the model file")
     epochs: int = config_field(6, "passes over the training samples")
     batch_size: int = config_field(32768, "samples per optimisation step")
     learning_rate: float = config_field(3e-3, "Adam's initial learning rate")
@@ -47,12 +60,34 @@ class TrainConfig:
             raise GratNetError(f"--learning-rate must be positive, got {self.learning_rate}")
         if not 0 <= self.epoch_flip_size <= 1024:
             raise GratNetError(f"--epoch-flip-size must be from 0 (off) to 1024 pixels, got {self.epoch_flip_size}")
+        if self.architecture not in ("mlp", "grid"):
+            raise GratNetError(f"--architecture must be mlp or grid, got {self.architecture!r}")
+        if self.architecture == "grid":
+            from gratnet.featuregrid import MAX_FEATURES, level_resolutions
+
+            level_resolutions(self.grid_levels, self.grid_resolution, self.grid_t_resolution)  # checks the sizes
+            if not 1 <= self.grid_features <= MAX_FEATURES:
+                raise GratNetError(f"--grid-features must be from 1 to {MAX_FEATURES}, got {self.grid_features}")
+            if not (self.grid_init >= 0 and self.grid_learning_rate > 0):
+                raise GratNetError(f"--grid-init must be ≥ 0 and --grid-learning-rate > 0, got {self.grid_init}, "
+                                   f"{self.grid_learning_rate}")
+            if self.grid_dtype not in ("float16", "float32"):
+                raise GratNetError(f"--grid-dtype must be float16 or float32, got {self.grid_dtype!r}")
         if self.split not in ("slices", "random", "all"):
             raise GratNetError(f"--split must be slices, random or all, got {self.split!r}")
 
     def encoding_for(self, volume: Volume) -> EncodingSpec:
         """Encoding scales for this volume's grid (top frequency at its Nyquist rate)."""
         return EncodingSpec.for_grid(volume.resolution, volume.slices, self.frequencies, self.t_frequencies)
+
+    def grid_shapes(self) -> list[tuple[int, int, int, int]]:
+        """(T, R, R, C) of every grid level, coarse to fine ([] for the mlp architecture)."""
+        if self.architecture != "grid":
+            return []
+        from gratnet.featuregrid import level_resolutions
+
+        return [(t, r, r, self.grid_features)
+                for r, t in level_resolutions(self.grid_levels, self.grid_resolution, self.grid_t_resolution)]
 
     def range_spec(self) -> RangeSpec:
         """The range transform of the targets."""

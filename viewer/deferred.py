@@ -410,6 +410,11 @@ def choose_render_path(scene: SceneRenderer, render_path: str = "auto", measure:
     :data:`PROBE_SIZE`, default light and camera) and caches the faster (:func:`render_path_cache_file`).
     ``measure=False``: no probe; ``forward`` while nothing is cached (the viewer: its compile process measures)."""
     check_render_path(render_path)
+    if scene.network.model.grids:  # the deferred path binds no feature grids: feature-grid models render forward
+        if render_path == "deferred":
+            raise GratNetError("the deferred render path is not built for feature-grid models; use the forward path "
+                               "(render path 'forward' or 'auto')")
+        return "forward", "feature-grid model: the forward path (the deferred path is not built for grids)"
     if render_path != "auto":
         return render_path, "requested"
     cache = render_path_cache_file()

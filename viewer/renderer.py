@@ -63,6 +63,10 @@ STATISTICS_KEYS = ("fragments", "evaluations", "skipped_a_zero", "skipped_bound"
 _SKIP_COUNTER_BINDING = 5  # SSBO binding of the counters (shaders/skip.glsl)
 _SKIP_COUNTER_SLOTS = 8
 _SKIP_BOUND_UNIT = 3  # texture unit of u_skip_bound (weights: 0; evaluate_keys/display inputs: 1, 2)
+_GRID_UNIT = 8  # texture unit of a feature-grid model's level 0 (level l: _GRID_UNIT + l; featuregrid.glsl)
+#: How a feature-grid model's grids are interpolated (shaders/featuregrid.glsl): ``manual`` (eight texelFetches,
+#: float32 weights: eq. 6g exactly) or ``hardware`` (one GL_LINEAR texture() call; GPUs may quantise the weights).
+GRID_FILTERS = ("manual", "hardware")
 _COUNTING_SUFFIX = "#count"  # program-cache key of a program compiled with COUNT_EVALUATIONS
 _DEPTH_ONLY_SUFFIX = "#depth"  # ... and of one compiled with DEPTH_ONLY (the depth pre-pass)
 
@@ -70,12 +74,15 @@ _DEPTH_ONLY_SUFFIX = "#depth"  # ... and of one compiled with DEPTH_ONLY (the de
 def model_defines(model: ModelFile) -> dict[str, int | float]:
     """The ``#define``s the programs need for ``model``: array capacities and the leaky-ReLU slope."""
     layout = texture_layout(list(model.layer_sizes))
-    return {
+    defines: dict[str, int | float] = {
         "MAX_BLOCKS": max(max(entry["in_blocks"], entry["out_blocks"]) for entry in layout),
         "MAX_LAYERS": len(layout),
         "MAX_FREQUENCIES": max(model.encoding.frequencies, model.encoding.t_frequencies, 1),
         "LEAKY_RELU_SLOPE": float(LEAKY_RELU_SLOPE),
     }
+    if model.grids:  # shaders/featuregrid.glsl is compiled in only for feature-grid models
+        defines.update({"GRID_LEVELS": len(model.grids), "GRID_FEATURES": int(model.grids[0].shape[-1])})
+    return defines
 
 
 def _split_frequency(value: float) -> tuple[float, float]:
@@ -149,13 +156,19 @@ def choose_weights_path(ctx: moderngl.Context, model: ModelFile, weights_path: s
       ~3 on the texture path, at the cost of a first compile that grows faster than the net (~25 s at
       28k MACs; Mesa's disk shader cache makes later ones take ~1 s);
     * ``texture`` otherwise: on a GPU texel fetches are cheap and a program per model is not worth its
-      compile time, and big nets would take llvmpipe minutes to compile.
+      compile time, and big nets would take llvmpipe minutes to compile; and always for feature-grid models,
+      which only the texture path evaluates (``baked`` is refused for them).
 
     Raises:
         GratNetError: ``weights_path`` is not one of :data:`WEIGHTS_PATHS`.
     """
     if weights_path not in WEIGHTS_PATHS:
         raise GratNetError(f"weights path must be one of {', '.join(WEIGHTS_PATHS)}, got {weights_path!r}")
+    if model.grids and weights_path == "baked":
+        raise GratNetError("the baked weights path is not built for feature-grid models; use the texture path "
+                           "(weights path 'texture' or 'auto')")
+    if model.grids:  # only the texture path reads feature grids (shaders/featuregrid.glsl)
+        return "texture"
     if weights_path != "auto":
         return weights_path
     software = is_software_rasterizer(ctx)
@@ -184,8 +197,11 @@ class NetworkRenderer:
     """
 
     def __init__(self, ctx: moderngl.Context, model: ModelFile, shader_root: str | Path | None = None,
-                 weights_path: str = "auto", baked_source: str | None = None) -> None:
+                 weights_path: str = "auto", baked_source: str | None = None, grid_filter: str = "manual") -> None:
         texture, layout = pack_texture(model)  # validates the model
+        if grid_filter not in GRID_FILTERS:
+            raise GratNetError(f"grid filter must be one of {', '.join(GRID_FILTERS)}, got {grid_filter!r}")
+        self.grid_filter = grid_filter
         #: The packed weight texture (docs/formats.md), ``float32`` ``(rows, texels per row, 4)``, on either path
         #: (the deferred path's weight buffers hold the same texels).
         self.packed_weights = np.ascontiguousarray(texture, dtype=np.float32)
@@ -206,6 +222,14 @@ class NetworkRenderer:
         self._weights = ctx.texture((width, height), 4, np.ascontiguousarray(texture).tobytes(), dtype="f4")
         self._weights.filter = (moderngl.NEAREST, moderngl.NEAREST)  # texelFetch ignores it; be explicit
         self._weights.repeat_x = self._weights.repeat_y = False
+        self._grids: list[moderngl.Texture] = []
+        for grid in model.grids:  # (T, R_v, R_u, C) → a (R_u, R_v, T) texture of C float channels
+            dtype = "f2" if grid.dtype == np.float16 else "f4"
+            level = ctx.texture3d((grid.shape[2], grid.shape[1], grid.shape[0]), grid.shape[3],
+                                  np.ascontiguousarray(grid).tobytes(), dtype=dtype)
+            level.filter = (moderngl.LINEAR, moderngl.LINEAR)  # texelFetch ignores it; texture() filters
+            level.repeat_x = level.repeat_y = level.repeat_z = False  # clamp to edge: eq. 6g clamps c
+            self._grids.append(level)
         self._programs: dict[str, moderngl.Program] = {}
         self._vertex_arrays: dict[str, moderngl.VertexArray] = {}
         # Skipping work (gratnet/bounds.py, shaders/skip.glsl): the bound table and the counters are made on
@@ -237,6 +261,9 @@ class NetworkRenderer:
             _set(program, "u_layers", layers)
             _set(program, "u_hidden_activation", _HIDDEN[model.activation])
             _set(program, "u_output_activation", _OUTPUT[model.output_activation])
+        if self._grids:
+            _set(program, "u_grid", np.arange(_GRID_UNIT, _GRID_UNIT + len(self._grids), dtype=np.int32))
+            _set(program, "u_grid_hardware_filter", int(self.grid_filter == "hardware"))
         _set(program, "u_scheme", _SCHEMES[model.scheme])
         # encoded_feature (encoding.glsl) reads the counts; the baked MLP has them in its code, so baked
         # programs that do not call encoded_feature (all but encode_keys) lack these uniforms.
@@ -278,6 +305,8 @@ class NetworkRenderer:
         on the baked path."""
         if self.weights_path == "texture":
             self._weights.use(location=location)
+        for level, grid in enumerate(self._grids):  # a feature-grid model's grids, on their fixed units
+            grid.use(location=_GRID_UNIT + level)
 
     def _draw(self, name: str, framebuffer: moderngl.Framebuffer,
               textures: tuple[tuple[moderngl.Texture, int], ...] = (),
@@ -291,6 +320,7 @@ class NetworkRenderer:
             with scope:
                 framebuffer.use()  # the scope binds the framebuffer but leaves the viewport as it was
                 weights = ((self._weights, 0),) if self.weights_path == "texture" else ()
+                weights += tuple((grid, _GRID_UNIT + level) for level, grid in enumerate(self._grids))
                 for texture, unit in (*weights, *textures):
                     texture.use(location=unit)
                 if scissor is not None:
@@ -340,6 +370,9 @@ class NetworkRenderer:
                        ) -> tuple[moderngl.Texture, int]:
         """Set skip.glsl's uniforms on ``program``; returns ``(texture, unit)`` of the bound to bind."""
         threshold = skip_threshold_value(skip_threshold)
+        if threshold > 0.0 and self.model.grids:  # gratnet/bounds.py builds no bound for grid models
+            _LOG.info("skipping work is not built for feature-grid models: evaluating every pixel")
+            threshold = 0.0
         texture = self._skip_bound_texture(threshold)
         _set(program, "u_skip_threshold", threshold)
         _set(program, "u_skip_bound", _SKIP_BOUND_UNIT)

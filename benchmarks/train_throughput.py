@@ -1,0 +1,94 @@
+"""Trainer throughput: samples per second of `gratnet train`'s own step (trainer.train.train_step).
+
+    python benchmarks/train_throughput.py [--threads 2] [--steps 30] [--device cpu] [--samples 4000000]
+
+Builds each network of NETWORKS exactly as `gratnet train` does (TrainConfig → build_model, the same
+optimiser and schedule), puts a synthetic data set of ``--samples`` random network coordinates and
+targets on the device once (the trainer keeps the whole set resident: per-step work is an index into
+it, no host gather or copy), runs ``--warmup`` steps, then times ``--steps`` steps of ``--batch-size``
+with no host sync inside the timed loop (one synchronisation at its end). Prints one JSON line per
+network: parameters, grid bytes, MACs per evaluation, samples per second. The data's values do not
+change the cost (the coordinates are uniformly random like a shuffled volume).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import time
+
+import torch
+
+from gratnet.encoding import EncodingSpec
+from trainer.model import GridNetwork
+from trainer.train import build_model, make_optimizer, make_scheduler, train_step
+from trainer.train_config import TrainConfig
+
+#: (label, TrainConfig overrides): the paper's and today's MLPs and the feature-grid candidates.
+NETWORKS: tuple[tuple[str, dict[str, object]], ...] = (
+    ("mlp small", {"preset": "small"}),
+    ("mlp funnel-176", {"preset": "funnel-176"}),
+    ("mlp paper", {"preset": "paper"}),
+    ("grid 3×251² T11 C2, 64-32-16", {"architecture": "grid", "hidden": "64,32,16", "grid_features": 2}),
+    ("grid 3×251² T11 C2, small", {"architecture": "grid", "preset": "small", "grid_features": 2}),
+    ("grid 3×251² T6 C4, small", {"architecture": "grid", "preset": "small", "grid_features": 4,
+                                  "grid_t_resolution": 6}),
+    ("grid 251²+501² T5 C2, small", {"architecture": "grid", "preset": "small", "grid_features": 2, "grid_levels": 2,
+                                     "grid_resolution": 501, "grid_t_resolution": 5}),
+    ("grid 3×251² T11 C2, 64-32-16, L=8 L_t=2", {"architecture": "grid", "hidden": "64,32,16", "grid_features": 2,
+                                                  "frequencies": 8, "t_frequencies": 2}),
+)
+
+
+def main() -> None:
+    """Print one JSON line per network."""
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--threads", type=int, default=2, help="torch intra-op threads (CPU)")
+    parser.add_argument("--device", default="cpu")
+    parser.add_argument("--steps", type=int, default=30)
+    parser.add_argument("--warmup", type=int, default=3)
+    parser.add_argument("--batch-size", type=int, default=32768)
+    parser.add_argument("--samples", type=int, default=4_000_000)
+    parser.add_argument("--only", default="", help="run only networks whose label contains this")
+    arguments = parser.parse_args()
+    torch.set_num_threads(arguments.threads)
+    device = torch.device(arguments.device)
+    generator = torch.Generator().manual_seed(0)
+    coordinates = (torch.rand(arguments.samples, 3, generator=generator) * 2 - 1).to(device)
+    targets = torch.rand(arguments.samples, 3, generator=generator).to(device)
+    for label, overrides in NETWORKS:
+        if arguments.only not in label:
+            continue
+        config = TrainConfig(batch_size=arguments.batch_size, **overrides)  # type: ignore[arg-type]
+        encoding = EncodingSpec.for_grid(1001, 11, config.frequencies, config.t_frequencies)  # the paper's grid
+        torch.manual_seed(0)
+        model = build_model(config, encoding).to(device)
+        optimizer = make_optimizer(model, config)
+        scheduler = make_scheduler(optimizer, config, arguments.steps + arguments.warmup,
+                                   isinstance(model, GridNetwork))
+        order = torch.randperm(arguments.samples, generator=generator).to(device)
+        batches = [order[k * config.batch_size:(k + 1) * config.batch_size]
+                   for k in range(arguments.samples // config.batch_size)]
+        for step in range(arguments.warmup):
+            batch = batches[step % len(batches)]
+            train_step(model, optimizer, scheduler, coordinates[batch], targets[batch], encoding)
+        if device.type == "cuda":
+            torch.cuda.synchronize()
+        started = time.perf_counter()
+        for step in range(arguments.steps):
+            batch = batches[step % len(batches)]
+            loss = train_step(model, optimizer, scheduler, coordinates[batch], targets[batch], encoding)
+        float(loss)  # the one sync
+        seconds = time.perf_counter() - started
+        mlp = model.mlp if isinstance(model, GridNetwork) else model
+        macs = sum(a * b for a, b in zip(mlp.sizes[:-1], mlp.sizes[1:], strict=False))
+        print(json.dumps({
+            "network": label, "layers": mlp.sizes, "parameters": model.parameter_count,
+            "grid_bytes": model.grid_bytes if isinstance(model, GridNetwork) else 0, "macs": macs,
+            "threads": arguments.threads, "device": str(device), "batch_size": config.batch_size,
+            "steps": arguments.steps, "samples_per_second": round(arguments.steps * config.batch_size / seconds),
+        }, ensure_ascii=False), flush=True)
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,70 @@
+"""Learned feature grids: trilinear interpolation of dense 3D feature grids over the network coordinates.
+
+docs/physics.md "Feature-grid network". A grid network's input is, per level ``l`` (coarse to fine), the
+``C`` features of a dense grid ``G_l`` of shape ``(T_l, R_l, R_l, C)`` (axes: c_t, c_v, c_u, feature)
+interpolated trilinearly at the network coordinates ``(c_u, c_v, c_t) ∈ [−1, 1]³``, followed by the
+sinusoidal encoding (gratnet/encoding.py). Grid node ``i`` of an axis of ``N`` nodes sits at
+``c = −1 + 2i/(N − 1)``: both ends of [−1, 1] are nodes (torch's ``grid_sample(align_corners=True)``; in
+GL texture coordinates, node ``i`` is the texel centre ``(i + 0.5)/N``), so the volume's 1001 u* samples
+fall on grid nodes whenever ``(N − 1)`` divides 1000. Coordinates outside [−1, 1] are clamped.
+
+One implementation for numpy arrays and torch tensors alike (array-api-compat picks the namespace), used
+by the trainer (torch, with autograd into the grids) and the runtime's numpy evaluator; the GLSL shader
+implements the same formula and a parity test ties them together.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from typing import Any
+
+import array_api_compat
+
+from gratnet.errors import GratNetError
+
+#: Most features per level: one RGBA texture per level in the shader.
+MAX_FEATURES = 4
+
+
+def level_resolutions(levels: int, finest: int, t_resolution: int) -> list[tuple[int, int]]:
+    """(R_l, T_l) per level, coarse to fine: the finest has ``finest`` nodes per u*/v* axis and each
+    coarser level half the intervals (``R_l − 1 = (finest − 1)/2^(levels−1−l)``, at least 2 nodes); every
+    level has ``t_resolution`` nodes along t."""
+    if levels < 1 or finest < 2 or t_resolution < 2:
+        raise GratNetError(f"a feature grid needs ≥ 1 level, ≥ 2 nodes per u*/v* axis and ≥ 2 along t, "
+                           f"got {levels} levels, {finest} and {t_resolution}")
+    return [(max(2, round((finest - 1) / 2 ** (levels - 1 - level)) + 1), t_resolution) for level in range(levels)]
+
+
+def grid_features(grids: Sequence[Any], coordinates: Any) -> Any:
+    """Features of every level at network coordinates ``(…, 3)`` → ``(…, Σ C_l)``, level 0 first.
+
+    Each grid is ``(T, R_v, R_u, C)``; the result has the coordinates' dtype (float16 grids are widened).
+    """
+    xp = array_api_compat.array_namespace(coordinates)
+    batch = tuple(coordinates.shape[:-1])
+    points = xp.reshape(coordinates, (-1, 3))
+    parts = []
+    for grid in grids:
+        t_nodes, v_nodes, u_nodes, channels = (int(size) for size in grid.shape)
+        flat = xp.reshape(xp.astype(grid, coordinates.dtype), (-1, channels))
+        index, fraction = [], []
+        for axis, nodes in enumerate((u_nodes, v_nodes, t_nodes)):
+            position = (xp.clip(points[:, axis], -1.0, 1.0) + 1.0) * (0.5 * (nodes - 1))
+            lower = xp.clip(xp.floor(position), 0.0, float(nodes - 2))  # the last cell includes its far end
+            index.append(xp.astype(lower, xp.int64))
+            fraction.append(position - lower)
+        (iu, iv, it), (fu, fv, ft) = index, fraction
+        base = (it * v_nodes + iv) * u_nodes + iu
+        corners, weights = [], []
+        for dt in (0, 1):  # the 8 corners in one gather: autograd then scatters into the grid once, not 8 times
+            for dv in (0, 1):
+                for du in (0, 1):
+                    corners.append(base + (dt * v_nodes + dv) * u_nodes + du)
+                    weights.append((ft if dt else 1.0 - ft) * (fv if dv else 1.0 - fv) * (fu if du else 1.0 - fu))
+        values = xp.take(flat, xp.reshape(xp.stack(corners, axis=1), (-1,)), axis=0)
+        values = xp.reshape(values, (-1, 8, channels))
+        total = xp.sum(xp.stack(weights, axis=1)[:, :, None] * values, axis=1)
+        parts.append(total)
+    features = xp.concat(parts, axis=-1)
+    return xp.reshape(features, (*batch, int(features.shape[-1])))

@@ -1,0 +1,67 @@
+// Learned feature grids (docs/physics.md "Feature-grid network", eq. 6g); mirrors gratnet/featuregrid.py.
+//
+// Compiled in only with #define GRID_LEVELS (levels) and GRID_FEATURES (C, 1..4), set from the model file:
+// one 3D texture per level, (R_u, R_v, T) texels of C channels (R16F.. RGBA16F or 32F), node i of an axis
+// of N nodes at c = -1 + 2i/(N-1), i.e. at the texel centre (i + 0.5)/N. The MLP's input is the L*C grid
+// features, level 0 first, then the encoding (encoding.glsl).
+//
+// Two ways to interpolate, chosen by u_grid_hardware_filter:
+//   0: eight texelFetches and float32 weights, exactly the formula of eq. 6g (the default);
+//   1: one texture() with GL_LINEAR, where the GPU may quantise the weights (8 bits of sub-texel position
+//      on NVIDIA hardware): cheaper, less exact (docs/benchmarks.md, "Feature-grid network").
+
+#ifdef GRID_LEVELS
+uniform highp sampler3D u_grid[GRID_LEVELS];
+uniform int u_grid_hardware_filter;
+vec4 g_grid_features[GRID_LEVELS];  // this fragment's features, level by level (.x .. first C lanes)
+
+vec4 grid_level_features(highp sampler3D grid, vec3 c) {
+    vec3 nodes = vec3(textureSize(grid, 0));
+    vec3 p = (clamp(c, -1.0, 1.0) + 1.0) * (0.5 * (nodes - 1.0));
+    if (u_grid_hardware_filter != 0) {
+        return texture(grid, (p + 0.5) / nodes);
+    }
+    vec3 lower = clamp(floor(p), vec3(0.0), nodes - 2.0);  // the last cell includes its far end
+    vec3 f = p - lower;
+    vec3 g = 1.0 - f;
+    ivec3 i = ivec3(lower);
+    vec4 sum = (g.z * g.y * g.x) * texelFetch(grid, i, 0);
+    sum += (g.z * g.y * f.x) * texelFetch(grid, i + ivec3(1, 0, 0), 0);
+    sum += (g.z * f.y * g.x) * texelFetch(grid, i + ivec3(0, 1, 0), 0);
+    sum += (g.z * f.y * f.x) * texelFetch(grid, i + ivec3(1, 1, 0), 0);
+    sum += (f.z * g.y * g.x) * texelFetch(grid, i + ivec3(0, 0, 1), 0);
+    sum += (f.z * g.y * f.x) * texelFetch(grid, i + ivec3(1, 0, 1), 0);
+    sum += (f.z * f.y * g.x) * texelFetch(grid, i + ivec3(0, 1, 1), 0);
+    sum += (f.z * f.y * f.x) * texelFetch(grid, i + ivec3(1, 1, 1), 0);
+    return sum;
+}
+
+// Fetch every level's features at the network coordinates of the key set by encoding_set_key.
+void grid_set_key() {
+    for (int level = 0; level < GRID_LEVELS; ++level) {
+        g_grid_features[level] = grid_level_features(u_grid[level], g_coordinates);
+    }
+}
+
+float network_input_feature(int f) {
+    if (f < GRID_LEVELS * GRID_FEATURES) {
+        int level = f / GRID_FEATURES;
+        return g_grid_features[level][f - level * GRID_FEATURES];
+    }
+    return encoded_feature(f - GRID_LEVELS * GRID_FEATURES);
+}
+
+// Input features 4*block ... 4*block+3 of the MLP: grid features, then the encoding.
+vec4 network_input_block(int block) {
+    int f = 4 * block;
+    return vec4(network_input_feature(f), network_input_feature(f + 1), network_input_feature(f + 2),
+                network_input_feature(f + 3));
+}
+#else
+void grid_set_key() {
+}
+
+vec4 network_input_block(int block) {
+    return encoded_block(block);
+}
+#endif

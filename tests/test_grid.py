@@ -1,0 +1,287 @@
+"""Feature-grid networks: trilinear interpolation (analytic), torch vs numpy, the model file, a smoke train."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+import torch
+
+from gratnet.encoding import EncodingSpec, RangeSpec, network_coordinates, range_inverse
+from gratnet.errors import GratNetError
+from gratnet.featuregrid import grid_features, level_resolutions
+from gratnet.modelfile import ModelFile, evaluate_keys, load_model, save_model
+from trainer.model import GridNetwork
+from trainer.train import train
+from trainer.train_config import TrainConfig
+
+
+def _nodes(count: int) -> np.ndarray:
+    return np.linspace(-1.0, 1.0, count)
+
+
+def _linear_grid(shape: tuple[int, int, int], coefficients: np.ndarray) -> np.ndarray:
+    """(T, R_v, R_u, C) grid whose feature k is Σ a_k·c + b_k sampled at the nodes (c_u, c_v, c_t)."""
+    t_nodes, v_nodes, u_nodes = shape
+    c_t, c_v, c_u = np.meshgrid(_nodes(t_nodes), _nodes(v_nodes), _nodes(u_nodes), indexing="ij")
+    points = np.stack([c_u, c_v, c_t], axis=-1)
+    return points @ coefficients[:3] + coefficients[3]
+
+
+def test_trilinear_interpolation_reproduces_a_linear_field_exactly():
+    rng = np.random.default_rng(1)
+    coefficients = rng.normal(size=(4, 3))  # rows: d/dc_u, d/dc_v, d/dc_t, offset; 3 features
+    grids = [_linear_grid((3, 5, 5), coefficients), _linear_grid((11, 17, 17), coefficients)]
+    points = rng.uniform(-1.0, 1.0, (500, 3))
+    points[:4] = [[-1, -1, -1], [1, 1, 1], [1, -1, 0.3], [0.0, 1.0, -1.0]]  # corners and faces: the last cells
+    expected = points @ coefficients[:3] + coefficients[3]
+    features = grid_features(grids, points)
+    assert features.shape == (500, 6)
+    np.testing.assert_allclose(features[:, :3], expected, rtol=0, atol=1e-12)
+    np.testing.assert_allclose(features[:, 3:], expected, rtol=0, atol=1e-12)
+
+
+def test_nodes_sit_at_both_ends_and_outside_points_clamp():
+    rng = np.random.default_rng(2)
+    grid = rng.normal(size=(4, 6, 6, 2))  # a non-linear field: node values must come back exactly
+    t_index, v_index, u_index = np.meshgrid(np.arange(4), np.arange(6), np.arange(6), indexing="ij")
+    points = np.stack([_nodes(6)[u_index], _nodes(6)[v_index], _nodes(4)[t_index]], axis=-1)
+    np.testing.assert_allclose(grid_features([grid], points), grid, rtol=0, atol=1e-12)
+    outside = np.array([[-3.0, 5.0, 2.0]])
+    np.testing.assert_allclose(grid_features([grid], outside)[0], grid[-1, -1, 0], rtol=0, atol=1e-12)
+
+
+def test_level_resolutions_halve_the_intervals():
+    assert level_resolutions(3, 251, 11) == [(63, 11), (126, 11), (251, 11)]
+    assert level_resolutions(1, 501, 6) == [(501, 6)]
+    with pytest.raises(GratNetError):
+        level_resolutions(2, 1, 11)
+
+
+def test_torch_grid_sample_matches_the_numpy_evaluator():
+    torch.manual_seed(0)
+    encoding = EncodingSpec.for_grid(21, 5, 3, 2)
+    network = GridNetwork(encoding, [(3, 5, 5, 4), (5, 9, 9, 4)], [8], init=1.0, grid_dtype="float32")
+    points = torch.rand(300, 3, dtype=torch.float64) * 2 - 1
+    with torch.no_grad():
+        expected = network.double().features(points).numpy()
+    grids = network.to_model_file(encoding=encoding, range=RangeSpec(), scheme="simple-max").grids
+    np.testing.assert_allclose(grid_features(grids, points.numpy()), expected, rtol=0, atol=1e-6)
+
+
+def _grid_model(dtype: str = "float16") -> ModelFile:
+    rng = np.random.default_rng(3)
+    encoding = EncodingSpec.for_grid(21, 5, 2, 1)
+    grids = [rng.normal(size=(3, 4, 4, 2)).astype(dtype), rng.normal(size=(3, 7, 7, 2)).astype(dtype)]
+    sizes = [4 + encoding.features, 6, 3]
+    return ModelFile(
+        layer_sizes=sizes,
+        weights=[rng.normal(size=(b, a)).astype(np.float32) for a, b in zip(sizes[:-1], sizes[1:], strict=True)],
+        biases=[rng.normal(size=b).astype(np.float32) for b in sizes[1:]],
+        activation="silu", output_activation="clamp", encoding=encoding, range=RangeSpec(), scheme="simple-max",
+        metadata={"note": "test"}, grids=grids,
+    )
+
+
+@pytest.mark.parametrize("dtype", ["float16", "float32"])
+def test_model_file_round_trip_with_grids(tmp_path, dtype):
+    model = _grid_model(dtype)
+    save_model(tmp_path / "grid.npz", model)
+    loaded = load_model(tmp_path / "grid.npz")
+    assert loaded == model and loaded.grids[0].dtype == np.dtype(dtype)
+    assert loaded.grid_bytes == sum(grid.nbytes for grid in model.grids)
+    with np.load(tmp_path / "grid.npz") as archive:
+        header = json.loads(str(archive["metadata_json"]))
+    assert header["format_version"] == 2 and header["grid"] == {"levels": [[3, 4, 4, 2], [3, 7, 7, 2]],
+                                                                "dtype": dtype}
+    rng = np.random.default_rng(4)
+    u, v = rng.uniform(-1.2, 1.2, (2, 50))
+    w = -rng.uniform(0, 1, 50) * np.sqrt(4 - u**2 - v**2)
+    np.testing.assert_array_equal(evaluate_keys(loaded, u, v, w), evaluate_keys(model, u, v, w))
+
+
+def test_pure_mlp_files_stay_version_1(tmp_path):
+    model = _grid_model()
+    mlp = ModelFile(layer_sizes=[model.encoding.features, 3], weights=[np.zeros((3, model.encoding.features),
+                    np.float32)], biases=[np.zeros(3, np.float32)], activation="relu", output_activation="clamp",
+                    encoding=model.encoding, range=model.range, scheme="simple")
+    save_model(tmp_path / "mlp.npz", mlp)
+    with np.load(tmp_path / "mlp.npz") as archive:
+        header = json.loads(str(archive["metadata_json"]))
+        assert "grid" not in header and header["format_version"] == 1 and "grid_0" not in archive.files
+
+
+def test_bad_grids_are_refused_with_a_clear_message(tmp_path):
+    model = _grid_model()
+    model.grids[1] = model.grids[1][..., :1]
+    with pytest.raises(GratNetError, match="every level must match"):
+        save_model(tmp_path / "bad.npz", model)
+    model = _grid_model()
+    model.grids[0] = model.grids[0].astype(np.float64)
+    with pytest.raises(GratNetError, match="float16 or float32"):
+        save_model(tmp_path / "bad.npz", model)
+    model = _grid_model()
+    model.layer_sizes = [model.encoding.features, 6, 3]
+    with pytest.raises(GratNetError, match="grid features"):
+        save_model(tmp_path / "bad.npz", model)
+    # A file whose header disagrees with its grid arrays.
+    save_model(tmp_path / "good.npz", _grid_model())
+    with np.load(tmp_path / "good.npz") as archive:
+        arrays = {name: archive[name] for name in archive.files}
+    header = json.loads(str(arrays["metadata_json"]))
+    header["grid"]["levels"][1] = [3, 8, 8, 2]
+    arrays["metadata_json"] = np.array(json.dumps(header))
+    np.savez(tmp_path / "corrupt.npz", **arrays)
+    with pytest.raises(GratNetError, match="do not match the header's grid"):
+        load_model(tmp_path / "corrupt.npz")
+
+
+def test_grid_training_smoke_and_torch_numpy_round_trip(tmp_path):
+    from trainer.fourier import OpticsConfig
+    from trainer.generators import generate
+    from trainer.groundtruth import VolumeConfig, compute_volume
+
+    optics = OpticsConfig(sigma_s_um=1.5, wavelength_step_nm=100.0)
+    volume = compute_volume(generate("blazed", size_um=5.0), VolumeConfig(resolution=21, slices=5,
+                            sampling="simple-max"), optics, progress=False)
+    config = TrainConfig(architecture="grid", hidden="16,16", frequencies=4, t_frequencies=2, grid_levels=2,
+                         grid_resolution=11, grid_t_resolution=5, grid_features=4, epochs=2, batch_size=256,
+                         split="all", grid_dtype="float32", seed=1)
+    model, model_file, history = train(volume, config, tmp_path, progress=False)
+    losses = [record["train_loss"] for record in history["epochs"]]
+    assert all(np.isfinite(losses)) and losses[-1] < losses[0]
+    assert history["grid_bytes"] == (5 * 6 * 6 + 5 * 11 * 11) * 4 * 4 and history["parameters"] == model.parameter_count
+    loaded = load_model(tmp_path / "model.npz")
+    assert [grid.shape for grid in loaded.grids] == [(5, 6, 6, 4), (5, 11, 11, 4)]
+    rng = np.random.default_rng(0)
+    u, v = rng.uniform(-1.3, 1.3, (2, 64))
+    w = -rng.uniform(0, 1, 64) * np.sqrt(4 - u**2 - v**2)
+    with torch.no_grad():
+        coordinates = torch.from_numpy(network_coordinates(u, v, w, "simple-max")).float()
+        expected = range_inverse(model.predict(coordinates).double(), model_file.range).numpy()
+    np.testing.assert_allclose(evaluate_keys(loaded, u, v, w), expected, rtol=2e-4, atol=1e-12)
+
+
+# ------------------------------------------------------------------------------------------------
+# GLSL (shaders/featuregrid.glsl) against the numpy evaluator
+
+
+def _random_grid_model(features: int, levels: int, dtype: str, seed: int = 5) -> ModelFile:
+    """A random feature-grid model: 2 hidden layers of 21, outputs mostly inside (0, 1)."""
+    rng = np.random.default_rng(seed)
+    spec = EncodingSpec.for_grid(101, 5, 4, 2)
+    grids = [(0.5 * rng.standard_normal((5, nodes, nodes, features))).astype(dtype) for nodes in (7, 13, 25)[:levels]]
+    sizes = [levels * features + spec.features, 21, 21, 3]
+    weights = [(rng.standard_normal((b, a)) / np.sqrt(a)).astype(np.float32) for a, b in zip(sizes[:-1], sizes[1:],
+                                                                                             strict=True)]
+    weights[-1] = (0.3 * weights[-1]).astype(np.float32)
+    biases = [(0.1 * rng.standard_normal(b)).astype(np.float32) for b in sizes[1:]]
+    biases[-1] = np.array([0.55, 0.6, 0.65], dtype=np.float32)
+    return ModelFile(sizes, weights, biases, "silu", "clamp", spec, RangeSpec(), "simple-max", grids=grids)
+
+
+def _keys(count: int = 400) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    rng = np.random.default_rng(9)
+    u, v = rng.uniform(-1.4, 1.4, (2, count))
+    w = -rng.uniform(0, 1, count) * np.sqrt(np.clip(4 - u**2 - v**2, 0, None))
+    keys = np.stack([u, v, w], -1).astype(np.float32).astype(np.float64)  # the GPU gets float32 keys
+    keys[:3] = [[0.0, 0.0, 0.0], [0.0, 0.0, -2.0], [2.0, 0.0, 0.0]]  # grid corners and faces
+    return keys[:, 0], keys[:, 1], keys[:, 2]
+
+
+@pytest.mark.parametrize(("features", "levels", "dtype"), [(2, 3, "float16"), (4, 2, "float32"), (3, 1, "float16")])
+@pytest.mark.parametrize("grid_filter", ["manual", "hardware"])
+def test_gpu_grid_model_matches_numpy(ctx, features, levels, dtype, grid_filter):
+    from viewer.renderer import NetworkRenderer
+
+    model = _random_grid_model(features, levels, dtype)
+    u, v, w = _keys()
+    expected = evaluate_keys(model, u, v, w)
+    renderer = NetworkRenderer(ctx, model, grid_filter=grid_filter)
+    try:
+        assert renderer.weights_path == "texture"
+        actual = renderer.evaluate_keys(u, v, w)
+    finally:
+        renderer.release()
+    assert np.all(expected.max(axis=0) > 0)
+    # float32 in the shader; eq. 7's inverse amplifies the outputs' rounding (~1e-7) to ~1e-5 relative.
+    np.testing.assert_allclose(actual, expected, rtol=1e-4, atol=1e-12)
+
+
+def test_gpu_grid_features_alone_match_numpy(ctx):
+    """A network that outputs three grid features: the interpolation itself, without the MLP's mixing."""
+    from gratnet.modelfile import mlp_forward, network_inputs
+    from viewer.renderer import NetworkRenderer
+
+    rng = np.random.default_rng(6)
+    spec = EncodingSpec.for_grid(101, 5, 4, 2)
+    grids = [rng.uniform(0, 1, (5, nodes, nodes, 4)).astype(np.float16) for nodes in (7, 33)]
+    weights = np.zeros((3, 8 + spec.features), np.float32)
+    weights[0, 4], weights[1, 5], weights[2, 0] = 1.0, 1.0, 1.0  # level 1 features 0, 1 and level 0 feature 0
+    model = ModelFile([8 + spec.features, 3], [weights], [np.zeros(3, np.float32)], "relu", "none", spec,
+                      RangeSpec(), "simple-max", grids=grids)
+    u, v, w = _keys(2000)
+    expected = mlp_forward(model, network_inputs(model, network_coordinates(u, v, w, "simple-max")))
+    for grid_filter in ("manual", "hardware"):
+        renderer = NetworkRenderer(ctx, model, grid_filter=grid_filter)
+        try:
+            actual = renderer.network_outputs(u, v, w)
+        finally:
+            renderer.release()
+        tolerance = 1e-5 if grid_filter == "manual" else 2e-3  # GPUs may filter with 8-bit weights
+        np.testing.assert_allclose(actual, expected, rtol=0, atol=tolerance)
+
+
+def test_gpu_grid_brdf_slice_matches_numpy(ctx):
+    from gratnet.brdf import a_term, direction, slice_view_directions
+    from viewer.renderer import NetworkRenderer
+
+    size, theta, phi, exposure = 24, 30.0, 40.0, 2.0
+    model = _random_grid_model(4, 2, "float16")
+    views, inside = slice_view_directions(size)
+    light = direction(theta, phi)
+    key = -(light + views)
+    xyz = evaluate_keys(model, key[..., 0], key[..., 1], key[..., 2]) * inside[..., None]
+    expected = exposure * a_term(light, views, 1.5)[..., None] * xyz
+    renderer = NetworkRenderer(ctx, model)
+    try:
+        exposed = renderer.render_brdf_slice(theta, phi, size, exposure, 1.5)
+    finally:
+        renderer.release()
+    np.testing.assert_allclose(exposed, expected, rtol=1e-4, atol=1e-3 * float(np.abs(expected).max()))
+
+
+def test_baked_path_refuses_grid_models_and_auto_picks_the_texture_path(ctx):
+    from viewer.renderer import NetworkRenderer, choose_weights_path
+
+    model = _random_grid_model(2, 1, "float16")
+    assert choose_weights_path(ctx, model, "auto") == "texture"
+    with pytest.raises(GratNetError, match="baked weights path is not built for feature-grid models"):
+        NetworkRenderer(ctx, model, weights_path="baked")
+    with pytest.raises(GratNetError, match="grid filter"):
+        NetworkRenderer(ctx, model, grid_filter="cubic")
+
+
+def test_scene_renders_grid_models_on_the_forward_path(ctx):
+    """auto takes the forward path for grid models (the deferred path is not built for them) and shades the mesh;
+    asking for deferred is refused in one line."""
+    from viewer.camera import Camera, Light
+    from viewer.meshes import compact_disc
+    from viewer.scene import SceneRenderer
+
+    model = _random_grid_model(4, 2, "float16")
+    scene = SceneRenderer(ctx, model, render_path="auto")
+    try:
+        assert scene.render_path == "forward" and scene.network.weights_path == "texture"
+        image = scene.render(compact_disc(segments=32), Camera(0.2, -90.0, 50.0), Light.directional(30.0, 180.0),
+                             (24, 18), exposure=10.0)
+    finally:
+        scene.release()
+    assert image.shape == (18, 24, 3) and np.all(np.isfinite(image)) and image.max() > 0
+    deferred = SceneRenderer(ctx, model, render_path="deferred")
+    try:
+        with pytest.raises(GratNetError, match="deferred render path is not built for feature-grid models"):
+            _ = deferred.render_path
+    finally:
+        deferred.release()
