@@ -25,6 +25,11 @@ from gratnet.encoding import EncodingSpec, RangeSpec
 from gratnet.modelfile import ModelFile, save_model
 from gratnet.volume import Volume, write_volume
 
+# Imported here, unpatched: these modules bind viewer.render_cli.resolve_material by name when first imported,
+# and a first import inside a test that patches it (bench, view) would keep the patch for the whole worker.
+importlib.import_module("viewer.scene_supply")
+importlib.import_module("viewer.app")
+
 TINY_FIELD = ["--dx-um", "0.1", "--height-scale-um", "0.5"]
 
 
