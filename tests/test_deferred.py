@@ -13,10 +13,9 @@ from collections.abc import Iterator
 import numpy as np
 import pytest
 
-from gratnet.brdf import a_term
 from gratnet.cli import main
 from gratnet.errors import GratNetError
-from gratnet.modelfile import evaluate_keys
+from tests.test_scene import plane_reference
 from tests.test_shader_parity import random_model
 from viewer.antialias import sample_offsets
 from viewer.camera import Camera, Light
@@ -54,24 +53,6 @@ def scenes(ctx, model) -> Iterator[dict[str, object]]:
         scene.release()
 
 
-def plane_reference(model, camera: Camera, light: Light, width: int, height: int) -> np.ndarray:
-    """exposure · irradiance · A · XYZ per pixel of an infinite plane z = 0 (numpy, float64; as test_scene)."""
-    points, views = [], []
-    for row in range(height):
-        for column in range(width):
-            eye, ray = camera.pixel_ray(row, column, width, height)
-            points.append(eye - eye[2] / ray[2] * ray)
-            views.append(-ray)
-    points, views = np.array(points), np.array(views)
-    offsets = np.asarray(light.vector) - points
-    distances = np.linalg.norm(offsets, axis=1, keepdims=True)
-    lights = offsets / distances
-    key = -(lights + views)
-    irradiance = light.intensity / distances**2
-    return (EXPOSURE * irradiance * a_term(lights, views, 1.5)[:, None]
-            * evaluate_keys(model, key[:, 0], key[:, 1], key[:, 2])).reshape(height, width, 3)
-
-
 @pytest.mark.parametrize("weights", WEIGHTS)
 def test_deferred_matches_forward_and_numpy_at_every_pixel(scenes, model, weights):
     camera = Camera(distance=0.25, azimuth_deg=-70.0, elevation_deg=40.0, fov_deg=40.0)
@@ -84,7 +65,7 @@ def test_deferred_matches_forward_and_numpy_at_every_pixel(scenes, model, weight
     assert np.all(deferred[..., 3] == 1.0)
     # Same float32 inputs, the same GLSL: equal up to the compilers' different instruction choices.
     np.testing.assert_allclose(deferred, forward, rtol=1e-5, atol=1e-7 * np.abs(forward).max())
-    expected = plane_reference(model, camera, light, 20, 16)
+    expected = plane_reference(model, camera, light, (20, 16), EXPOSURE)
     scale = expected.max()
     assert scale > 1e-3
     # test_scene's tolerance for the forward path against numpy.

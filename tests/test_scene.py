@@ -323,25 +323,32 @@ def test_plane_with_a_rotated_tangent_renders_the_off_specular_value(scene, mode
     assert_relative(image[16, 16].astype(np.float64), expected)
 
 
+def plane_reference(model, camera: Camera, light: Light, size: tuple[int, int], exposure: float) -> np.ndarray:
+    """exposure · irradiance · A · XYZ per pixel of an infinite plane z = 0 lit by a point light (numpy,
+    float64, (H, W, 3)): each pixel's ray hits z = 0; its ωo and the light give the value (1/d² too)."""
+    width, height = size
+    points, views = [], []
+    for row in range(height):
+        for column in range(width):
+            eye, ray = camera.pixel_ray(row, column, width, height)
+            points.append(eye - eye[2] / ray[2] * ray)
+            views.append(-ray)
+    points, views = np.array(points), np.array(views)
+    offsets = np.asarray(light.vector) - points
+    distances = np.linalg.norm(offsets, axis=1, keepdims=True)
+    lights = offsets / distances
+    key = -(lights + views)
+    return (exposure * light.intensity / distances**2 * a_term(lights, views, 1.5)[:, None]
+            * evaluate_keys(model, key[:, 0], key[:, 1], key[:, 2])).reshape(height, width, 3)
+
+
 def test_plane_render_matches_numpy_at_every_pixel(scene, model):
     """Each pixel's ray hits z = 0; its ωo and the light give the numpy value (point light: 1/d² too)."""
     camera = Camera(distance=0.25, azimuth_deg=-70.0, elevation_deg=40.0, fov_deg=40.0)
     light = Light.point([0.0, 0.08, 0.1], intensity=0.02)
     size = (20, 16)
     image = scene.render_rgba(plane(2.0), camera, light, size, exposure=EXPOSURE, ior=1.5)
-    rows, columns = np.mgrid[0:16, 0:20]
-    points, views = [], []
-    for row, column in zip(rows.ravel(), columns.ravel(), strict=True):
-        eye, ray = camera.pixel_ray(row, column, 20, 16)
-        points.append(eye - eye[2] / ray[2] * ray)
-        views.append(-ray)
-    points, views = np.array(points), np.array(views)
-    offsets = np.asarray(light.vector) - points
-    distances = np.linalg.norm(offsets, axis=1, keepdims=True)
-    lights = offsets / distances
-    key = -(lights + views)
-    expected = (EXPOSURE * 0.02 / distances**2 * a_term(lights, views, 1.5)[:, None]
-                * evaluate_keys(model, key[:, 0], key[:, 1], key[:, 2])).reshape(16, 20, 3)
+    expected = plane_reference(model, camera, light, size, EXPOSURE)
     assert np.all(image[..., 3] == 1.0)
     actual = image[..., :3].astype(np.float64)
     # Rays hit the plane within float32 interpolation error, so compare with a floor at the bright end.
