@@ -3,15 +3,15 @@
     PYTHONPATH=. python benchmarks/render_paths.py --material cd --mesh cd --sizes 640x480,1920x1080 \\
         --samples 1,4 --variants forward:texture,forward:baked,deferred:texture,deferred:ssbo,deferred:baked
 
-A variant is ``PATH:WEIGHTS``: ``forward:texture|baked`` (the fragment-shader network, depth pre-pass;
-one sample per pixel only: multi-sample forward rendering is not this script's), ``deferred:texture|ssbo|
-shared|baked|ssbo-fp16|shared-fp16`` (viewer/deferred.py's compute pass reading the weights from there).
-Scene: the material's default light, camera and exposure on the mesh (viewer.defaults, as ``gratnet
-render``). Each line: the best and median wall time (ms, after ``ctx.finish()``) of ``--repeats`` renders,
-the variants interleaved so that all see the same machine load, after one untimed render that compiles
-the programs (its time is ``first_ms``), the network evaluations (the counters of a separate render),
-``GL_RENDERER`` and the 1-minute load average (other work on the machine slows a CPU rasterizer). Runs on
-whatever EGL gives (llvmpipe here; the NVIDIA driver on a GPU machine).
+A variant is ``PATH:WEIGHTS``: ``forward:texture|baked`` (the fragment-shader network, depth pre-pass),
+``deferred:texture|ssbo|shared|baked|ssbo-fp16|shared-fp16`` (viewer/deferred.py's compute pass reading the
+weights from there).
+Scene: the material's default light, camera and exposure on the mesh (viewer.defaults, as ``gratnet render``:
+bench.scenes.scene_view). Each line: the best and median wall time (ms, after ``ctx.finish()``) of
+``--repeats`` renders, the variants interleaved so that all see the same machine load, after one untimed
+render that compiles the programs (its time is ``first_ms``), the network evaluations (the counters of a
+separate render), ``GL_RENDERER`` and the 1-minute load average (other work on the machine slows a CPU
+rasterizer). Runs on whatever EGL gives (llvmpipe here; the NVIDIA driver on a GPU machine).
 """
 
 from __future__ import annotations
@@ -28,11 +28,10 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 import numpy as np  # noqa: E402
 
+from bench.scenes import scene_view  # noqa: E402
 from gratnet.modelfile import ModelFile, load_model  # noqa: E402
-from viewer.antialias import sample_offsets  # noqa: E402
-from viewer.camera import Camera, Light  # noqa: E402
+from viewer.camera import Light  # noqa: E402
 from viewer.context import create_headless_context  # noqa: E402
-from viewer.defaults import resolve_defaults  # noqa: E402
 from viewer.render_cli import build_mesh, resolve_material  # noqa: E402
 from viewer.scene import SceneRenderer  # noqa: E402
 
@@ -73,11 +72,8 @@ def main() -> int:
     if arguments.random_net:
         model = _random_net(model, [int(width) for width in arguments.random_net.split(",")])
     mesh = build_mesh(arguments.mesh)
-    defaults = resolve_defaults(arguments.material, arguments.mesh)
-    camera = Camera(defaults.camera_distance, defaults.camera_azimuth_degrees, defaults.camera_elevation_degrees)
-    theta, phi = ((float(v) for v in arguments.light.split(",")) if arguments.light
-                  else (defaults.light_theta_degrees, defaults.light_phi_degrees))
-    light = Light.directional(theta, phi)
+    view = scene_view(str(model_path), arguments.mesh)
+    light = Light.directional(*(float(v) for v in arguments.light.split(","))) if arguments.light else view.light
     ctx = create_headless_context()
     renderer_name = ctx.info.get("GL_RENDERER", "?")
     scenes: dict[str, tuple[SceneRenderer, object]] = {}
@@ -88,24 +84,21 @@ def main() -> int:
         scenes[variant] = (scene, scene.upload(mesh))
     for size in _sizes(arguments.sizes):
         for samples in (int(n) for n in arguments.samples.split(",")):
-            offsets = sample_offsets(samples) if samples > 1 else None
-            chosen = list(scenes)
-
-            def render(variant: str, counts_out: dict[str, int] | None = None, offsets: object = offsets,
+            def render(variant: str, counts_out: dict[str, int] | None = None, samples: int = samples,
                        size: tuple[int, int] = size) -> float:
                 scene, uploaded = scenes[variant]
                 start = time.perf_counter()
-                scene._render(uploaded, camera, light, size, defaults.exposure, 1.5, 1,  # type: ignore[arg-type]
-                              statistics=counts_out, offsets_px=offsets)  # type: ignore[arg-type]
+                scene.render_rgba(uploaded, view.camera, light, size, view.exposure, view.ior,  # type: ignore[arg-type]
+                                  statistics=counts_out, samples=samples)
                 ctx.finish()
                 return time.perf_counter() - start
 
-            first = {variant: render(variant) for variant in chosen}
-            times: dict[str, list[float]] = {variant: [] for variant in chosen}
+            first = {variant: render(variant) for variant in scenes}
+            times: dict[str, list[float]] = {variant: [] for variant in scenes}
             for _ in range(arguments.repeats):  # interleaved: every variant sees the same machine load
-                for variant in chosen:
+                for variant in scenes:
                     times[variant].append(render(variant))
-            for variant in chosen:
+            for variant in scenes:
                 counts: dict[str, int] = {}
                 render(variant, counts)
                 path, weights = variant.split(":")
