@@ -188,3 +188,29 @@ def test_cover_window_keeps_the_patch_centred(mode):
     np.testing.assert_array_equal(neighbour, expected[:, : neighbour.shape[1]])
     cropped = cover_window(HeightField(covered, 0.1, "big"), 20, mode).heights_um
     np.testing.assert_array_equal(cropped, covered[10:30, 10:30])
+
+
+@pytest.mark.parametrize("device", ["cpu", pytest.param("cuda", marks=pytest.mark.skipif(
+    not __import__("torch").cuda.is_available(), reason="no CUDA device"))])
+def test_torch_engine_equals_numpy_engine(coarse_spectrum, device):
+    # The GPU path (--device cuda) is the numpy engine's loop with torch arrays: constant-w slices and
+    # per-sample w (Chebyshev interpolation, as simple-max volumes and BRDF slices use) agree to float32
+    # rounding, relative to the peak, on a tall rough field.
+    rng = np.random.default_rng(3)
+    field = HeightField(ndimage.gaussian_filter(rng.standard_normal((96, 96)), 3) * 0.6, 0.06, "rough")
+    surface = prepare_surface(field, SMALL)
+    u = np.linspace(-1.2, 1.1, 37)
+    v = np.linspace(-0.9, 1.3, 29)
+    w_varying = -1.0 - 0.8 * np.hypot(*np.meshgrid(u, v)) / 2
+    slices = [-1.3, w_varying, -2.0]
+    numpy_engine = FTerm(surface, coarse_spectrum)
+    expected = numpy_engine.xyz_grid(u, v, slices)
+    torch_engine = FTerm(surface, coarse_spectrum, device=device)
+    got = torch_engine.xyz_grid(u, v, slices)
+    assert numpy_engine.last_node_count > 2 and torch_engine.last_node_count == numpy_engine.last_node_count
+    assert got.dtype == np.float64 and got.shape == expected.shape
+    np.testing.assert_allclose(got, expected, rtol=0, atol=2e-6 * expected.max())
+    # And a wavelength block alone (sweep parts) on the torch path.
+    part = torch_engine.xyz_grid(u, v, slices, wavelengths=range(0, 3))
+    np.testing.assert_allclose(part, numpy_engine.xyz_grid(u, v, slices, wavelengths=range(0, 3)),
+                               rtol=0, atol=2e-6 * expected.max())

@@ -20,9 +20,11 @@ as accurate as flat ones.
 
 from __future__ import annotations
 
+import contextlib
 import dataclasses
 import math
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Iterator, Sequence
+from typing import Any
 
 import numpy as np
 from tqdm.auto import tqdm
@@ -202,12 +204,17 @@ class FTerm:
     """Evaluates XYZ(u, v, w) (eq. 1–3) of a prepared surface on (u, v) grids, slice by slice."""
 
     def __init__(
-        self, surface: PreparedSurface, spectral: SpectralWeights | None = None, tolerance: float = 1e-9
+        self, surface: PreparedSurface, spectral: SpectralWeights | None = None, tolerance: float = 1e-9,
+        device: str | None = None,
     ) -> None:
+        """``device`` None runs :meth:`xyz_grid` in numpy (the reference); a torch device name ("cuda",
+        "cpu") runs its matrix products in torch there: the same complex64 products and float64 sums,
+        agreeing with numpy to float32 rounding (tests/test_fourier.py ties them)."""
         self.surface = surface
         self.spectral = spectral or spectral_weights()
         self.heights = surface.heights_um
         self.tolerance = tolerance
+        self.device = device
         self.last_node_count = 0  # Chebyshev nodes used by the last xyz_grid call (0: none needed)
 
     def _kernel(self, keys: np.ndarray, positions_um: np.ndarray, window: np.ndarray, wavenumber: float) -> np.ndarray:
@@ -220,12 +227,8 @@ class FTerm:
         return kernel
 
     def _height_phasor(self, wavenumber: float, w: float) -> np.ndarray:
-        """exp(i k w h) on the integration grid, complex64."""
-        phase = np.float32(wavenumber * w) * self.heights
-        phasor = np.empty(phase.shape, dtype=np.complex64)
-        phasor.real = np.cos(phase)
-        phasor.imag = np.sin(phase)
-        return phasor
+        """exp(i k w h) on the integration grid, complex64 (numpy)."""
+        return _NumpyOps().height_phasor(self.heights, wavenumber, w)
 
     def xyz_grid(
         self,
@@ -255,7 +258,8 @@ class FTerm:
             if np.shape(w_slices[index]) != (v.size, u.size):
                 raise GratNetError(f"w array of slice {index} has shape {np.shape(w_slices[index])}, "
                                    f"expected {(v.size, u.size)}")
-        result = np.zeros((len(w_slices), v.size, u.size, 3), dtype=np.float64)
+        ops = _NumpyOps() if self.device is None else _TorchOps(self.device, self.heights)
+        result = ops.zeros((len(w_slices), v.size, u.size, 3), complex_=False)
         interpolation = _ChebyshevPlan(
             np.stack([np.asarray(w_slices[i], dtype=np.float64) for i in varying]) if varying else None,
             self.surface.half_span_um,
@@ -268,27 +272,26 @@ class FTerm:
             total=len(chosen), desc=progress if isinstance(progress, str) else "F-term",
             unit="λ", disable=not progress, leave=False,
         )
-        with bar:
+        with bar, ops.exact_products():
             for wavelength, weights in zip(self.spectral.wavelengths_um[chosen], self.spectral.xyz_weights[chosen],
                                            strict=True):
                 wavenumber = 2.0 * np.pi / wavelength
-                kernel_x = self._kernel(u, self.surface.x_um, self.surface.window_x, wavenumber)
-                kernel_y = self._kernel(v, self.surface.y_um, self.surface.window_y, wavenumber)
+                kernel_x = ops.put(self._kernel(u, self.surface.x_um, self.surface.window_x, wavenumber))
+                kernel_y = ops.put(self._kernel(v, self.surface.y_um, self.surface.window_y, wavenumber))
+                xyz_weights = ops.put(np.asarray(weights, dtype=np.float64))
 
-                def transform(w: float, kx: np.ndarray = kernel_x, ky: np.ndarray = kernel_y,
-                              k: float = wavenumber) -> np.ndarray:
+                def transform(w: float, kx: Any = kernel_x, ky: Any = kernel_y, k: float = wavenumber) -> Any:
                     # P = Ey · exp(i k w H) · Exᵀ  (eq. 1 as a separable sum)
-                    return (ky @ self._height_phasor(k, w)) @ kx.T
+                    return (ky @ ops.height_phasor(self.heights, k, w)) @ kx.T
 
                 for index in constant:
-                    power = np.square(np.abs(transform(float(w_slices[index]))), dtype=np.float64)
-                    result[index] += power[..., None] * weights
+                    power = ops.power(transform(float(w_slices[index])))
+                    result[index] += power[..., None] * xyz_weights
                 if varying:
-                    power = interpolation.power(transform, wavenumber)
-                    result[varying] += power[..., None] * weights
+                    power = interpolation.power(transform, ops)
+                    result[varying] += power[..., None] * xyz_weights
                 bar.update(1)
-        return result
-
+        return ops.fetch(result)
 
     def xyz_points(self, u: np.ndarray, v: np.ndarray, w: np.ndarray, chunk: int = 4096,
                    progress: bool | str = False) -> np.ndarray:
@@ -320,7 +323,7 @@ class FTerm:
                                   k: float = wavenumber) -> np.ndarray:
                         return np.einsum("mp,pm->p", self._height_phasor(k, w_node) @ kx.T, ky)
 
-                    result[part] += plan.power(transform, wavenumber)[:, None] * weights
+                    result[part] += plan.power(transform)[:, None] * weights
                     bar.update(1)
         return result.reshape(shape + (3,))
 
@@ -372,13 +375,97 @@ class _ChebyshevPlan:
             self.cache[j] = value.astype(np.float32)
         return value
 
-    def power(self, transform: Callable[[float], np.ndarray], wavenumber: float) -> np.ndarray:
-        """|P|² at every sample of every varying slice."""
+    def power(self, transform: Callable[[float], Any], ops: _NumpyOps | _TorchOps | None = None) -> Any:
+        """|P|² (float64) at every sample of every varying slice, as ``ops`` arrays (numpy by default)."""
         assert self.w is not None
+        ops = ops or _NumpyOps()
         if self.count == 1:
-            amplitude = transform(self.centre)
-            return np.broadcast_to(np.square(np.abs(amplitude), dtype=np.float64), self.w.shape).copy()
-        total = np.zeros(self.w.shape, dtype=np.complex128)
+            power = ops.power(transform(self.centre))
+            return power.expand(self.w.shape).clone() if ops.is_torch else np.broadcast_to(power, self.w.shape).copy()
+        total = ops.zeros(self.w.shape, complex_=True)
         for j in range(self.count):
-            total += self.basis(j) * transform(float(self.node_w[j]))
-        return np.square(np.abs(total))
+            total += ops.put_basis(self, j) * transform(float(self.node_w[j]))
+        return ops.power(total)
+
+
+class _NumpyOps:
+    """The array operations of :meth:`FTerm.xyz_grid` in numpy (the reference implementation)."""
+
+    is_torch = False
+
+    def put(self, array: np.ndarray) -> np.ndarray:
+        return array
+
+    def put_basis(self, plan: _ChebyshevPlan, j: int) -> np.ndarray:
+        return plan.basis(j)
+
+    def zeros(self, shape: tuple[int, ...], complex_: bool) -> np.ndarray:
+        return np.zeros(shape, dtype=np.complex128 if complex_ else np.float64)
+
+    def height_phasor(self, heights: np.ndarray, wavenumber: float, w: float) -> np.ndarray:
+        """exp(i k w h) on the integration grid, complex64."""
+        phase = np.float32(wavenumber * w) * heights
+        phasor = np.empty(phase.shape, dtype=np.complex64)
+        phasor.real = np.cos(phase)
+        phasor.imag = np.sin(phase)
+        return phasor
+
+    def power(self, amplitude: np.ndarray) -> np.ndarray:
+        return np.square(np.abs(amplitude), dtype=np.float64)
+
+    def fetch(self, array: np.ndarray) -> np.ndarray:
+        return array
+
+    def exact_products(self) -> contextlib.AbstractContextManager[None]:
+        return contextlib.nullcontext()
+
+
+class _TorchOps:
+    """The same operations in torch on ``device``: complex64 products, float64 sums (as numpy's)."""
+
+    is_torch = True
+
+    def __init__(self, device: str, heights: np.ndarray) -> None:
+        try:
+            import torch
+        except ImportError as error:  # torch comes with the trainer extra
+            raise GratNetError("--device other than numpy's cpu needs torch: pip install 'gratnet[trainer]'") from error
+        self.torch = torch
+        self.device = torch.device(device)
+        self.heights = torch.from_numpy(np.ascontiguousarray(heights)).to(self.device)
+        self._bases: dict[tuple[int, int], Any] = {}
+
+    def put(self, array: np.ndarray) -> Any:
+        return self.torch.from_numpy(np.ascontiguousarray(array)).to(self.device)
+
+    def put_basis(self, plan: _ChebyshevPlan, j: int) -> Any:
+        # The bases do not depend on λ: upload each once (float32, as numpy's cache keeps them).
+        key = (id(plan), j)
+        if key not in self._bases:
+            self._bases[key] = self.put(np.asarray(plan.basis(j), dtype=np.float32))
+        return self._bases[key]
+
+    def zeros(self, shape: tuple[int, ...], complex_: bool) -> Any:
+        dtype = self.torch.complex128 if complex_ else self.torch.float64
+        return self.torch.zeros(shape, dtype=dtype, device=self.device)
+
+    def height_phasor(self, heights: np.ndarray, wavenumber: float, w: float) -> Any:
+        phase = float(np.float32(wavenumber * w)) * self.heights  # float32, as numpy's
+        return self.torch.polar(self.torch.ones_like(phase), phase)
+
+    def power(self, amplitude: Any) -> Any:
+        return amplitude.abs().to(self.torch.float64).square()
+
+    def fetch(self, array: Any) -> np.ndarray:
+        return array.cpu().numpy()
+
+    @contextlib.contextmanager
+    def exact_products(self) -> Iterator[None]:
+        """Full float32 matrix products (no TF32, whose 10-bit mantissa would cost 1e-3 relative)."""
+        matmul = self.torch.backends.cuda.matmul
+        saved = matmul.allow_tf32
+        matmul.allow_tf32 = False
+        try:
+            yield
+        finally:
+            matmul.allow_tf32 = saved

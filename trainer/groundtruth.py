@@ -39,6 +39,36 @@ class VolumeConfig:
             raise GratNetError(f"--slices must be at least 1, got {self.slices}")
 
 
+@dataclasses.dataclass(frozen=True)
+class ComputeConfig:
+    """Where the F-term's matrix products run (the volume does not depend on it beyond float32 rounding)."""
+
+    device: str = config_field(
+        "auto", "auto (CUDA when torch sees a GPU, else cpu), cpu (numpy: the reference) or cuda[:N] (torch on "
+        "the GPU: the same complex64 products and float64 sums, equal to cpu to float32 rounding)",
+    )
+
+    def __post_init__(self) -> None:
+        if self.device not in ("auto", "cpu") and not self.device.startswith("cuda"):
+            raise GratNetError(f"--device must be auto, cpu or cuda[:N], got {self.device!r}")
+
+    def resolve(self) -> str | None:
+        """The torch device for :class:`trainer.fourier.FTerm`, or None for numpy; checked before any work."""
+        if self.device == "cpu":
+            return None
+        try:
+            import torch
+        except ImportError:
+            if self.device == "auto":
+                return None
+            raise GratNetError("--device cuda needs torch: pip install 'gratnet[trainer]'") from None
+        if not torch.cuda.is_available():
+            if self.device == "auto":
+                return None
+            raise GratNetError(f"--device {self.device} was asked for, but torch sees no CUDA device")
+        return "cuda" if self.device == "auto" else self.device
+
+
 def volume_key_vectors(config: VolumeConfig) -> tuple[np.ndarray, np.ndarray, list[float | np.ndarray]]:
     """The key components u (columns), v (rows) and each slice's w (scalar or per-sample array)."""
     grid = grid_axis(config.resolution)
@@ -71,12 +101,14 @@ def compute_volume_part(
     optics: OpticsConfig,
     wavelengths: range | None = None,
     progress: bool = False,
+    device: str | None = None,
 ) -> tuple[np.ndarray, int]:
     """The float64 XYZ sum (S, R, R, 3) over the spectral samples ``wavelengths`` (all when None), and the
-    Chebyshev node count used; :func:`volume_from_sum` turns the sum of all parts into a volume."""
+    Chebyshev node count used; :func:`volume_from_sum` turns the sum of all parts into a volume. ``device``: as
+    :class:`trainer.fourier.FTerm`'s (None: numpy)."""
     spectral = spectral_weights(optics.wavelength_start_nm, optics.wavelength_end_nm, optics.wavelength_step_nm)
     u, v, w_slices = volume_key_vectors(config)
-    engine = FTerm(surface, spectral, optics.tolerance)
+    engine = FTerm(surface, spectral, optics.tolerance, device=device)
     xyz = engine.xyz_grid(u, v, w_slices, progress="ground truth" if progress else False, wavelengths=wavelengths)
     return xyz, engine.last_node_count
 
@@ -88,11 +120,27 @@ def compute_volume(
     report: Callable[[str], None] | None = None,
     progress: bool = True,
     surface: PreparedSurface | None = None,
+    device: str | None = None,
 ) -> Volume:
-    """Sample CIE XYZ(u, v, w) of ``field`` on ``config``'s grid (eq. 1–3 of physics.md)."""
+    """Sample CIE XYZ(u, v, w) of ``field`` on ``config``'s grid (eq. 1–3 of physics.md); ``device`` as
+    :class:`trainer.fourier.FTerm`'s (None: numpy), recorded in the metadata."""
     surface = surface or prepare_surface(field, optics, report)
-    xyz, node_count = compute_volume_part(surface, config, optics, progress=progress)
-    return volume_from_sum(field, config, optics, surface, xyz, node_count)
+    xyz, node_count = compute_volume_part(surface, config, optics, progress=progress, device=device)
+    volume = volume_from_sum(field, config, optics, surface, xyz, node_count)
+    volume.metadata["compute_device"] = _device_name(device)
+    return volume
+
+
+def _device_name(device: str | None) -> str:
+    """"cpu (numpy)" or the GPU's name, for the volume's metadata."""
+    if device is None:
+        return "cpu (numpy)"
+    import torch
+
+    torch_device = torch.device(device)
+    if torch_device.type == "cuda":
+        return f"{device} (torch, {torch.cuda.get_device_name(torch_device)})"
+    return f"{device} (torch)"
 
 
 def volume_from_sum(
