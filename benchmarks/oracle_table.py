@@ -6,7 +6,7 @@ project's own metrics (mean FLIP, PSNR of CIE XYZ inside the view disc) and spli
 involved: this is the floor a network trained on that grid could reach if it interpolated perfectly.
 
     python benchmarks/oracle_table.py VOLUME_DIR [--size 256] [--cache-dir out/cache] [--json out.json]
-        [--figure docs/images/oracle_slices.png]
+        [--figure docs/images/oracle_slices.png] [--device cpu|cuda]
 
 Prints one JSON line per volume and a markdown table (FLIP per slice) on stdout. The ground-truth slices
 are cached in --cache-dir (the same cache `gratnet evaluate` uses), so a second run is cheap.
@@ -35,7 +35,8 @@ from trainer.metrics import image_metrics
 from trainer.report import comparison_figure
 
 
-def oracle_rows(volume_path: Path, size: int, cache_dir: str, progress: bool) -> tuple[dict[str, Any], list]:
+def oracle_rows(volume_path: Path, size: int, cache_dir: str, progress: bool,
+                device: str | None = None) -> tuple[dict[str, Any], list]:
     """Oracle metrics of one volume (one dict) and its figure rows (label, reference, oracle)."""
     started = time.perf_counter()
     volume = read_volume(volume_path)
@@ -51,7 +52,7 @@ def oracle_rows(volume_path: Path, size: int, cache_dir: str, progress: bool) ->
     slices, figure = [], []
     for theta, phi, exposure in STANDARD_SLICES:
         config = SliceConfig(theta, phi, size=size, exposure=exposure)
-        reference = ground_truth_brdf_slice(field, optics, config, cache_dir, progress)
+        reference = ground_truth_brdf_slice(field, optics, config, cache_dir, progress, device)
         predicted = oracle.brdf_slice(config)
         labels = region_labels(reference, config, optics.sigma_s_um)
         label = _slice_label(theta, phi, exposure)
@@ -91,14 +92,19 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--json", type=Path, help="write all rows as one JSON file")
     parser.add_argument("--figure", type=Path, help="PNG: ground truth | oracle | FLIP for every slice")
     parser.add_argument("--quiet", action="store_true", help="no progress bars")
+    parser.add_argument("--device", default="cpu", help="where uncached ground-truth slices are computed: cpu "
+                        "(numpy) or cuda (as gratnet groundtruth --device)")
     arguments = parser.parse_args(argv)
+    from trainer.groundtruth import ComputeConfig
+
+    device = ComputeConfig(arguments.device).resolve()
     paths = sorted(arguments.volumes.glob("*.exr"))
     if not paths:
         print(f"oracle_table: no *.exr in {arguments.volumes}", file=sys.stderr)
         return 2
     rows, figure_rows = [], []
     for path in tqdm(paths, desc="volumes", disable=arguments.quiet):
-        row, figure = oracle_rows(path, arguments.size, arguments.cache_dir, not arguments.quiet)
+        row, figure = oracle_rows(path, arguments.size, arguments.cache_dir, not arguments.quiet, device)
         print(json.dumps(row), flush=True)
         rows.append(row)
         figure_rows.extend(figure)

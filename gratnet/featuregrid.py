@@ -24,6 +24,32 @@ from gratnet.errors import GratNetError
 
 #: Most features per level: one RGBA texture per level in the shader.
 MAX_FEATURES = 4
+#: How features are interpolated between nodes: ``linear`` (trilinear, C⁰: its kinks at the cell faces show
+#: as a lattice of lines in slices) or ``smoothstep`` (trilinear with each axis' cell fraction f replaced by
+#: f²(3 − 2f): C¹, the same eight nodes, and on a GPU still one hardware-filtered fetch).
+INTERPOLATIONS = ("linear", "smoothstep")
+
+
+def check_interpolation(interpolation: str) -> str:
+    """``interpolation`` itself if it is one of :data:`INTERPOLATIONS`, else a one-line error."""
+    if interpolation not in INTERPOLATIONS:
+        raise GratNetError(f"grid interpolation must be one of {', '.join(INTERPOLATIONS)}, got {interpolation!r}")
+    return interpolation
+
+
+def smoothstep_coordinates(coordinates: Any, nodes_uvt: Sequence[int]) -> Any:
+    """Network coordinates ``(…, 3)`` moved within their grid cell so that *linear* interpolation at the result
+    is smoothstep interpolation at the input (eq. 6g with f → f²(3 − 2f) per axis), for a level of
+    ``nodes_uvt = (R_u, R_v, T)`` nodes. Clamped to [−1, 1] like the grid lookup itself."""
+    xp = array_api_compat.array_namespace(coordinates)
+    axes = []
+    for axis, nodes in enumerate(nodes_uvt):
+        half = 0.5 * (int(nodes) - 1)
+        position = (xp.clip(coordinates[..., axis], -1.0, 1.0) + 1.0) * half
+        lower = xp.clip(xp.floor(position), 0.0, float(int(nodes) - 2))
+        fraction = position - lower
+        axes.append((lower + fraction * fraction * (3.0 - 2.0 * fraction)) / half - 1.0)
+    return xp.stack(axes, axis=-1)
 
 
 def level_resolutions(levels: int, finest: int, t_resolution: int) -> list[tuple[int, int]]:
@@ -36,17 +62,21 @@ def level_resolutions(levels: int, finest: int, t_resolution: int) -> list[tuple
     return [(max(2, round((finest - 1) / 2 ** (levels - 1 - level)) + 1), t_resolution) for level in range(levels)]
 
 
-def grid_features(grids: Sequence[Any], coordinates: Any) -> Any:
+def grid_features(grids: Sequence[Any], coordinates: Any, interpolation: str = "linear") -> Any:
     """Features of every level at network coordinates ``(…, 3)`` → ``(…, Σ C_l)``, level 0 first.
 
     Each grid is ``(T, R_v, R_u, C)``; the result has the coordinates' dtype (float16 grids are widened).
+    ``interpolation``: one of :data:`INTERPOLATIONS`.
     """
     xp = array_api_compat.array_namespace(coordinates)
+    check_interpolation(interpolation)
     batch = tuple(coordinates.shape[:-1])
-    points = xp.reshape(coordinates, (-1, 3))
+    flat_points = xp.reshape(coordinates, (-1, 3))
     parts = []
     for grid in grids:
         t_nodes, v_nodes, u_nodes, channels = (int(size) for size in grid.shape)
+        points = (smoothstep_coordinates(flat_points, (u_nodes, v_nodes, t_nodes)) if interpolation == "smoothstep"
+                  else flat_points)
         flat = xp.reshape(xp.astype(grid, coordinates.dtype), (-1, channels))
         index, fraction = [], []
         for axis, nodes in enumerate((u_nodes, v_nodes, t_nodes)):

@@ -20,7 +20,8 @@ File layout (a contract; also documented in ``docs/formats.md``, section "Model 
 A *feature-grid* model (docs/physics.md "Feature-grid network") has, in addition, ``grid_0``, ``grid_1``, …
 (coarse to fine; ``float16`` or ``float32``, all of one dtype; ``(T_l, R_l, R_l, C)``: axes c_t, c_v, c_u,
 feature, ``1 ≤ C ≤ 4`` the same for every level, every axis ≥ 2 nodes) and the JSON key ``grid``
-(``{"levels": [[T_l, R_l, R_l, C], …], "dtype": "float16"|"float32"}``); such files have ``format_version``
+(``{"levels": [[T_l, R_l, R_l, C], …], "dtype": "float16"|"float32"}``, and ``"interpolation":
+"smoothstep"`` when the grids are interpolated so; absent means ``linear``); such files have ``format_version``
 2 (a GratNet that reads only version 1 then says so), and ``layer_sizes[0]`` is ``L·C`` grid features plus
 the encoding's features, grid features first. Pure-MLP files stay version 1, unchanged.
 
@@ -52,7 +53,7 @@ import numpy as np
 from gratnet.atomic import atomic_path
 from gratnet.encoding import EncodingSpec, RangeSpec, encode, network_coordinates, range_inverse
 from gratnet.errors import GratNetError, read_magic
-from gratnet.featuregrid import MAX_FEATURES, grid_features
+from gratnet.featuregrid import INTERPOLATIONS, MAX_FEATURES, grid_features
 from gratnet.jsontext import strict_json
 
 __all__ = [
@@ -129,6 +130,8 @@ class ModelFile:
         metadata: JSON-able dict: the source volume's physical parameters, training information, …
         grids: the feature grids of a feature-grid network, coarse to fine, each ``(T, R, R, C)`` ``float16``
             or ``float32`` (see the module docstring); empty (the default) for the paper's pure MLP.
+        grid_interpolation: how the grids are interpolated between nodes, one of
+            :data:`gratnet.featuregrid.INTERPOLATIONS` (``linear`` for a pure MLP).
 
     Two model files compare equal when every field is equal and the arrays are bit-identical.
     """
@@ -143,6 +146,7 @@ class ModelFile:
     scheme: str
     metadata: dict[str, Any] = field(default_factory=dict)
     grids: list[np.ndarray] = field(default_factory=list)
+    grid_interpolation: str = "linear"
 
     @property
     def grid_feature_count(self) -> int:
@@ -178,6 +182,7 @@ class ModelFile:
             and self.scheme == other.scheme
             and self.metadata == other.metadata
             and _arrays_equal(self.grids, other.grids)
+            and self.grid_interpolation == other.grid_interpolation
         )
 
     __hash__ = None  # type: ignore[assignment]  # mutable (holds arrays)
@@ -328,6 +333,10 @@ def _validated(model: object, where: str = "model", *, from_file: bool = False) 
     encoding = _encoding_from_dict(dataclasses.asdict(model.encoding), where)
     range_spec = _range_from_dict(dataclasses.asdict(model.range), where)
     grids = _check_grids(model.grids, where, from_file=from_file)
+    interpolation = model.grid_interpolation
+    if interpolation not in INTERPOLATIONS or (interpolation != "linear" and not grids):
+        raise GratNetError(f"{where}: grid interpolation must be one of {', '.join(INTERPOLATIONS)} (linear for a "
+                           f"pure MLP), got {interpolation!r}")
     grid_width = sum(grid.shape[-1] for grid in grids)
     if sizes[0] != encoding.features + grid_width:
         extra = f" plus {grid_width} grid features" if grids else ""
@@ -359,6 +368,7 @@ def _validated(model: object, where: str = "model", *, from_file: bool = False) 
         scheme=scheme,
         metadata=_plain_metadata(model.metadata, where),
         grids=grids,
+        grid_interpolation=interpolation,
     )
 
 
@@ -582,7 +592,7 @@ def network_inputs(model: ModelFile, coordinates: np.ndarray) -> np.ndarray:
     encoded = encode(coordinates, model.encoding)
     if not model.grids:
         return encoded
-    return np.concatenate([grid_features(model.grids, coordinates), encoded], axis=-1)
+    return np.concatenate([grid_features(model.grids, coordinates, model.grid_interpolation), encoded], axis=-1)
 
 
 def evaluate_keys(model: ModelFile, u: np.ndarray, v: np.ndarray, w: np.ndarray) -> np.ndarray:
@@ -625,6 +635,8 @@ def _header(model: ModelFile, layout: list[dict[str, int]]) -> dict[str, Any]:
     }
     if model.grids:
         header[_GRID_KEY] = {"levels": [list(grid.shape) for grid in model.grids], "dtype": model.grids[0].dtype.name}
+        if model.grid_interpolation != "linear":  # absent means linear: older files read unchanged
+            header[_GRID_KEY]["interpolation"] = model.grid_interpolation
     return header
 
 
@@ -712,7 +724,8 @@ def _read_header(source: Path, arrays: dict[str, np.ndarray]) -> dict[str, Any]:
 
 
 def _grid_header(header: dict[str, Any], where: str) -> list[list[int]]:
-    """The grid levels' shapes from the header's ``grid`` (version 2), or [] for a pure-MLP file."""
+    """The grid levels' shapes from the header's ``grid`` (version 2), or [] for a pure-MLP file (its
+    ``interpolation`` is checked by :func:`_validated`)."""
     if header["format_version"] == FORMAT_VERSION:
         if _GRID_KEY in header:
             raise GratNetError(f"{where}: a format version {FORMAT_VERSION} file has a 'grid' entry; "
@@ -720,7 +733,8 @@ def _grid_header(header: dict[str, Any], where: str) -> list[list[int]]:
         return []
     grid = header[_GRID_KEY]
     levels = grid.get("levels") if isinstance(grid, dict) else None
-    if (not isinstance(grid, dict) or sorted(grid) != ["dtype", "levels"] or grid["dtype"] not in GRID_DTYPES
+    if (not isinstance(grid, dict) or sorted(set(grid) - {"interpolation"}) != ["dtype", "levels"]
+            or grid["dtype"] not in GRID_DTYPES
             or not isinstance(levels, list) or not levels
             or not all(isinstance(shape, list) and len(shape) == 4 and all(_is_int(n) for n in shape)
                        for shape in levels)):
@@ -774,6 +788,7 @@ def load_model(path: str | os.PathLike[str]) -> ModelFile:
             scheme=header["scheme"],
             metadata=header["metadata"],
             grids=[arrays[f"grid_{level}"] for level in range(len(grid_shapes))],
+            grid_interpolation=str(header[_GRID_KEY].get("interpolation", "linear")) if grid_shapes else "linear",
         ),
         where,
         from_file=True,

@@ -55,8 +55,9 @@ def expose_slice(config: SliceConfig, light: np.ndarray, views: np.ndarray, insi
 
 
 def brdf_slice_xyz(surface: PreparedSurface, config: SliceConfig, optics: OpticsConfig,
-                   progress: bool = True) -> np.ndarray:
-    """exposure · A · XYZ for every pixel, shape (size, size, 3); 0 outside the unit disc."""
+                   progress: bool = True, device: str | None = None) -> np.ndarray:
+    """exposure · A · XYZ for every pixel, shape (size, size, 3); 0 outside the unit disc. ``device``: as
+    :class:`trainer.fourier.FTerm`'s (None: numpy)."""
     light, views, inside = slice_geometry(config)
     x_axis, y_axis = views[0, :, 0], views[:, 0, 1]
     u_axis = -(light[0] + x_axis)
@@ -64,7 +65,7 @@ def brdf_slice_xyz(surface: PreparedSurface, config: SliceConfig, optics: Optics
     # Outside the disc w is irrelevant: give it an in-range value so it does not widen the interpolation.
     w = np.where(inside, -(light[2] + views[..., 2]), -light[2] - 0.5)
     spectral = spectral_weights(optics.wavelength_start_nm, optics.wavelength_end_nm, optics.wavelength_step_nm)
-    xyz = FTerm(surface, spectral, optics.tolerance).xyz_grid(
+    xyz = FTerm(surface, spectral, optics.tolerance, device=device).xyz_grid(
         u_axis, v_axis, [w], progress="BRDF slice" if progress else False
     )[0]
     return expose_slice(config, light, views, inside, xyz)

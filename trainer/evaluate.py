@@ -69,13 +69,15 @@ def ground_truth_brdf_slice(
     config: SliceConfig,
     cache_dir: str | Path | None,
     progress: bool = True,
+    device: str | None = None,
 ) -> np.ndarray:
-    """Ground-truth slice (exact key vectors), cached by (source, optics, slice config)."""
+    """Ground-truth slice (exact key vectors), cached by (source, optics, slice config); ``device`` as
+    :class:`trainer.fourier.FTerm`'s (None: numpy; the cache holds either)."""
     key = json.dumps([field.source, config_to_dict(optics), config_to_dict(config)], sort_keys=True)
     path = Path(cache_dir) / f"brdf_{hashlib.sha256(key.encode()).hexdigest()[:20]}.npy" if cache_dir else None
     if path is not None and path.exists():
         return np.load(path)
-    xyz = brdf_slice_xyz(prepare_surface(field, optics), config, optics, progress=progress)
+    xyz = brdf_slice_xyz(prepare_surface(field, optics), config, optics, progress=progress, device=device)
     if path is not None:  # atomically: workers of a sweep share the cache
         with atomic_path(path) as temporary:
             np.save(temporary, xyz)

@@ -14,6 +14,7 @@ from torch import nn
 
 from gratnet.encoding import EncodingSpec, encode
 from gratnet.errors import GratNetError
+from gratnet.featuregrid import check_interpolation, smoothstep_coordinates
 from gratnet.modelfile import ModelFile
 
 GOLDEN_RATIO = (1.0 + math.sqrt(5.0)) / 2.0
@@ -136,10 +137,11 @@ class GridNetwork(nn.Module):
 
     def __init__(self, encoding: EncodingSpec, shapes: list[tuple[int, int, int, int]], hidden: list[int],
                  activation: str = "silu", output_activation: str = "clamp", init: float = 1e-4,
-                 grid_dtype: str = "float16") -> None:
+                 grid_dtype: str = "float16", interpolation: str = "linear") -> None:
         super().__init__()
         self.encoding = encoding
         self.grid_dtype = grid_dtype
+        self.interpolation = check_interpolation(interpolation)
         self.grids = nn.ParameterList(
             [nn.Parameter(torch.empty(c, t, r_v, r_u).uniform_(-init, init)) for t, r_v, r_u, c in shapes]
         )
@@ -152,12 +154,14 @@ class GridNetwork(nn.Module):
     def features(self, coordinates: torch.Tensor) -> torch.Tensor:
         """Trilinearly interpolated features of every level, level 0 first: (N, 3) → (N, Σ C)."""
         # grid_sample's (x, y, z) index (W, H, D) = (u, v, t): exactly the order of the network coordinates.
-        points = coordinates.reshape(1, -1, 1, 1, 3)
-        parts = [
-            nn.functional.grid_sample(grid[None], points, mode="bilinear", padding_mode="border",
-                                      align_corners=True)[0, :, :, 0, 0].T
-            for grid in self.grids
-        ]
+        flat = coordinates.reshape(-1, 3)
+        parts = []
+        for grid in self.grids:
+            # Smoothstep: the same trilinear lookup at coordinates moved within their cell (gratnet.featuregrid).
+            moved = (smoothstep_coordinates(flat, (grid.shape[3], grid.shape[2], grid.shape[1]))
+                     if self.interpolation == "smoothstep" else flat)
+            parts.append(nn.functional.grid_sample(grid[None], moved.reshape(1, -1, 1, 1, 3), mode="bilinear",
+                                                   padding_mode="border", align_corners=True)[0, :, :, 0, 0].T)
         return torch.cat(parts, dim=-1)
 
     def inputs(self, coordinates: torch.Tensor) -> torch.Tensor:
@@ -187,6 +191,7 @@ class GridNetwork(nn.Module):
         model_file = self.mlp.to_model_file(**fields)
         model_file.grids = [grid.detach().cpu().permute(1, 2, 3, 0).contiguous().numpy().astype(self.grid_dtype)
                             for grid in self.grids]
+        model_file.grid_interpolation = self.interpolation
         return model_file
 
 

@@ -113,7 +113,7 @@ def build_model(config: TrainConfig, encoding: EncodingSpec) -> FunnelMLP | Grid
     hidden = parse_hidden(config.preset, config.hidden)
     if config.architecture == "grid":
         return GridNetwork(encoding, config.grid_shapes(), hidden, config.activation, config.output_activation,
-                           config.grid_init, config.grid_dtype)
+                           config.grid_init, config.grid_dtype, config.grid_interpolation)
     return FunnelMLP(encoding.features, hidden, config.activation, config.output_activation)
 
 

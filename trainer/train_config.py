@@ -42,6 +42,10 @@ class TrainConfig:
     grid_init: float = config_field(1e-4, "grid: initial features uniform in ±this")
     grid_learning_rate: float = config_field(1e-2, "grid: Adam's initial learning rate of the grids (same schedule)")
     grid_dtype: Literal["float16", "float32"] = config_field("float16", "grid: storage dtype in the model file")
+    grid_interpolation: Literal["linear", "smoothstep"] = config_field(
+        "linear", "grid: between nodes, linear (trilinear, C⁰) or smoothstep (C¹: f → f²(3 − 2f) per axis; the "
+        "same cost)"
+    )
     epochs: int = config_field(6, "passes over the training samples")
     batch_size: int = config_field(32768, "samples per optimisation step")
     learning_rate: float = config_field(3e-3, "Adam's initial learning rate")
@@ -71,6 +75,9 @@ class TrainConfig:
             if not (self.grid_init >= 0 and self.grid_learning_rate > 0):
                 raise GratNetError(f"--grid-init must be ≥ 0 and --grid-learning-rate > 0, got {self.grid_init}, "
                                    f"{self.grid_learning_rate}")
+            from gratnet.featuregrid import check_interpolation
+
+            check_interpolation(self.grid_interpolation)
             if self.grid_dtype not in ("float16", "float32"):
                 raise GratNetError(f"--grid-dtype must be float16 or float32, got {self.grid_dtype!r}")
         if self.split not in ("slices", "random", "all"):
