@@ -5,6 +5,10 @@
 // of N nodes at c = -1 + 2i/(N-1), i.e. at the texel centre (i + 0.5)/N. The MLP's input is the L*C grid
 // features, level 0 first, then the encoding (encoding.glsl).
 //
+// u_grid_smoothstep (the model file's grid interpolation): 1 moves p within its cell so that linear
+// interpolation there is smoothstep interpolation (f -> f^2 (3 - 2f) per axis; gratnet.featuregrid
+// smoothstep_coordinates), before either way of interpolating.
+//
 // Two ways to interpolate, chosen by u_grid_hardware_filter:
 //   0: eight texelFetches and float32 weights, exactly the formula of eq. 6g (the default);
 //   1: one texture() with GL_LINEAR, where the GPU may quantise the weights (8 bits of sub-texel position
@@ -13,11 +17,17 @@
 #ifdef GRID_LEVELS
 uniform highp sampler3D u_grid[GRID_LEVELS];
 uniform int u_grid_hardware_filter;
+uniform int u_grid_smoothstep;
 vec4 g_grid_features[GRID_LEVELS];  // this fragment's features, level by level (.x .. first C lanes)
 
 vec4 grid_level_features(highp sampler3D grid, vec3 c) {
     vec3 nodes = vec3(textureSize(grid, 0));
     vec3 p = (clamp(c, -1.0, 1.0) + 1.0) * (0.5 * (nodes - 1.0));
+    if (u_grid_smoothstep != 0) {
+        vec3 cell = clamp(floor(p), vec3(0.0), nodes - 2.0);
+        vec3 t = p - cell;
+        p = cell + t * t * (3.0 - 2.0 * t);
+    }
     if (u_grid_hardware_filter != 0) {
         return texture(grid, (p + 0.5) / nodes);
     }

@@ -59,15 +59,38 @@ def test_level_resolutions_halve_the_intervals():
         level_resolutions(2, 1, 11)
 
 
-def test_torch_grid_sample_matches_the_numpy_evaluator():
+def test_smoothstep_interpolation_is_the_smoothstep_of_the_cell_fraction():
+    # One axis varies (u: a ramp 0, 1, 2, … over the nodes); between nodes i and i + 1 smoothstep gives
+    # i + s²(3 − 2s) for the cell fraction s, equal to linear at the nodes and the cell midpoints, with zero
+    # slope at the nodes (C¹ across the faces, where linear has a kink).
+    nodes = 5
+    grid = np.broadcast_to(np.arange(nodes, dtype=np.float64)[None, None, :, None], (2, 3, nodes, 1)).copy()
+    s = np.linspace(0.0, 1.0, 11)
+    position = 1.0 + s  # within cell [1, 2]
+    c_u = position / (0.5 * (nodes - 1)) - 1.0
+    points = np.stack([c_u, np.zeros_like(c_u), np.full_like(c_u, 0.3)], axis=-1)
+    smooth = grid_features([grid], points, "smoothstep")[:, 0]
+    np.testing.assert_allclose(smooth, 1.0 + s * s * (3 - 2 * s), atol=1e-12)
+    np.testing.assert_allclose(grid_features([grid], points)[:, 0], position, atol=1e-12)
+    with pytest.raises(GratNetError, match="grid interpolation must be one of linear, smoothstep"):
+        grid_features([grid], points, "cubic")
+
+
+@pytest.mark.parametrize("interpolation", ["linear", "smoothstep"])
+def test_torch_grid_sample_matches_the_numpy_evaluator(interpolation):
     torch.manual_seed(0)
     encoding = EncodingSpec.for_grid(21, 5, 3, 2)
-    network = GridNetwork(encoding, [(3, 5, 5, 4), (5, 9, 9, 4)], [8], init=1.0, grid_dtype="float32")
-    points = torch.rand(300, 3, dtype=torch.float64) * 2 - 1
+    network = GridNetwork(encoding, [(3, 5, 5, 4), (5, 9, 9, 4)], [8], init=1.0, grid_dtype="float32",
+                          interpolation=interpolation)
+    points = torch.rand(300, 3, dtype=torch.float64) * 2.2 - 1.1  # some outside [−1, 1]: clamped alike
     with torch.no_grad():
         expected = network.double().features(points).numpy()
-    grids = network.to_model_file(encoding=encoding, range=RangeSpec(), scheme="simple-max").grids
-    np.testing.assert_allclose(grid_features(grids, points.numpy()), expected, rtol=0, atol=1e-6)
+    model = network.to_model_file(encoding=encoding, range=RangeSpec(), scheme="simple-max")
+    assert model.grid_interpolation == interpolation
+    np.testing.assert_allclose(grid_features(model.grids, points.numpy(), interpolation), expected, rtol=0,
+                               atol=1e-6)
+    if interpolation == "smoothstep":  # and the two interpolations do differ between the nodes
+        assert np.abs(grid_features(model.grids, points.numpy()) - expected).max() > 1e-2
 
 
 def _grid_model(dtype: str = "float16") -> ModelFile:
@@ -99,6 +122,24 @@ def test_model_file_round_trip_with_grids(tmp_path, dtype):
     u, v = rng.uniform(-1.2, 1.2, (2, 50))
     w = -rng.uniform(0, 1, 50) * np.sqrt(4 - u**2 - v**2)
     np.testing.assert_array_equal(evaluate_keys(loaded, u, v, w), evaluate_keys(model, u, v, w))
+
+
+def test_smoothstep_is_recorded_in_the_header_and_read_back(tmp_path):
+    model = _grid_model("float16")
+    model.grid_interpolation = "smoothstep"
+    save_model(tmp_path / "smooth.npz", model)
+    loaded = load_model(tmp_path / "smooth.npz")
+    assert loaded == model and loaded.grid_interpolation == "smoothstep"
+    with np.load(tmp_path / "smooth.npz") as archive:
+        header = json.loads(str(archive["metadata_json"]))
+    assert header["grid"]["interpolation"] == "smoothstep"
+    from gratnet.modelfile import network_inputs
+
+    points = np.array([[0.31, 0.12, -0.2], [-0.7, 0.4, 0.5]])  # between nodes: the loaded file interpolates so
+    assert np.abs(network_inputs(loaded, points) - network_inputs(_grid_model("float16"), points)).max() > 1e-2
+    model.grid_interpolation = "cubic"
+    with pytest.raises(GratNetError, match="grid interpolation must be one of linear, smoothstep"):
+        save_model(tmp_path / "bad.npz", model)
 
 
 def test_pure_mlp_files_stay_version_1(tmp_path):
@@ -190,12 +231,15 @@ def _keys(count: int = 400) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     return keys[:, 0], keys[:, 1], keys[:, 2]
 
 
-@pytest.mark.parametrize(("features", "levels", "dtype"), [(2, 3, "float16"), (4, 2, "float32"), (3, 1, "float16")])
+@pytest.mark.parametrize(("features", "levels", "dtype", "interpolation"),
+                         [(2, 3, "float16", "linear"), (4, 2, "float32", "linear"), (3, 1, "float16", "linear"),
+                          (2, 3, "float16", "smoothstep"), (4, 1, "float32", "smoothstep")])
 @pytest.mark.parametrize("grid_filter", ["manual", "hardware"])
-def test_gpu_grid_model_matches_numpy(ctx, features, levels, dtype, grid_filter):
+def test_gpu_grid_model_matches_numpy(ctx, features, levels, dtype, interpolation, grid_filter):
     from viewer.renderer import NetworkRenderer
 
     model = _random_grid_model(features, levels, dtype)
+    model.grid_interpolation = interpolation
     u, v, w = _keys()
     expected = evaluate_keys(model, u, v, w)
     renderer = NetworkRenderer(ctx, model, grid_filter=grid_filter)
@@ -222,15 +266,17 @@ def test_gpu_grid_features_alone_match_numpy(ctx):
     model = ModelFile([8 + spec.features, 3], [weights], [np.zeros(3, np.float32)], "relu", "none", spec,
                       RangeSpec(), "simple-max", grids=grids)
     u, v, w = _keys(2000)
-    expected = mlp_forward(model, network_inputs(model, network_coordinates(u, v, w, "simple-max")))
-    for grid_filter in ("manual", "hardware"):
-        renderer = NetworkRenderer(ctx, model, grid_filter=grid_filter)
-        try:
-            actual = renderer.network_outputs(u, v, w)
-        finally:
-            renderer.release()
-        tolerance = 1e-5 if grid_filter == "manual" else 2e-3  # GPUs may filter with 8-bit weights
-        np.testing.assert_allclose(actual, expected, rtol=0, atol=tolerance)
+    for interpolation in ("linear", "smoothstep"):
+        model.grid_interpolation = interpolation
+        expected = mlp_forward(model, network_inputs(model, network_coordinates(u, v, w, "simple-max")))
+        for grid_filter in ("manual", "hardware"):
+            renderer = NetworkRenderer(ctx, model, grid_filter=grid_filter)
+            try:
+                actual = renderer.network_outputs(u, v, w)
+            finally:
+                renderer.release()
+            tolerance = 1e-5 if grid_filter == "manual" else 2e-3  # GPUs may filter with 8-bit weights
+            np.testing.assert_allclose(actual, expected, rtol=0, atol=tolerance)
 
 
 def test_gpu_grid_brdf_slice_matches_numpy(ctx):

@@ -264,6 +264,7 @@ class NetworkRenderer:
         if self._grids:
             _set(program, "u_grid", np.arange(_GRID_UNIT, _GRID_UNIT + len(self._grids), dtype=np.int32))
             _set(program, "u_grid_hardware_filter", int(self.grid_filter == "hardware"))
+            _set(program, "u_grid_smoothstep", int(model.grid_interpolation == "smoothstep"))
         _set(program, "u_scheme", _SCHEMES[model.scheme])
         # encoded_feature (encoding.glsl) reads the counts; the baked MLP has them in its code, so baked
         # programs that do not call encoded_feature (all but encode_keys) lack these uniforms.
