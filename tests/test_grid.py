@@ -309,25 +309,29 @@ def test_baked_path_refuses_grid_models_and_auto_picks_the_texture_path(ctx):
         NetworkRenderer(ctx, model, grid_filter="cubic")
 
 
-def test_scene_renders_grid_models_on_the_forward_path(ctx):
-    """auto takes the forward path for grid models (the deferred path is not built for them) and shades the mesh;
-    asking for deferred is refused in one line."""
+@pytest.mark.parametrize("interpolation", ["linear", "smoothstep"])
+def test_deferred_path_renders_grid_models_like_the_forward_path(ctx, interpolation):
+    """The deferred compute pass fetches the same grids (mlp.glsl includes featuregrid.glsl) for every weights
+    source it reads the MLP from, and equals the forward path at every pixel of a disc scene."""
     from viewer.camera import Camera, Light
     from viewer.meshes import compact_disc
     from viewer.scene import SceneRenderer
 
     model = _random_grid_model(4, 2, "float16")
-    scene = SceneRenderer(ctx, model, render_path="auto")
+    model.grid_interpolation = interpolation
+    mesh, camera, light = compact_disc(segments=32), Camera(0.2, -90.0, 50.0), Light.directional(30.0, 180.0)
+    forward = SceneRenderer(ctx, model, render_path="forward")
     try:
-        assert scene.render_path == "forward" and scene.network.weights_path == "texture"
-        image = scene.render(compact_disc(segments=32), Camera(0.2, -90.0, 50.0), Light.directional(30.0, 180.0),
-                             (24, 18), exposure=10.0)
+        assert forward.network.weights_path == "texture"
+        expected = forward.render_rgba(mesh, camera, light, (24, 18), 10.0, 1.5)
     finally:
-        scene.release()
-    assert image.shape == (18, 24, 3) and np.all(np.isfinite(image)) and image.max() > 0
-    deferred = SceneRenderer(ctx, model, render_path="deferred")
-    try:
-        with pytest.raises(GratNetError, match="deferred render path is not built for feature-grid models"):
-            _ = deferred.render_path
-    finally:
-        deferred.release()
+        forward.release()
+    assert np.all(np.isfinite(expected)) and expected[..., :3].max() > 0
+    for weights in ("texture", "ssbo"):
+        deferred = SceneRenderer(ctx, model, render_path="deferred", deferred_weights=weights)
+        try:
+            assert deferred.render_path == "deferred"
+            actual = deferred.render_rgba(mesh, camera, light, (24, 18), 10.0, 1.5)
+        finally:
+            deferred.release()
+        np.testing.assert_allclose(actual, expected, rtol=1e-5, atol=1e-6 * np.abs(expected).max())

@@ -63,6 +63,7 @@ from viewer.glsl import compile_compute, compile_program
 from viewer.renderer import _LOG, _SOFTWARE_RASTERIZERS, _set, skip_threshold_value
 
 if TYPE_CHECKING:
+    from gratnet.modelfile import ModelFile
     from viewer.camera import Camera, Light
     from viewer.scene import MeshBuffers, SceneRenderer
 
@@ -89,7 +90,7 @@ _SHADE_GROUP = 64  # invocations per SHADE work group
 _TILE = 8  # COMPACT / RESOLVE work groups: 8×8 texels
 _LIST_BINDING = 7  # SSBO bindings: skip counters 5 (renderer.py), weights 6, the list 7
 _WEIGHTS_BINDING = 6
-_CACHE_VERSION = 1
+_CACHE_VERSION = 2  # 2: the key names a feature-grid model's levels
 _CHUNK_TEXELS = 1 << 26  # G-buffer texels per chunk of samples at most (1 GiB of RGBA32F)
 
 
@@ -188,9 +189,9 @@ class DeferredRenderer:
         return self._programs[key]  # type: ignore[return-value]
 
     def _bind_weights(self) -> None:
-        if self.weights == "texture":
-            self.network.use_weights(0)
-        elif self.weights != "baked":
+        if self.weights == "texture" or self.network.model.grids:
+            self.network.use_weights(0)  # the weight texture, and a feature-grid model's grids on their units
+        if self.weights not in ("texture", "baked"):
             if self._weight_buffer is None:
                 texels = self.network.packed_weights
                 if self.weights.endswith("-fp16"):  # four halves per texel, in packHalf2x16 order (little-endian)
@@ -366,7 +367,14 @@ def _cache_key(scene: SceneRenderer) -> str:
     model = network.model
     return (f"v{_CACHE_VERSION}|{scene.ctx.info.get('GL_RENDERER', '?')}|{'-'.join(map(str, model.layer_sizes))}|"
             f"{model.activation}|{model.encoding.frequencies},{model.encoding.t_frequencies}|{network.weights_path}|"
-            f"{scene.deferred.weights}")
+            f"{scene.deferred.weights}|{_grid_signature(model)}")
+
+
+def _grid_signature(model: ModelFile) -> str:
+    """A feature-grid model's levels (their fetches cost both paths alike, but not alike to a pure MLP)."""
+    if not model.grids:
+        return "mlp"
+    return "grid:" + ",".join("x".join(map(str, np.shape(grid))) for grid in model.grids)
 
 
 def _read_cache(path: Path) -> dict[str, dict[str, object]]:
@@ -410,11 +418,6 @@ def choose_render_path(scene: SceneRenderer, render_path: str = "auto", measure:
     :data:`PROBE_SIZE`, default light and camera) and caches the faster (:func:`render_path_cache_file`).
     ``measure=False``: no probe; ``forward`` while nothing is cached (the viewer: its compile process measures)."""
     check_render_path(render_path)
-    if scene.network.model.grids:  # the deferred path binds no feature grids: feature-grid models render forward
-        if render_path == "deferred":
-            raise GratNetError("the deferred render path is not built for feature-grid models; use the forward path "
-                               "(render path 'forward' or 'auto')")
-        return "forward", "feature-grid model: the forward path (the deferred path is not built for grids)"
     if render_path != "auto":
         return render_path, "requested"
     cache = render_path_cache_file()
