@@ -59,6 +59,12 @@ def scene_view(model_path: str, mesh: str) -> SceneView:
     return SceneView(mesh, camera, light, defaults.exposure)
 
 
+#: Warm-up before timing: frames until this many seconds have passed (at least one, at most
+#: :data:`_WARMUP_FRAMES`). One frame was not enough on an H100: after seconds of compiling on the CPU the idle
+#: GPU's clocks were down, and the first configuration timed ran at half speed (docs/benchmarks.md "GPU bench").
+_WARMUP_SECONDS = 0.5
+_WARMUP_FRAMES = 20
+
 #: moderngl reads GL_TIME_ELAPSED as a 32-bit count of nanoseconds: frames longer than this (llvmpipe at full HD)
 #: have no GPU time (``None``); their wall time stands.
 _TIMER_LIMIT_S = (2**32 - 1) * 1e-9
@@ -78,6 +84,17 @@ def _timed(frame: Any, ctx: Any, repeats: int, max_seconds: float) -> tuple[list
         elapsed = query.elapsed * 1e-9  # nanoseconds; waits for the result
         gpus.append(elapsed if walls[-1] < 0.9 * _TIMER_LIMIT_S else None)
     return walls, gpus
+
+
+def _warm_up(frame: Any, ctx: Any) -> Any:
+    """Render until :data:`_WARMUP_SECONDS` have passed (1 to :data:`_WARMUP_FRAMES` frames); the last result."""
+    started = time.perf_counter()
+    for _ in range(_WARMUP_FRAMES):
+        result = frame()
+        ctx.finish()
+        if time.perf_counter() - started >= _WARMUP_SECONDS:
+            break
+    return result
 
 
 def scene_frame_times(ctx: Any, model: Any, model_path: str, view: SceneView, weights_path: str,
@@ -103,7 +120,7 @@ def scene_frame_times(ctx: Any, model: Any, model_path: str, view: SceneView, we
         setup_seconds = time.perf_counter() - start
         for size in sizes:
             for count in samples:
-                coverage = frame(size, count)[..., 3]  # warm-up at this size and sample count
+                coverage = _warm_up(lambda size=size, count=count: frame(size, count), ctx)[..., 3]
                 walls, gpus = _timed(lambda size=size, count=count: frame(size, count), ctx, repeats, max_seconds)
                 seconds = statistics.median(walls)
                 evaluations = float(np.sum(coverage)) * count  # samples that hit the mesh, each one evaluation

@@ -249,8 +249,9 @@ def test_gpu_grid_model_matches_numpy(ctx, features, levels, dtype, interpolatio
     finally:
         renderer.release()
     assert np.all(expected.max(axis=0) > 0)
-    # float32 in the shader; eq. 7's inverse amplifies the outputs' rounding (~1e-7) to ~1e-5 relative.
-    np.testing.assert_allclose(actual, expected, rtol=1e-4, atol=1e-12)
+    # float32 in the shader; eq. 7's inverse amplifies the outputs' rounding (~1e-7) to ~1e-5 relative. The
+    # hardware filter may quantise its weights (8 bits on NVIDIA): up to 0.31 % relative measured on an H100.
+    np.testing.assert_allclose(actual, expected, rtol=1e-4 if grid_filter == "manual" else 1e-2, atol=1e-12)
 
 
 def test_gpu_grid_features_alone_match_numpy(ctx):
