@@ -7,6 +7,7 @@ import json
 import numpy as np
 import pytest
 
+from gratnet.errors import GratNetError
 from gratnet.volume import Volume, volume_axes, write_volume
 from trainer.brdfslice import SliceConfig, slice_geometry
 from trainer.diagnostics import (
@@ -138,6 +139,41 @@ def test_report_holds_the_oracle_and_the_regions_beside_the_network(tiny_run):
         assert 0.0 <= row["oracle"]["flip"] <= 1.0 and row["oracle_flip"] == row["oracle"]["flip"]
         fractions = [row["regions"][name]["fraction"] for name in REGIONS]
         assert sum(fractions) == pytest.approx(1.0)
+
+
+def test_further_views_are_scored_beside_the_papers_five(tiny_run):
+    """`gratnet evaluate --views` adds slices, marked extra_view, with the same metrics, regions and oracle."""
+    from gratnet.cli import main
+
+    out = tiny_run / "views"
+    assert main(["evaluate", str(tiny_run / "run" / "model.npz"), "--out", str(out), "--volume",
+                 str(tiny_run / "tiny.exr"), "--volume-slices", "2", "--views", "45,60,500; 15,200,300", "--size", "16",
+                 "--cache-dir", str(tiny_run / "cache"), "--quiet"]) == 0
+    rows = json.loads((out / "metrics.json").read_text())["brdf_slices"]
+    assert [row["slice"] for row in rows[5:]] == ["(45°, 60°) 500 RU", "(15°, 200°) 300 RU"]
+    assert not any(row.get("extra_view") for row in rows[:5]) and all(row["extra_view"] for row in rows[5:])
+    for row in rows[5:]:
+        assert 0.0 <= row["flip"] <= 1.0 and 0.0 <= row["oracle_flip"] <= 1.0
+    # The paper's five are the same numbers as without --views (same model, same cached ground truth).
+    baseline = json.loads((tiny_run / "run" / "metrics.json").read_text())["brdf_slices"]
+    assert [row["flip"] for row in rows[:5]] == [row["flip"] for row in baseline]
+
+
+def test_volume_slices_beyond_the_volume_are_refused_in_one_line(tiny_run, capsys):
+    from gratnet.cli import main
+
+    status = main(["evaluate", str(tiny_run / "run" / "model.npz"), "--out", str(tiny_run / "bad"), "--volume",
+                   str(tiny_run / "tiny.exr"), "--volume-slices", "4,7", "--no-brdf-slices", "--quiet"])
+    assert status != 0
+    assert "--volume-slices 7: the volume has 5 slices (0 to 4)" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("views", ["45,60", "95,0,500", "10,0,-1", "a,b,c"])
+def test_bad_views_are_refused_in_one_line(views):
+    from trainer.evaluate import EvaluateConfig
+
+    with pytest.raises(GratNetError, match="--views"):
+        EvaluateConfig(views=views)
 
 
 def test_oracle_runs_on_a_shipped_models_tiny_volume(tmp_path):

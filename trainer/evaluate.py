@@ -13,6 +13,7 @@ from __future__ import annotations
 import dataclasses
 import hashlib
 import json
+import math
 from pathlib import Path
 from typing import Any
 
@@ -22,6 +23,7 @@ from gratnet.atomic import atomic_path, make_folder
 from gratnet.brdf import slice_view_directions
 from gratnet.config import config_field, config_to_dict
 from gratnet.encoding import range_forward
+from gratnet.errors import GratNetError
 from gratnet.modelfile import ModelFile, evaluate_keys
 from gratnet.volume import Volume, volume_axes
 from trainer.brdfslice import SliceConfig, brdf_slice_xyz, expose_slice, slice_geometry
@@ -51,7 +53,27 @@ class EvaluateConfig:
     oracle: bool = config_field(True, "also score the interpolation oracle on the BRDF slices: the volume "
                                 "interpolated trilinearly at the exact keys (needs the volume; cheap)")
     cache_dir: str = config_field("out/cache", "where ground-truth BRDF slices are cached (.npy)")
+    views: str = config_field(
+        "", "further BRDF slices scored beside the paper's five (views no training was tuned on): 'θ,φ,RU' "
+        "triples separated by ';' (light polar and azimuth angles in degrees, exposure), e.g. '45,60,5000;15,200,3000'"
+    )
     progress: bool = config_field(True, "progress bars while computing ground-truth slices", cli=False)
+
+    def __post_init__(self) -> None:
+        self.extra_views()  # checked before any work
+
+    def extra_views(self) -> tuple[tuple[float, float, float], ...]:
+        """The ``views`` as (θi degrees, φi degrees, exposure) triples."""
+        views = []
+        for part in filter(None, (item.strip() for item in self.views.split(";"))):
+            try:
+                theta, phi, exposure = (float(value) for value in part.split(","))
+            except ValueError:
+                raise GratNetError(f"--views: each view is 'θ,φ,RU' (three numbers), got {part!r}") from None
+            if not (0.0 <= theta < 90.0 and math.isfinite(phi) and exposure > 0 and math.isfinite(exposure)):
+                raise GratNetError(f"--views: θ must lie in [0, 90) degrees and RU be a positive number, got {part!r}")
+            views.append((theta, phi, exposure))
+        return tuple(views)
 
 
 def network_brdf_slice(model: ModelFile, config: SliceConfig) -> np.ndarray:
@@ -96,13 +118,15 @@ def evaluate_brdf_slices(
     out_dir: Path,
     volume: Volume | None = None,
 ) -> list[dict[str, Any]]:
-    """Metrics and a comparison figure for the paper's five BRDF slices; per-region errors; and, with a
+    """Metrics and a comparison figure for the paper's five BRDF slices and ``config.views`` (rows marked
+    ``extra_view``); per-region errors; and, with a
     ``volume`` and ``config.oracle``, the interpolation oracle's metrics (``oracle``) beside the network's."""
     from trainer.diagnostics import VolumeOracle, region_errors, region_figure, region_labels
 
     rows, figure_rows, region_maps = [], [], []
     oracle_of_volume = VolumeOracle(volume) if volume is not None and config.oracle else None
-    for theta, phi, exposure in STANDARD_SLICES:
+    extra = config.extra_views()
+    for theta, phi, exposure in STANDARD_SLICES + extra:
         slice_config = SliceConfig(theta, phi, size=config.size, exposure=exposure, ior=config.ior)
         reference = ground_truth_brdf_slice(field, optics, slice_config, config.cache_dir, config.progress)
         predicted = network_brdf_slice(model, slice_config)
@@ -114,6 +138,8 @@ def evaluate_brdf_slices(
             "slice": _slice_label(theta, phi, exposure), "theta": theta, "phi": phi, "exposure": exposure, **metrics,
             "regions": region_errors(reference, predicted, labels),
         }
+        if (theta, phi, exposure) not in STANDARD_SLICES:
+            row["extra_view"] = True  # one of --views: not the paper's
         if oracle_of_volume is not None:
             oracle = oracle_of_volume.brdf_slice(slice_config)
             row["oracle"] = {**image_metrics(reference, oracle, mask=inside),
@@ -203,6 +229,10 @@ def evaluate_model(
                                  "grid_interpolation_macs": 8 * model.grid_feature_count})
     table: list[dict[str, Any]] = []
     if volume is not None and volume_slices:
+        outside = [index for index in volume_slices if not -volume.slices <= index < volume.slices]
+        if outside:
+            raise GratNetError(f"--volume-slices {','.join(map(str, outside))}: the volume has {volume.slices} slices "
+                               f"(0 to {volume.slices - 1})")
         results["volume_slices"] = evaluate_volume_slices(model, volume, volume_slices, out_dir)
         table += results["volume_slices"]
     sections = []
