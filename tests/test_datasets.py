@@ -163,3 +163,36 @@ def test_evaluation_rebuilds_a_scan_preset_from_a_volumes_source(fields):
     field, optics = _ground_truth_inputs(arguments, {"source": "dataset:paper-snake", "sigma_s_um": 16.25})
     np.testing.assert_array_equal(field.heights_um, fields["paper-snake"].heights_um)
     assert optics.sigma_s_um == 16.25
+
+
+def test_reproduce_script_replays_every_shipped_paper_models_recorded_training(tmp_path):
+    """scripts/reproduce_paper_models.sh (DRY_RUN) rebuilds each assets/paper-* from its train_command.json:
+    ground truth with the w-slices of the volume it was trained on, the same training flags, the evaluation."""
+    import json
+    import shlex
+    import subprocess
+
+    from tests.conftest import REPO
+
+    names = sorted(path.parent.name for path in (REPO / "assets").glob("paper-*/train_command.json"))
+    assert len(names) == 7
+    result = subprocess.run(["bash", str(REPO / "scripts" / "reproduce_paper_models.sh")], capture_output=True,
+                            text=True, env={"DRY_RUN": "1", "OUT": str(tmp_path), "PATH": "/usr/bin:/bin"},
+                            check=True)
+    commands = [shlex.split(line[2:]) for line in result.stdout.splitlines() if line.startswith("+ ")]
+    assert len(commands) == 3 * len(names)
+    triples = [commands[index:index + 3] for index in range(0, len(commands), 3)]
+    for name, (groundtruth, train, evaluate) in zip(names, triples, strict=True):
+        recorded = shlex.split(json.loads((REPO / "assets" / name / "train_command.json").read_text())["command"])
+        slices = "41" if name == "paper-pits" else "21" if name == "paper-corner-cubes" else "11"
+        assert groundtruth[1:3] == ["groundtruth", name] and groundtruth[groundtruth.index("--slices") + 1] == slices
+        volume = groundtruth[groundtruth.index("--out") + 1]
+        assert train[1:3] == ["train", volume]
+        out = recorded.index("--out")
+        assert [word for word in train[3:] if word not in ("--out", str(tmp_path / "runs" / name))] == \
+            recorded[3:out] + recorded[out + 2:]
+        assert evaluate[1] == "evaluate" and "--views" in evaluate
+        assert evaluate[evaluate.index("--volume") + 1] == volume
+    bad = subprocess.run(["bash", str(REPO / "scripts" / "reproduce_paper_models.sh"), "no-such"], capture_output=True,
+                         text=True, env={"DRY_RUN": "1", "PATH": "/usr/bin:/bin"})
+    assert bad.returncode == 2 and "no assets/no-such/train_command.json" in bad.stderr
