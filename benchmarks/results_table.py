@@ -322,6 +322,7 @@ def main() -> None:
         "interpolation oracle of the volume the model was trained on (\"—\": that volume exists only on the GPU",
         "machine and was not scored). Targets (issue 15): beat the paper at (0°, 0°) with ≤ 60k parameters",
         "(≤ 130k for corner cubes and pits), a grid ≤ 1/20 of the volume, every other slice within 1.5×.",
+        "`bash scripts/reproduce_paper_models.sh [NAME …]` rebuilds them from those recorded commands.",
         "",
         *paper_datasets_table(Path(arguments.assets)),
         "",

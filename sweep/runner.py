@@ -68,6 +68,10 @@ def _submit(ray: Any, spec: SweepSpec, plan: Plan, out: Path) -> dict[Any, str]:
     """Submit every task that is left; returns their refs with a label each."""
     resources = spec.resources
     gt_options: dict[str, Any] = {"num_cpus": resources.groundtruth_cpus}
+    gt_device = None  # numpy on the task's CPUs, unless the ground truth asks for GPUs: then CUDA (torch)
+    if resources.groundtruth_gpus > 0:
+        gt_options["num_gpus"] = resources.groundtruth_gpus
+        gt_device = "cuda"
     train_options: dict[str, Any] = {"num_cpus": resources.train_cpus, "num_gpus": resources.train_gpus}
     for options, gigabytes in ((gt_options, resources.groundtruth_memory_gb),
                                (train_options, resources.train_memory_gb)):
@@ -93,11 +97,11 @@ def _submit(ray: Any, spec: SweepSpec, plan: Plan, out: Path) -> dict[Any, str]:
         if plan.volumes[name] == "done":
             metadata = task(tasks.read_volume_metadata, f"{name}: read volume", {"num_cpus": 1}, out, dataset)
         elif dataset.parts == 1:
-            metadata = task(tasks.ground_truth, f"{name}: ground truth", gt_options, out, dataset)
+            metadata = task(tasks.ground_truth, f"{name}: ground truth", gt_options, out, dataset, gt_device)
         else:
             surface = task(tasks.prepare, f"{name}: prepare surface", gt_options, dataset)
             parts = [task(tasks.volume_part, f"{name}: λ block {block + 1}/{dataset.parts}", gt_options, dataset,
-                          surface, block) for block in range(dataset.parts)]
+                          surface, block, gt_device) for block in range(dataset.parts)]
             metadata = task(tasks.assemble_volume, f"{name}: assemble volume", {"num_cpus": 1}, out, dataset,
                             surface, *parts)
         dependencies[name] = [metadata]
@@ -106,7 +110,8 @@ def _submit(ray: Any, spec: SweepSpec, plan: Plan, out: Path) -> dict[Any, str]:
             from trainer.evaluate import STANDARD_SLICES
 
             dependencies[name] += [task(tasks.evaluation_slice, f"{name}: BRDF slice {index + 1}", gt_options,
-                                        dataset, metadata, evaluate, index) for index in range(len(STANDARD_SLICES))]
+                                        dataset, metadata, evaluate, index, gt_device)
+                                   for index in range(len(STANDARD_SLICES))]
     threads = max(1, int(resources.train_cpus))
     for run in pending_runs:
         task(tasks.train_run, f"run {run.name}", train_options, out, run, threads, *dependencies[run.dataset.name])

@@ -21,6 +21,7 @@ GratNetError (the CLI prints one line and exits 2). The resolved grid is a list 
     size = 128
     [resources]                          # per task: CPUs, GPUs (fractions share one GPU), memory
     train_gpus = 0.25
+    groundtruth_gpus = 0.5               # ground truth on CUDA (seconds per 1001² volume on an H100)
     groundtruth_memory_gb = 3
 
     [[datasets]]
@@ -67,6 +68,7 @@ class Resources:
 
     groundtruth_cpus: float = 1.0  # also the BLAS threads of its products (Ray sets OMP_NUM_THREADS)
     groundtruth_memory_gb: float = 0.0  # memory reserved per ground-truth task (GiB; 0: none)
+    groundtruth_gpus: float = 0.0  # > 0: ground-truth tasks ask Ray for GPUs and run on CUDA (groundtruth --device)
     train_cpus: float = 1.0  # also its torch threads
     train_gpus: float = 0.0  # a fraction lets several trainings share one GPU (CUDA then, as device auto picks)
     train_memory_gb: float = 0.0  # memory reserved per training task (GiB; 0: none)

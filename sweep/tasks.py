@@ -85,14 +85,15 @@ def prepare(dataset: DatasetSpec) -> Any:
     return prepare_surface(load_field(dataset), dataset.optics)
 
 
-def volume_part(dataset: DatasetSpec, surface: Any, block: int) -> tuple[Any, int, float]:
+def volume_part(dataset: DatasetSpec, surface: Any, block: int, device: str | None = None
+                ) -> tuple[Any, int, float]:
     """Block ``block`` of ``dataset.parts``: the float64 XYZ sum over its wavelengths, the node count, and
-    the seconds it took."""
+    the seconds it took. ``device``: as :class:`trainer.fourier.FTerm`'s (None: numpy)."""
     from trainer.groundtruth import compute_volume_part, wavelength_blocks
 
     started = time.perf_counter()
     wavelengths = wavelength_blocks(dataset.optics, dataset.parts)[block]
-    xyz, nodes = compute_volume_part(surface, dataset.volume, dataset.optics, wavelengths)
+    xyz, nodes = compute_volume_part(surface, dataset.volume, dataset.optics, wavelengths, device=device)
     return xyz, nodes, time.perf_counter() - started
 
 
@@ -120,12 +121,12 @@ def assemble_volume(out: Path, dataset: DatasetSpec, surface: Any, *parts: tuple
     return _write_volume(out, dataset, volume, sum(part[2] for part in parts))
 
 
-def ground_truth(out: Path, dataset: DatasetSpec) -> dict[str, Any]:
+def ground_truth(out: Path, dataset: DatasetSpec, device: str | None = None) -> dict[str, Any]:
     """The whole volume in one task (``gratnet groundtruth``'s call); returns its metadata."""
     from trainer.groundtruth import compute_volume
 
     started = time.perf_counter()
-    volume = compute_volume(load_field(dataset), dataset.volume, dataset.optics, progress=False)
+    volume = compute_volume(load_field(dataset), dataset.volume, dataset.optics, progress=False, device=device)
     return _write_volume(out, dataset, volume, time.perf_counter() - started)
 
 
@@ -136,7 +137,8 @@ def read_volume_metadata(out: Path, dataset: DatasetSpec) -> dict[str, Any]:
     return dict(read_volume(volume_path(out, dataset)).metadata)
 
 
-def evaluation_slice(dataset: DatasetSpec, metadata: dict[str, Any], evaluate: Any, index: int) -> None:
+def evaluation_slice(dataset: DatasetSpec, metadata: dict[str, Any], evaluate: Any, index: int,
+                     device: str | None = None) -> None:
     """Fill the evaluation cache with ground-truth BRDF slice ``index`` (trainer.evaluate.STANDARD_SLICES),
     with the optics the evaluation will read back from the volume, so that no run computes it again."""
     from trainer.brdfslice import SliceConfig
@@ -146,7 +148,7 @@ def evaluation_slice(dataset: DatasetSpec, metadata: dict[str, Any], evaluate: A
     theta, phi, exposure = STANDARD_SLICES[index]
     config = SliceConfig(theta, phi, size=evaluate.size, exposure=exposure, ior=evaluate.ior)
     ground_truth_brdf_slice(load_field(dataset), OpticsConfig.from_volume_metadata(metadata), config,
-                            evaluate.cache_dir, progress=False)
+                            evaluate.cache_dir, progress=False, device=device)
 
 
 def train_run(out: Path, run: RunSpec, threads: int, *dependencies: Any) -> dict[str, Any]:

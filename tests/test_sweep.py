@@ -266,3 +266,29 @@ def test_bench_table_measures_every_finished_model(swept):
     assert all(result["flip_mean"] == next(row["flip_mean"] for row in rows if row["run"] == result["model"])
                for result in results)
     assert (swept / "out" / "bench" / "pareto.png").is_file()
+
+
+def test_ground_truth_tasks_take_the_device_of_gpu_resources():
+    """[resources] groundtruth_gpus > 0 runs the ground-truth tasks on CUDA (torch); the tasks take the device
+    (here torch on the CPU, which the GPU path shares) and agree with numpy's part to float32 rounding."""
+    from gratnet.errors import GratNetError
+    from sweep.spec import Resources
+    from sweep.tasks import volume_part
+    from trainer.fourier import OpticsConfig, prepare_surface
+    from trainer.generators import generate
+    from trainer.groundtruth import VolumeConfig
+
+    assert Resources().groundtruth_gpus == 0.0 and Resources(groundtruth_gpus=0.5).groundtruth_gpus == 0.5
+    with pytest.raises(GratNetError, match="groundtruth_gpus must be a number ≥ 0"):
+        Resources(groundtruth_gpus=-1.0)
+
+    class Dataset:  # the fields volume_part reads
+        volume = VolumeConfig(resolution=17, slices=3, sampling="simple-max")
+        optics = OpticsConfig(sigma_s_um=3.0, wavelength_step_nm=40.0)
+        parts = 2
+
+    surface = prepare_surface(generate("blazed", size_um=10.0), Dataset.optics)
+    numpy_part, nodes, _ = volume_part(Dataset, surface, 1)
+    torch_part, torch_nodes, _ = volume_part(Dataset, surface, 1, "cpu")
+    assert torch_nodes == nodes and np.max(numpy_part) > 0
+    np.testing.assert_allclose(torch_part, numpy_part, rtol=0, atol=2e-6 * np.max(numpy_part))
