@@ -203,3 +203,24 @@ def test_oracle_runs_on_a_shipped_models_tiny_volume(tmp_path):
     assert (tmp_path / "report" / "training_curves.png").is_file()
     oracle = oracle_brdf_slice(volume, SliceConfig(0.0, 0.0, size=24, exposure=2000.0))
     assert oracle.shape == (24, 24, 3) and np.isfinite(oracle).all() and oracle.max() > 0
+
+
+def test_evaluate_scores_by_default_only_the_slices_the_training_held_out(tiny_run):
+    """Without --volume-slices, `gratnet evaluate` scores the model's own held-out slices (here --test-slices 2),
+    and none for a model trained on every slice (--split all): those would not test anything."""
+    from gratnet.cli import main
+    from gratnet.modelfile import load_model, save_model
+    from trainer.train_cli import held_out_slices
+
+    out = tiny_run / "default-slices"
+    assert main(["evaluate", str(tiny_run / "run" / "model.npz"), "--out", str(out), "--volume",
+                 str(tiny_run / "tiny.exr"), "--no-brdf-slices", "--quiet"]) == 0
+    rows = json.loads((out / "metrics.json").read_text())["volume_slices"]
+    assert [row["slice"].split(" (")[0] for row in rows] == ["volume slice 2"]
+    model = load_model(tiny_run / "run" / "model.npz")
+    model.metadata["training"]["config"]["split"] = "all"
+    save_model(tiny_run / "all.npz", model)
+    assert held_out_slices(model.metadata) == [] and held_out_slices({}) == [4, 7, 10]
+    assert main(["evaluate", str(tiny_run / "all.npz"), "--out", str(tiny_run / "all-eval"), "--volume",
+                 str(tiny_run / "tiny.exr"), "--no-brdf-slices", "--quiet"]) == 0
+    assert "volume_slices" not in json.loads((tiny_run / "all-eval" / "metrics.json").read_text())

@@ -54,8 +54,10 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     evaluate.add_argument("model", metavar="MODEL.npz", help="model file from gratnet train")
     evaluate.add_argument("--out", required=True, metavar="DIR", help="report folder")
     evaluate.add_argument("--volume", metavar="VOLUME.exr", help="ground-truth volume for the volume-slice metrics")
-    evaluate.add_argument("--volume-slices", default="4,7,10",
-                          help="volume slices to evaluate, comma-separated indices (default: 4,7,10)")
+    evaluate.add_argument("--volume-slices", default=None,
+                          help="volume slices to evaluate, comma-separated indices (default: the slices the model's "
+                          "training held out: its --test-slices under --split slices, none under --split all or "
+                          "random, whose every slice was trained on; 4,7,10 when the model does not say)")
     _add_evaluation_inputs(evaluate)
     evaluate.set_defaults(handler=run_evaluate)
 
@@ -183,6 +185,16 @@ def _read_history(path: Path) -> dict[str, Any] | None:
     return history if isinstance(history, dict) and isinstance(history.get("epochs"), list) else None
 
 
+def held_out_slices(metadata: dict) -> list[int]:
+    """The volume slices a model's training held out (its metadata's training config); [4, 7, 10] when unknown."""
+    config = metadata.get("training", {}).get("config")
+    if not isinstance(config, dict) or "split" not in config:
+        return [4, 7, 10]
+    if config["split"] != "slices":
+        return []  # every slice was trained on: scoring one would not test anything
+    return _slice_list(str(config.get("test_slices", "4,7,10")), "the model's test_slices")
+
+
 def run_evaluate(arguments: argparse.Namespace) -> int:
     """Evaluate an existing model file."""
     from gratnet.modelfile import load_model
@@ -191,8 +203,11 @@ def run_evaluate(arguments: argparse.Namespace) -> int:
 
     evaluate_config = dataclasses.replace(from_arguments(EvaluateConfig, arguments), progress=not arguments.quiet)
     _check_before_work(arguments, evaluating=True)
-    slices = _slice_list(arguments.volume_slices, "--volume-slices") if arguments.volume else []
+    slices = _slice_list(arguments.volume_slices, "--volume-slices") if arguments.volume and arguments.volume_slices \
+        else []
     model = load_model(arguments.model)
+    if arguments.volume and arguments.volume_slices is None:
+        slices = held_out_slices(model.metadata)
     volume = read_volume(arguments.volume) if arguments.volume else None
     metadata = volume.metadata if volume is not None else model.metadata.get("volume", {})
     field, optics = _ground_truth_inputs(arguments, metadata) if evaluate_config.brdf_slices else (None, None)
