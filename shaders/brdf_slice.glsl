@@ -12,6 +12,7 @@ precision highp float;
 precision highp int;
 
 #include "encoding.glsl"
+#include "featuregrid.glsl"  // before mlp.glsl: its baked stand-in includes nothing
 #include "mlp.glsl"
 #include "range.glsl"
 #include "brdf.glsl"

@@ -82,6 +82,7 @@ void main() {
 
 #ifdef SHADE
 layout(local_size_x = SHADE_GROUP) in;  // before mlp.glsl, whose shared-memory copy reads gl_WorkGroupSize
+#include "featuregrid.glsl"  // before mlp.glsl: its baked stand-in includes nothing
 #include "mlp.glsl"
 #include "range.glsl"
 

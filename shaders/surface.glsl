@@ -50,6 +50,7 @@ precision highp int;
 #include "brdf.glsl"
 #ifndef GBUFFER
 #include "encoding.glsl"
+#include "featuregrid.glsl"  // before mlp.glsl: its baked stand-in includes nothing
 #include "mlp.glsl"
 #include "range.glsl"
 #include "skip.glsl"

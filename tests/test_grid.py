@@ -242,7 +242,7 @@ def test_gpu_grid_model_matches_numpy(ctx, features, levels, dtype, interpolatio
     model.grid_interpolation = interpolation
     u, v, w = _keys()
     expected = evaluate_keys(model, u, v, w)
-    renderer = NetworkRenderer(ctx, model, grid_filter=grid_filter)
+    renderer = NetworkRenderer(ctx, model, weights_path="texture", grid_filter=grid_filter)
     try:
         assert renderer.weights_path == "texture"
         actual = renderer.evaluate_keys(u, v, w)
@@ -271,7 +271,7 @@ def test_gpu_grid_features_alone_match_numpy(ctx):
         model.grid_interpolation = interpolation
         expected = mlp_forward(model, network_inputs(model, network_coordinates(u, v, w, "simple-max")))
         for grid_filter in ("manual", "hardware"):
-            renderer = NetworkRenderer(ctx, model, grid_filter=grid_filter)
+            renderer = NetworkRenderer(ctx, model, weights_path="texture", grid_filter=grid_filter)
             try:
                 actual = renderer.network_outputs(u, v, w)
             finally:
@@ -291,7 +291,7 @@ def test_gpu_grid_brdf_slice_matches_numpy(ctx):
     key = -(light + views)
     xyz = evaluate_keys(model, key[..., 0], key[..., 1], key[..., 2]) * inside[..., None]
     expected = exposure * a_term(light, views, 1.5)[..., None] * xyz
-    renderer = NetworkRenderer(ctx, model)
+    renderer = NetworkRenderer(ctx, model, weights_path="texture")
     try:
         exposed = renderer.render_brdf_slice(theta, phi, size, exposure, 1.5)
     finally:
@@ -299,13 +299,22 @@ def test_gpu_grid_brdf_slice_matches_numpy(ctx):
     np.testing.assert_allclose(exposed, expected, rtol=1e-4, atol=1e-3 * float(np.abs(expected).max()))
 
 
-def test_baked_path_refuses_grid_models_and_auto_picks_the_texture_path(ctx):
+@pytest.mark.parametrize("interpolation", ["linear", "smoothstep"])
+def test_baked_path_evaluates_grid_models_like_numpy(ctx, interpolation):
+    """The baked MLP reads the grid features (featuregrid.glsl, included before mlp.glsl) as its first inputs:
+    the same outputs as numpy. Only when asked for: auto keeps grid models on the texture path."""
     from viewer.renderer import NetworkRenderer, choose_weights_path
 
-    model = _random_grid_model(2, 1, "float16")
+    model = _random_grid_model(3, 2, "float16")
+    model.grid_interpolation = interpolation
     assert choose_weights_path(ctx, model, "auto") == "texture"
-    with pytest.raises(GratNetError, match="baked weights path is not built for feature-grid models"):
-        NetworkRenderer(ctx, model, weights_path="baked")
+    assert choose_weights_path(ctx, model, "baked") == "baked"
+    u, v, w = _keys()
+    expected = evaluate_keys(model, u, v, w)
+    with NetworkRenderer(ctx, model, weights_path="baked") as renderer:
+        assert renderer.weights_path == "baked" and "g_grid_features[1]" in renderer.baked_source
+        baked = renderer.evaluate_keys(u, v, w)
+    np.testing.assert_allclose(baked, expected, rtol=1e-4, atol=1e-12)
     with pytest.raises(GratNetError, match="grid filter"):
         NetworkRenderer(ctx, model, grid_filter="cubic")
 
@@ -321,15 +330,16 @@ def test_deferred_path_renders_grid_models_like_the_forward_path(ctx, interpolat
     model = _random_grid_model(4, 2, "float16")
     model.grid_interpolation = interpolation
     mesh, camera, light = compact_disc(segments=32), Camera(0.2, -90.0, 50.0), Light.directional(30.0, 180.0)
-    forward = SceneRenderer(ctx, model, render_path="forward")
+    forward = SceneRenderer(ctx, model, weights_path="texture", render_path="forward")
     try:
         assert forward.network.weights_path == "texture"
         expected = forward.render_rgba(mesh, camera, light, (24, 18), 10.0, 1.5)
     finally:
         forward.release()
     assert np.all(np.isfinite(expected)) and expected[..., :3].max() > 0
-    for weights in ("texture", "ssbo"):
-        deferred = SceneRenderer(ctx, model, render_path="deferred", deferred_weights=weights)
+    for weights in ("texture", "ssbo", "baked"):
+        deferred = SceneRenderer(ctx, model, weights_path="baked" if weights == "baked" else "texture",
+                                 render_path="deferred", deferred_weights=weights)
         try:
             assert deferred.render_path == "deferred"
             actual = deferred.render_rgba(mesh, camera, light, (24, 18), 10.0, 1.5)

@@ -1,7 +1,9 @@
 """The funnel MLP as GLSL with the model's weights baked in as literals: a faster stand-in for mlp.glsl.
 
 :func:`baked_mlp_source` writes ``vec3 mlp_evaluate()`` with the same signature and meaning as
-``shaders/mlp.glsl`` — inputs: the encoding (eq. 6) of the key set by ``encoding_set_key``, the hidden activation after
+``shaders/mlp.glsl`` — inputs: a feature-grid model's grid features (featuregrid.glsl, which the including
+shader includes before mlp.glsl: a generated source includes nothing), then the encoding (eq. 6) of the key set
+by ``encoding_set_key``, the hidden activation after
 every layer but the last, the output activation after the last, returns the range-transformed XYZ
 (eq. 7 domain) — but declares no uniforms and reads no texture: every 4×4 weight block is a ``mat4``
 literal. It computes the encoding itself, from encoding.glsl's per-frequency functions (the only uniforms
@@ -127,8 +129,17 @@ def baked_mlp_source(model: ModelFile, name: str = "model") -> str:
     # them (output-major): on llvmpipe at 28k MACs this ran 2x faster than input-major with SiLU. No loop
     # and no array: a const mat4[] indexed in a loop over encoded_block(i) took minutes of JIT at 28k MACs.
     ob = out_blocks(0)
-    encoded = baked_encoded_inputs(model)
+    # A feature-grid model's inputs are its grid features first (featuregrid.glsl fetches them into
+    # g_grid_features[level], the first C lanes), then the encoding: its columns follow the grids'.
+    grid_width = model.grid_feature_count
+    channels = int(model.grids[0].shape[-1]) if model.grids else 0
+    encoded = [("", f"g_grid_features[{level}]", [level * channels + c if c < channels else -1 for c in range(4)])
+               for level in range(len(model.grids))]
+    encoded += [(declaration, name, [f + grid_width if f >= 0 else -1 for f in features])
+                for declaration, name, features in baked_encoded_inputs(model)]
     lines.append(f"    // layer 1: {model.weights[0].shape[1]} -> {model.weights[0].shape[0]}")
+    if model.grids:
+        lines.append("    grid_set_key();  // featuregrid.glsl: this key's features of every level")
     lines += [f"    {declaration}" for declaration, _, _ in encoded if declaration]
     for o in range(ob):
         lines.append(f"    vec4 a1_{o} = {_vec4(padded[0][1][4 * o:4 * o + 4])};")
