@@ -432,11 +432,12 @@ class _TorchOps:
             raise GratNetError("--device other than numpy's cpu needs torch: pip install 'gratnet[trainer]'") from error
         self.torch = torch
         self.device = torch.device(device)
-        self.heights = torch.from_numpy(np.ascontiguousarray(heights)).to(self.device)
+        self.heights = torch.from_numpy(np.array(heights, copy=True)).to(self.device)  # a writable copy
         self._bases: dict[tuple[int, int], Any] = {}
 
     def put(self, array: np.ndarray) -> Any:
-        return self.torch.from_numpy(np.ascontiguousarray(array)).to(self.device)
+        writable = array if array.flags.writeable and array.flags.c_contiguous else np.array(array, copy=True)
+        return self.torch.from_numpy(writable).to(self.device)
 
     def put_basis(self, plan: _ChebyshevPlan, j: int) -> Any:
         # The bases do not depend on λ: upload each once (float32, as numpy's cache keeps them).
