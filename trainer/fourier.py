@@ -258,7 +258,8 @@ class FTerm:
             if np.shape(w_slices[index]) != (v.size, u.size):
                 raise GratNetError(f"w array of slice {index} has shape {np.shape(w_slices[index])}, "
                                    f"expected {(v.size, u.size)}")
-        ops = _NumpyOps() if self.device is None else _TorchOps(self.device, self.heights)
+        ops = _NumpyOps() if self.device is None else _TorchOps(self.device)
+        heights = ops.put(self.heights)  # the integration grid's heights where the products run
         result = ops.zeros((len(w_slices), v.size, u.size, 3), complex_=False)
         interpolation = _ChebyshevPlan(
             np.stack([np.asarray(w_slices[i], dtype=np.float64) for i in varying]) if varying else None,
@@ -282,7 +283,7 @@ class FTerm:
 
                 def transform(w: float, kx: Any = kernel_x, ky: Any = kernel_y, k: float = wavenumber) -> Any:
                     # P = Ey · exp(i k w H) · Exᵀ  (eq. 1 as a separable sum)
-                    return (ky @ ops.height_phasor(self.heights, k, w)) @ kx.T
+                    return (ky @ ops.height_phasor(heights, k, w)) @ kx.T
 
                 for index in constant:
                     power = ops.power(transform(float(w_slices[index])))
@@ -425,33 +426,33 @@ class _TorchOps:
 
     is_torch = True
 
-    def __init__(self, device: str, heights: np.ndarray) -> None:
+    def __init__(self, device: str) -> None:
         try:
             import torch
         except ImportError as error:  # torch comes with the trainer extra
             raise GratNetError("--device other than numpy's cpu needs torch: pip install 'gratnet[trainer]'") from error
         self.torch = torch
         self.device = torch.device(device)
-        self.heights = torch.from_numpy(np.array(heights, copy=True)).to(self.device)  # a writable copy
-        self._bases: dict[tuple[int, int], Any] = {}
+        self._bases: dict[int, Any] = {}
 
     def put(self, array: np.ndarray) -> Any:
         writable = array if array.flags.writeable and array.flags.c_contiguous else np.array(array, copy=True)
         return self.torch.from_numpy(writable).to(self.device)
 
     def put_basis(self, plan: _ChebyshevPlan, j: int) -> Any:
-        # The bases do not depend on λ: upload each once (float32, as numpy's cache keeps them).
-        key = (id(plan), j)
-        if key not in self._bases:
-            self._bases[key] = self.put(np.asarray(plan.basis(j), dtype=np.float32))
-        return self._bases[key]
+        # The bases do not depend on λ: upload each once (float32, as numpy's cache keeps them); one plan per
+        # xyz_grid call, as one ops.
+        if j not in self._bases:
+            self._bases[j] = self.put(np.asarray(plan.basis(j), dtype=np.float32))
+        return self._bases[j]
 
     def zeros(self, shape: tuple[int, ...], complex_: bool) -> Any:
         dtype = self.torch.complex128 if complex_ else self.torch.float64
         return self.torch.zeros(shape, dtype=dtype, device=self.device)
 
-    def height_phasor(self, heights: np.ndarray, wavenumber: float, w: float) -> Any:
-        phase = float(np.float32(wavenumber * w)) * self.heights  # float32, as numpy's
+    def height_phasor(self, heights: Any, wavenumber: float, w: float) -> Any:
+        """exp(i k w h) of ``heights`` (a float32 tensor from :meth:`put`), complex64."""
+        phase = float(np.float32(wavenumber * w)) * heights  # float32, as numpy's
         return self.torch.polar(self.torch.ones_like(phase), phase)
 
     def power(self, amplitude: Any) -> Any:
