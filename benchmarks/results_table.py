@@ -176,16 +176,23 @@ def _ratio(rows: list[dict], reference: float | None) -> str:
     return f"{worst:.2f}× ({'yes' if worst <= 1.5 else 'no'})"
 
 
-def _paper_oracle(folder: Path, normal: dict) -> float | None:
+def _trained_volume(folder: Path) -> dict:
+    """The model's record of the volume it was trained on (resolution, slices, …), from the model file's header
+    alone (an .npz member is read on access: the grids stay on disk)."""
+    import numpy as np
+
+    with np.load(folder / "model.npz") as archive:
+        return json.loads(str(archive["metadata_json"]))["metadata"].get("volume", {})
+
+
+def _paper_oracle(folder: Path, normal: dict, slices: int) -> float | None:
     """The oracle's FLIP at (0°, 0°) for the volume the model was trained on: from its own evaluation, or (the
-    GPU-only 21/41-slice volumes) from the committed oracle tables."""
+    41-slice pits volume, scored on the GPU machine) from the committed oracle table."""
     if normal.get("oracle_flip") is not None:
         return float(normal["oracle_flip"])
-    history = json.loads((folder / "history.json").read_text()) if (folder / "history.json").exists() else {}
-    slices = history.get("grid_shapes") and json.loads((folder / "model.config.json").read_text())["volume"]
-    if folder.name == "paper-pits" and PITS_SLICES_JSON.exists() and isinstance(slices, str):
+    if folder.name == "paper-pits" and PITS_SLICES_JSON.exists():
         for row in json.loads(PITS_SLICES_JSON.read_text()):
-            if slices.endswith(str(row["volume"]).removeprefix("paper-pits")):
+            if row["slices"] == slices:
                 return float(row["brdf_slices"][0]["flip"])
     return None
 
@@ -212,7 +219,7 @@ def paper_datasets_table(assets: Path) -> list[str]:
         grid = history.get("grid_bytes")
         volume_bytes = history.get("volume_bytes")
         shapes = history.get("grid_shapes") or []
-        slices_count = round(volume_bytes / (1001 * 1001 * 3 * 4)) if volume_bytes else "?"
+        trained_on = _trained_volume(folder)
         config = json.loads((folder / "model.config.json").read_text())["train"]
         network = (f"grid {len(shapes)}×{shapes[-1][3]}@{shapes[-1][1]}², t {shapes[-1][0]}, "
                    f"{config.get('grid_interpolation', 'linear')}; MLP {'-'.join(map(str, history['layer_sizes']))}"
@@ -220,9 +227,10 @@ def paper_datasets_table(assets: Path) -> list[str]:
         paper = PAPER_FLIP_PAPER_DATASETS.get(folder.name)
         flip = normal.get("flip")
         met = "—" if paper is None or flip is None else ("**yes**" if flip <= paper else "no")
-        oracle = _paper_oracle(folder, normal)
+        oracle = _paper_oracle(folder, normal, trained_on.get("slices"))
         lines.append(
-            f"| {folder.name} | 1001² × {slices_count} | {network} | {history['parameters']} | "
+            f"| {folder.name} | {trained_on.get('resolution', '?')}² × {trained_on.get('slices', '?')} | {network} | "
+            f"{history['parameters']} | "
             f"{'—' if not grid else f'{grid / 1e6:.2f} ({100 * grid / volume_bytes:.1f} %)'} | "
             f"{len(history.get('epochs', []))} ({history.get('device', '?')}) | {_number(flip)} | {_number(oracle)} | "
             f"{_number(paper)} | {met} | {_ratio(others, flip)} | {_ratio(views, flip)} | "
