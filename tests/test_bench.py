@@ -60,15 +60,8 @@ def _tiny_model(path: Path) -> Path:
     return path
 
 
-def test_bench_end_to_end_writes_table_plot_and_config(tmp_path, capsys):
+def test_bench_end_to_end_writes_table_plot_and_config(tmp_path, capsys, ctx):  # ctx: skipped without GL
     pytest.importorskip("torch")
-    from gratnet.errors import GratNetError
-    from viewer.context import create_headless_context
-
-    try:
-        create_headless_context().release()
-    except GratNetError as error:
-        pytest.skip(f"no headless OpenGL: {error}")
     model = _tiny_model(tmp_path / "tiny" / "model.npz")
     out = tmp_path / "bench"
     code = main(["bench", str(model), "--out", str(out), "--sizes", "16,24", "--repeats", "1", "--no-scenes",
@@ -116,15 +109,9 @@ def test_paper_size_comparison_names_the_cheapest_model_at_or_below_the_paper_si
 # Mesh scenes (bench.scenes)
 
 
-def test_scene_bench_times_every_combination_and_records_the_device(tmp_path):
+def test_scene_bench_times_every_combination_and_records_the_device(tmp_path, ctx):  # ctx: skipped without GL
     from bench.scenes import available_render_paths
-    from gratnet.errors import GratNetError
-    from viewer.context import create_headless_context
 
-    try:
-        create_headless_context().release()
-    except GratNetError as error:
-        pytest.skip(f"no headless OpenGL: {error}")
     model = _tiny_model(tmp_path / "tiny" / "model.npz")
     out = tmp_path / "bench"
     code = main(["bench", str(model), "--out", str(out), "--no-slices", "--scene-sizes", "24x16,12x12",

@@ -230,13 +230,18 @@ def _shows_diffraction(display_srgb8: np.ndarray) -> tuple[bool, str]:
     """
     pixels = display_srgb8.reshape(-1, 3).astype(int)
     black = float(np.mean(~np.any(pixels > 0, axis=1)))
+    coloured, sextants = _dispersion(display_srgb8)
+    saturated = float(np.mean(np.any(pixels >= 255, axis=1)))
+    ok = black < BLACK_FRACTION_WARNING and coloured >= 10 and sextants >= 3 and saturated <= 0.05
+    return ok, f"black {black:.3f}, {coloured} coloured pixels in {sextants} hue sextants, saturated {saturated:.3f}"
+
+
+def _dispersion(display_srgb8: np.ndarray) -> tuple[int, int]:
+    """(pixels with chroma (max − min channel) ≥ 32/255 that are not white, hue sextants among them)."""
+    pixels = display_srgb8.reshape(-1, 3).astype(int)
     chroma = pixels.max(axis=1) - pixels.min(axis=1)
     coloured = pixels[(chroma >= 32) & ~np.all(pixels >= 250, axis=1)]
-    sextants = {int(colorsys.rgb_to_hsv(*(p / 255.0))[0] * 6) % 6 for p in coloured}
-    saturated = float(np.mean(np.any(pixels >= 255, axis=1)))
-    ok = black < BLACK_FRACTION_WARNING and len(coloured) >= 10 and len(sextants) >= 3 and saturated <= 0.05
-    return ok, (f"black {black:.3f}, {len(coloured)} coloured pixels in {len(sextants)} hue sextants, "
-                f"saturated {saturated:.3f}")
+    return len(coloured), len({int(colorsys.rgb_to_hsv(*(p / 255.0))[0] * 6) % 6 for p in coloured})
 
 
 #: (material, mesh) pairs whose default picture is a thin order ring on black, by their physics: the paper's
@@ -245,16 +250,6 @@ def _shows_diffraction(display_srgb8: np.ndarray) -> tuple[bool, str]:
 #: MAX_VISIBLE_RATIO × the material's); the 20 µm `blazed` tile passes only by its repetition's faint
 #: speckle. For these the ring must still show the dispersion (coloured pixels in ≥ 3 hue sextants).
 THIN_RING = {("paper-blazed", "sphere")}
-
-
-def _coloured_sextants(display_srgb8: np.ndarray) -> int:
-    """Hue sextants among at least 10 chromatic, non-white pixels (0 when there are fewer)."""
-    pixels = display_srgb8.reshape(-1, 3).astype(int)
-    chroma = pixels.max(axis=1) - pixels.min(axis=1)
-    coloured = pixels[(chroma >= 32) & ~np.all(pixels >= 250, axis=1)]
-    if len(coloured) < 10:
-        return 0
-    return len({int(colorsys.rgb_to_hsv(*(p / 255.0))[0] * 6) % 6 for p in coloured})
 
 
 @pytest.mark.parametrize("material", MATERIALS)
@@ -275,7 +270,8 @@ def test_every_shipped_material_shows_its_diffraction_on_every_mesh_at_the_defau
                                                                  d.exposure, 1.5))
             ok, summary = _shows_diffraction(pixels)
             if (material, mesh) in THIN_RING:
-                ok = _coloured_sextants(pixels) >= 3
+                coloured, sextants = _dispersion(pixels)
+                ok = coloured >= 10 and sextants >= 3
             if not ok:
                 failures.append(f"{material} on {mesh} ({d.light_text}, exposure {d.exposure:g}): {summary}")
         if material == "cd":  # the criterion can fail: the old fixed defaults of `gratnet render` show nothing
