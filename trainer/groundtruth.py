@@ -57,16 +57,13 @@ class ComputeConfig:
         if self.device == "cpu":
             return None
         try:
-            import torch
+            from trainer.train import pick_device  # the trainer's --device rule: auto is CUDA when present
         except ImportError:
             if self.device == "auto":
                 return None
             raise GratNetError("--device cuda needs torch: pip install 'gratnet[trainer]'") from None
-        if not torch.cuda.is_available():
-            if self.device == "auto":
-                return None
-            raise GratNetError(f"--device {self.device} was asked for, but torch sees no CUDA device")
-        return "cuda" if self.device == "auto" else self.device
+        device = pick_device(self.device)
+        return None if device.type == "cpu" else str(device)
 
 
 def volume_key_vectors(config: VolumeConfig) -> tuple[np.ndarray, np.ndarray, list[float | np.ndarray]]:

@@ -203,10 +203,10 @@ def run_evaluate(arguments: argparse.Namespace) -> int:
 
     evaluate_config = dataclasses.replace(from_arguments(EvaluateConfig, arguments), progress=not arguments.quiet)
     _check_before_work(arguments, evaluating=True)
-    slices = _slice_list(arguments.volume_slices, "--volume-slices") if arguments.volume and arguments.volume_slices \
-        else []
+    explicit = bool(arguments.volume) and arguments.volume_slices is not None
+    slices = _slice_list(arguments.volume_slices, "--volume-slices") if explicit else []
     model = load_model(arguments.model)
-    if arguments.volume and arguments.volume_slices is None:
+    if arguments.volume and not explicit:
         slices = held_out_slices(model.metadata)
     volume = read_volume(arguments.volume) if arguments.volume else None
     metadata = volume.metadata if volume is not None else model.metadata.get("volume", {})
