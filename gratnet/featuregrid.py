@@ -37,18 +37,28 @@ def check_interpolation(interpolation: str) -> str:
     return interpolation
 
 
+def _cell(xp: Any, c: Any, nodes: int) -> tuple[Any, Any]:
+    """(lower node i₀, fraction f) of coordinates ``c`` on an axis of ``nodes`` nodes (eq. 6g): p = (clamp(c, −1, 1)
+    + 1)·(N − 1)/2, i₀ = clamp(⌊p⌋, 0, N − 2) (the last cell includes its far end), f = p − i₀."""
+    position = (xp.clip(c, -1.0, 1.0) + 1.0) * (0.5 * (nodes - 1))
+    lower = xp.clip(xp.floor(position), 0.0, float(nodes - 2))
+    return lower, position - lower
+
+
+def _smoothstep(fraction: Any) -> Any:
+    return fraction * fraction * (3.0 - 2.0 * fraction)
+
+
 def smoothstep_coordinates(coordinates: Any, nodes_uvt: Sequence[int]) -> Any:
     """Network coordinates ``(…, 3)`` moved within their grid cell so that *linear* interpolation at the result
     is smoothstep interpolation at the input (eq. 6g with f → f²(3 − 2f) per axis), for a level of
-    ``nodes_uvt = (R_u, R_v, T)`` nodes. Clamped to [−1, 1] like the grid lookup itself."""
+    ``nodes_uvt = (R_u, R_v, T)`` nodes: for lookups that only interpolate linearly (the trainer's
+    ``grid_sample``). Clamped to [−1, 1] like the grid lookup itself."""
     xp = array_api_compat.array_namespace(coordinates)
     axes = []
     for axis, nodes in enumerate(nodes_uvt):
-        half = 0.5 * (int(nodes) - 1)
-        position = (xp.clip(coordinates[..., axis], -1.0, 1.0) + 1.0) * half
-        lower = xp.clip(xp.floor(position), 0.0, float(int(nodes) - 2))
-        fraction = position - lower
-        axes.append((lower + fraction * fraction * (3.0 - 2.0 * fraction)) / half - 1.0)
+        lower, fraction = _cell(xp, coordinates[..., axis], int(nodes))
+        axes.append((lower + _smoothstep(fraction)) / (0.5 * (int(nodes) - 1)) - 1.0)
     return xp.stack(axes, axis=-1)
 
 
@@ -71,19 +81,16 @@ def grid_features(grids: Sequence[Any], coordinates: Any, interpolation: str = "
     xp = array_api_compat.array_namespace(coordinates)
     check_interpolation(interpolation)
     batch = tuple(coordinates.shape[:-1])
-    flat_points = xp.reshape(coordinates, (-1, 3))
+    points = xp.reshape(coordinates, (-1, 3))
     parts = []
     for grid in grids:
         t_nodes, v_nodes, u_nodes, channels = (int(size) for size in grid.shape)
-        points = (smoothstep_coordinates(flat_points, (u_nodes, v_nodes, t_nodes)) if interpolation == "smoothstep"
-                  else flat_points)
         flat = xp.reshape(xp.astype(grid, coordinates.dtype), (-1, channels))
         index, fraction = [], []
         for axis, nodes in enumerate((u_nodes, v_nodes, t_nodes)):
-            position = (xp.clip(points[:, axis], -1.0, 1.0) + 1.0) * (0.5 * (nodes - 1))
-            lower = xp.clip(xp.floor(position), 0.0, float(nodes - 2))  # the last cell includes its far end
+            lower, f = _cell(xp, points[:, axis], nodes)
             index.append(xp.astype(lower, xp.int64))
-            fraction.append(position - lower)
+            fraction.append(_smoothstep(f) if interpolation == "smoothstep" else f)
         (iu, iv, it), (fu, fv, ft) = index, fraction
         base = (it * v_nodes + iv) * u_nodes + iu
         corners, weights = [], []
