@@ -195,7 +195,11 @@ class GridNetwork(nn.Module):
         return model_file
 
 
-def log_cosh_loss(prediction: torch.Tensor, target: torch.Tensor) -> torch.Tensor:
-    """Mean log(cosh(prediction − target)), computed stably as |d| + softplus(−2|d|) − log 2."""
+def log_cosh_loss(prediction: torch.Tensor, target: torch.Tensor, weight: torch.Tensor | None = None) -> torch.Tensor:
+    """Mean log(cosh(prediction − target)), computed stably as |d| + softplus(−2|d|) − log 2; with ``weight``
+    (one per sample, shape (N,)) the weighted mean Σ w·l / Σ w over the samples."""
     difference = (prediction - target).abs()
-    return (difference + nn.functional.softplus(-2.0 * difference) - math.log(2.0)).mean()
+    loss = difference + nn.functional.softplus(-2.0 * difference) - math.log(2.0)
+    if weight is None:
+        return loss.mean()
+    return (loss.mean(dim=-1) * weight).sum() / weight.sum()

@@ -137,12 +137,36 @@ def make_scheduler(optimizer: torch.optim.Optimizer, config: TrainConfig, steps:
     )
 
 
+class VisibleWeight:
+    """The display-weighted loss's per-sample weight: ``weight`` where the target's CIE Y lies in the band,
+    else 1. The band is compared in the range-transformed domain (the transform is monotone), so the weight
+    costs two comparisons on the device."""
+
+    def __init__(self, band: tuple[float, float], weight: float, range_spec: RangeSpec) -> None:
+        self.low, self.high = (float(range_forward(np.full((1, 3), value), range_spec)[0, 1]) for value in band)
+        self.weight = weight
+
+    def __call__(self, targets: torch.Tensor) -> torch.Tensor:
+        y = targets[:, 1]  # the range-transformed CIE Y
+        inside = (y >= self.low) & (y <= self.high)
+        return torch.where(inside, self.weight, 1.0).to(targets.dtype)
+
+
+def visible_weight(config: TrainConfig) -> VisibleWeight | None:
+    """The config's display weighting, or None when it is off (no band, or weight 1)."""
+    band = config.visible_band()
+    if band is None or config.loss_visible_weight == 1.0:
+        return None
+    return VisibleWeight(band, config.loss_visible_weight, config.range_spec())
+
+
 def train_step(model: FunnelMLP | GridNetwork, optimizer: torch.optim.Optimizer,
                scheduler: torch.optim.lr_scheduler.LRScheduler, coordinates: torch.Tensor, targets: torch.Tensor,
-               encoding: EncodingSpec) -> torch.Tensor:
+               encoding: EncodingSpec, weighting: VisibleWeight | None = None) -> torch.Tensor:
     """One optimisation step on a batch already on the model's device; returns the loss, detached (reading
     it is the caller's choice: on a GPU that is a host sync)."""
-    loss = log_cosh_loss(_raw_outputs(model, coordinates, encoding), targets)
+    weight = None if weighting is None else weighting(targets)
+    loss = log_cosh_loss(_raw_outputs(model, coordinates, encoding), targets, weight)
     optimizer.zero_grad(set_to_none=True)
     loss.backward()
     optimizer.step()
@@ -188,6 +212,7 @@ def train(
     device = pick_device(config.device)
     torch.manual_seed(config.seed)
     encoding, range_spec = config.encoding_for(volume), config.range_spec()
+    weighting = visible_weight(config)
     train_samples, test_samples = split_samples(volume, config)
     model = build_model(config, encoding).to(device)
     optimizer = make_optimizer(model, config)
@@ -228,7 +253,7 @@ def train(
         for step in bar:
             batch = order[step * config.batch_size : (step + 1) * config.batch_size]
             value = train_step(model, optimizer, scheduler, coordinates_all[batch], targets_all[batch],
-                               encoding).double()
+                               encoding, weighting).double()
             running = 0.98 * running + 0.02 * value if step else value
             if progress and step % 20 == 0:  # the only host sync of the loop, and only with a progress bar
                 bar.set_postfix(loss=f"{float(running):.3e}", lr=f"{scheduler.get_last_lr()[0]:.2e}")

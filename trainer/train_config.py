@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import dataclasses
+import math
 from typing import Literal
 
 from gratnet.config import config_field
@@ -46,6 +47,12 @@ class TrainConfig:
         "linear", "grid: between nodes, linear (trilinear, C⁰) or smoothstep (C¹: f → f²(3 − 2f) per axis; the "
         "same cost)"
     )
+    loss_visible_y: str = config_field(
+        "", "display-weighted loss: 'LOW,HIGH', a band of CIE Y (the volume's units, 1 = a perfect mirror's peak) "
+        "whose samples weigh --loss-visible-weight in the LogCosh mean; e.g. 6e-8,5e-4 is what sRGB shows at "
+        "2000-5000 RU (empty: every sample weighs 1)"
+    )
+    loss_visible_weight: float = config_field(1.0, "weight of the samples in --loss-visible-y's band (1: off)")
     epochs: int = config_field(6, "passes over the training samples")
     batch_size: int = config_field(32768, "samples per optimisation step")
     learning_rate: float = config_field(3e-3, "Adam's initial learning rate")
@@ -80,6 +87,9 @@ class TrainConfig:
             check_interpolation(self.grid_interpolation)
             if self.grid_dtype not in ("float16", "float32"):
                 raise GratNetError(f"--grid-dtype must be float16 or float32, got {self.grid_dtype!r}")
+        if not (math.isfinite(self.loss_visible_weight) and self.loss_visible_weight > 0):
+            raise GratNetError(f"--loss-visible-weight must be a positive number, got {self.loss_visible_weight}")
+        self.visible_band()  # checks the band
         if self.split not in ("slices", "random", "all"):
             raise GratNetError(f"--split must be slices, random or all, got {self.split!r}")
 
@@ -95,6 +105,20 @@ class TrainConfig:
 
         return [(t, r, r, self.grid_features)
                 for r, t in level_resolutions(self.grid_levels, self.grid_resolution, self.grid_t_resolution)]
+
+    def visible_band(self) -> tuple[float, float] | None:
+        """(LOW, HIGH) CIE Y of the display-weighted loss, or None when every sample weighs the same."""
+        if not self.loss_visible_y.strip():
+            return None
+        try:
+            low, high = (float(part) for part in self.loss_visible_y.split(","))
+        except ValueError:
+            raise GratNetError(
+                f"--loss-visible-y must be 'LOW,HIGH' (two numbers), got {self.loss_visible_y!r}"
+            ) from None
+        if not (0 < low < high and math.isfinite(high)):
+            raise GratNetError(f"--loss-visible-y needs 0 < LOW < HIGH, got {self.loss_visible_y!r}")
+        return low, high
 
     def range_spec(self) -> RangeSpec:
         """The range transform of the targets."""
