@@ -163,8 +163,9 @@ PAPER_FLIP_PAPER_DATASETS = {"paper-blazed": 0.0021, "paper-cd": 0.0178, "paper-
 ORACLE_JSON = Path("docs/data/oracle_paper.json")
 
 
-#: benchmarks/oracle_table.py --device cuda on paper-pits volumes of 11, 21 and 41 w-slices (computed on a GPU).
-PITS_SLICES_JSON = Path("docs/data/oracle_pits_slices.json")
+#: benchmarks/oracle_table.py --device cuda on volumes of more w-slices than the CPU here affords (computed on a
+#: GPU): docs/data/oracle_NAME_slices.json for the preset paper-NAME (pits: 11, 21, 41; scratches: 21, 41).
+SLICES_JSON = "docs/data/oracle_{name}_slices.json"
 
 
 def _ratio(rows: list[dict], reference: float | None) -> str:
@@ -186,12 +187,14 @@ def _trained_volume(folder: Path) -> dict:
 
 
 def _paper_oracle(folder: Path, normal: dict, slices: int) -> float | None:
-    """The oracle's FLIP at (0°, 0°) for the volume the model was trained on: from its own evaluation, or (the
-    41-slice pits volume, scored on the GPU machine) from the committed oracle table."""
+    """The oracle's FLIP at (0°, 0°) for the volume the model was trained on: from its own evaluation, or (a
+    volume scored on the GPU machine, as pits' 41 and scratches' 21 slices) from the committed oracle table of
+    the same slice count."""
     if normal.get("oracle_flip") is not None:
         return float(normal["oracle_flip"])
-    if folder.name == "paper-pits" and PITS_SLICES_JSON.exists():
-        for row in json.loads(PITS_SLICES_JSON.read_text()):
+    table = Path(SLICES_JSON.format(name=folder.name.removeprefix("paper-")))
+    if table.exists():
+        for row in json.loads(table.read_text()):
             if row["slices"] == slices:
                 return float(row["brdf_slices"][0]["flip"])
     return None
@@ -323,12 +326,14 @@ def main() -> None:
         "",
         "The paper's seven datasets (presets below), each shipped as `assets/paper-NAME`: ground truth on an H100",
         "(`gratnet groundtruth paper-NAME --sampling simple-max --device cuda [--slices S]`, 9–29 s per volume), a",
-        "feature-grid network trained there (`train_command.json` beside each model; 40 epochs, 16 for pits),",
+        "feature-grid network trained there (`train_command.json` beside each model: its epochs, batch and",
+        "flags),",
         "evaluated here on the CPU (`gratnet evaluate MODEL --heightfield paper-NAME --views",
         "'45,60,5000;15,200,3000;60,315,5000' [--volume VOLUME]`): the paper's five BRDF slices at 256² and three",
         "further views chosen before any result was seen and never trained or tuned on. \"oracle\": the",
-        "interpolation oracle of the volume the model was trained on (paper-pits' 41-slice volume was scored on",
-        "the GPU machine: docs/data/oracle_pits_slices.json; paper-corner-cubes' 21-slice volume was computed",
+        "interpolation oracle of the volume the model was trained on (paper-pits' 41-slice and paper-scratches'",
+        "21-slice volumes were scored on the GPU machine: docs/data/oracle_{pits,scratches}_slices.json;",
+        "paper-corner-cubes' 21-slice volume was computed",
         "here on the CPU, 1,093 s). Targets (issue 15): beat the paper at (0°, 0°) with ≤ 60k parameters",
         "(≤ 130k for corner cubes and pits), a grid ≤ 1/20 of the volume, every other slice within 1.5×.",
         "`bash scripts/reproduce_paper_models.sh [NAME …]` rebuilds them from those recorded commands.",

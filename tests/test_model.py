@@ -89,3 +89,87 @@ def test_resume_continues_from_the_checkpoint(tiny_volume, tmp_path):
     with pytest.raises(GratNetError, match="different configuration"):
         train(volume, TrainConfig(preset="tiny", epochs=3, batch_size=256, test_slices="2"), tmp_path,
               resume=True, progress=False)
+
+
+def test_weighted_log_cosh_is_the_weighted_mean_of_the_per_sample_losses():
+    prediction = torch.tensor([[0.1, 0.2, 0.3], [0.5, 0.5, 0.5], [0.9, 0.0, 0.4]])
+    target = torch.zeros(3, 3)
+    per_sample = torch.log(torch.cosh(prediction.double())).mean(dim=1)
+    weight = torch.tensor([1.0, 4.0, 1.0])
+    expected = float((per_sample * weight.double()).sum() / weight.sum())
+    np.testing.assert_allclose(log_cosh_loss(prediction, target, weight).item(), expected, rtol=1e-5)
+    # Equal weights, whatever their value, give the plain mean.
+    np.testing.assert_allclose(log_cosh_loss(prediction, target, torch.full((3,), 7.0)).item(),
+                               log_cosh_loss(prediction, target).item(), rtol=1e-6)
+
+
+def test_visible_weight_marks_exactly_the_samples_whose_y_is_in_the_band():
+    from gratnet.encoding import range_forward
+    from trainer.train import visible_weight
+
+    config = TrainConfig(loss_visible_y="1e-7,1e-3", loss_visible_weight=4.0, range_power=4.0)
+    weighting = visible_weight(config)
+    assert weighting is not None
+    y = np.array([1e-12, 0.5e-7, 2e-7, 1e-5, 0.9e-3, 2e-3, 0.5])
+    xyz = np.stack([np.full_like(y, 0.3), y, np.full_like(y, 1e-20)], axis=1)  # only Y decides
+    weights = weighting(torch.from_numpy(range_forward(xyz, config.range_spec())))
+    assert weights.tolist() == [1.0, 1.0, 4.0, 4.0, 4.0, 1.0, 1.0]
+    # Off: no band, or a weight of 1.
+    assert visible_weight(TrainConfig()) is None
+    assert visible_weight(TrainConfig(loss_visible_y="1e-7,1e-3")) is None
+
+
+@pytest.mark.parametrize("band, weight, message", [
+    ("1e-3,1e-7", 4.0, "0 < LOW < HIGH"),
+    ("0,1e-3", 4.0, "0 < LOW < HIGH"),
+    ("dark,bright", 4.0, "two numbers"),
+    ("1e-7", 4.0, "two numbers"),
+    ("1e-300,1e-3", 4.0, "inside what the range transform resolves"),
+    ("1e-7,2.0", 4.0, "inside what the range transform resolves"),
+    ("1e-7,1e-3", 0.0, "--loss-visible-weight"),
+    ("1e-7,1e-3", float("nan"), "--loss-visible-weight"),
+])
+def test_bad_visible_band_is_refused_in_one_line(band, weight, message):
+    from gratnet.errors import GratNetError
+
+    with pytest.raises(GratNetError, match=message):
+        TrainConfig(loss_visible_y=band, loss_visible_weight=weight)
+
+
+def test_display_weighted_training_trains_on_the_weighted_loss(tiny_volume, tmp_path):
+    """The weighting reaches the optimiser: one train_step's loss is the weighted mean of the per-sample losses
+    (an empty band gives the plain mean), and training with it ends at other weights than without."""
+    from gratnet.encoding import encode
+    from trainer.train import build_model, make_optimizer, make_scheduler, train_step, visible_weight
+
+    volume, _ = tiny_volume
+    base = dict(preset="tiny", epochs=1, batch_size=256, test_slices="2", seed=3, device="cpu")
+    samples, _ = split_samples(volume, TrainConfig(**base))
+    coordinates = torch.from_numpy(samples.coordinates[:512])
+    targets = torch.from_numpy(samples.targets[:512])
+
+    def step_loss(config: TrainConfig) -> float:
+        torch.manual_seed(0)
+        encoding = config.encoding_for(volume)
+        model = build_model(config, encoding)
+        optimizer = make_optimizer(model, config)
+        with torch.no_grad():
+            per_sample = torch.log(torch.cosh(model(encode(coordinates, encoding)).double() - targets.double()))
+        weighting = visible_weight(config)
+        weight = torch.ones(len(targets)) if weighting is None else weighting(targets)
+        expected = float((per_sample.mean(dim=1) * weight.double()).sum() / weight.double().sum())
+        loss = float(train_step(model, optimizer, make_scheduler(optimizer, config, 1, False), coordinates,
+                                targets, encoding, weighting))
+        np.testing.assert_allclose(loss, expected, rtol=1e-5)
+        return loss
+
+    band = dict(loss_visible_y="1e-9,1e-2", loss_visible_weight=9.0)
+    assert visible_weight(TrainConfig(**base, **band))(targets).eq(9.0).float().mean() > 0.1  # the band holds samples
+    plain = step_loss(TrainConfig(**base))
+    np.testing.assert_allclose(step_loss(TrainConfig(**base, loss_visible_y="0.5,0.6", loss_visible_weight=9.0)),
+                               plain, rtol=1e-6)  # no sample of the tiny grating is that bright
+    assert abs(step_loss(TrainConfig(**base, **band)) - plain) > 1e-3 * plain
+
+    first = train(volume, TrainConfig(**base), tmp_path / "plain", progress=False)[1]
+    second = train(volume, TrainConfig(**base, **band), tmp_path / "weighted", progress=False)[1]
+    assert max(float(np.abs(a - b).max()) for a, b in zip(first.weights, second.weights, strict=True)) > 1e-4

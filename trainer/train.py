@@ -138,12 +138,11 @@ def make_scheduler(optimizer: torch.optim.Optimizer, config: TrainConfig, steps:
 
 
 class VisibleWeight:
-    """The display-weighted loss's per-sample weight: ``weight`` where the target's CIE Y lies in the band,
-    else 1. The band is compared in the range-transformed domain (the transform is monotone), so the weight
-    costs two comparisons on the device."""
+    """The display-weighted loss's per-sample weight: ``weight`` where the target's range-transformed CIE Y
+    lies in ``band`` (TrainConfig.visible_band), else 1: two comparisons on the device."""
 
-    def __init__(self, band: tuple[float, float], weight: float, range_spec: RangeSpec) -> None:
-        self.low, self.high = (float(range_forward(np.full((1, 3), value), range_spec)[0, 1]) for value in band)
+    def __init__(self, band: tuple[float, float], weight: float) -> None:
+        self.low, self.high = band
         self.weight = weight
 
     def __call__(self, targets: torch.Tensor) -> torch.Tensor:
@@ -157,7 +156,7 @@ def visible_weight(config: TrainConfig) -> VisibleWeight | None:
     band = config.visible_band()
     if band is None or config.loss_visible_weight == 1.0:
         return None
-    return VisibleWeight(band, config.loss_visible_weight, config.range_spec())
+    return VisibleWeight(band, config.loss_visible_weight)
 
 
 def train_step(model: FunnelMLP | GridNetwork, optimizer: torch.optim.Optimizer,

@@ -6,8 +6,10 @@ import dataclasses
 import math
 from typing import Literal
 
+import numpy as np
+
 from gratnet.config import config_field
-from gratnet.encoding import EncodingSpec, RangeSpec
+from gratnet.encoding import EncodingSpec, RangeSpec, range_forward
 from gratnet.errors import GratNetError
 from gratnet.volume import Volume
 
@@ -107,7 +109,8 @@ class TrainConfig:
                 for r, t in level_resolutions(self.grid_levels, self.grid_resolution, self.grid_t_resolution)]
 
     def visible_band(self) -> tuple[float, float] | None:
-        """(LOW, HIGH) CIE Y of the display-weighted loss, or None when every sample weighs the same."""
+        """The display-weighted loss's band as range-transformed targets (y_low, y_high) of CIE Y, or None when
+        every sample weighs the same. The transform is monotone, so a target is in the band iff its Y is."""
         if not self.loss_visible_y.strip():
             return None
         try:
@@ -118,7 +121,13 @@ class TrainConfig:
             ) from None
         if not (0 < low < high and math.isfinite(high)):
             raise GratNetError(f"--loss-visible-y needs 0 < LOW < HIGH, got {self.loss_visible_y!r}")
-        return low, high
+        y_low, y_high = (float(range_forward(np.full((1, 3), value), self.range_spec())[0, 1]) for value in (low, high))
+        # Beyond the transform's floor (2^-B) or ceiling (the white's Y) the band's edges collapse onto the
+        # clipped ends, where they would select every sample clipped there.
+        if not (0 < y_low < y_high and (self.range_kind == "log1p" or y_high < 1)):
+            raise GratNetError(f"--loss-visible-y {self.loss_visible_y!r} must lie inside what the range "
+                               f"transform resolves: from 2^-{self.range_bits:g} to 1 (a perfect mirror's Y)")
+        return y_low, y_high
 
     def range_spec(self) -> RangeSpec:
         """The range transform of the targets."""
