@@ -204,7 +204,7 @@ def paper_datasets_table(assets: Path) -> list[str]:
     """The shipped models of the paper's datasets (assets/paper-*) against the paper, like for like."""
     lines = [
         "| dataset | volume (u*, v* × w) | network | parameters | grid (MB; share of the volume) | epochs "
-        "(device) | FLIP (0°, 0°) | oracle | paper | beats paper | other 4 slices: worst / (0°, 0°) "
+        "× batch (device) | FLIP (0°, 0°) | oracle | paper | beats paper | other 4 slices: worst / (0°, 0°) "
         "| further 3 views: worst / (0°, 0°) | PSNR (dB) |",
         "|---|---|---|---|---|---|---|---|---|---|---|---|---|",
     ]
@@ -235,7 +235,8 @@ def paper_datasets_table(assets: Path) -> list[str]:
             f"| {folder.name} | {trained_on.get('resolution', '?')}² × {trained_on.get('slices', '?')} | {network} | "
             f"{history['parameters']} | "
             f"{'—' if not grid else f'{grid / 1e6:.2f} ({100 * grid / volume_bytes:.1f} %)'} | "
-            f"{len(history.get('epochs', []))} ({history.get('device', '?')}) | {_number(flip)} | {_number(oracle)} | "
+            f"{len(history.get('epochs', []))} × {config.get('batch_size', '?')} ({history.get('device', '?')}) | "
+            f"{_number(flip)} | {_number(oracle)} | "
             f"{_number(paper)} | {met} | {_ratio(others, flip)} | {_ratio(views, flip)} | "
             f"{_number(normal.get('psnr_xyz'), 3)} |"
         )
@@ -325,17 +326,16 @@ def main() -> None:
         "## The paper's datasets against the paper (like for like)",
         "",
         "The paper's seven datasets (presets below), each shipped as `assets/paper-NAME`: ground truth on an H100",
-        "(`gratnet groundtruth paper-NAME --sampling simple-max --device cuda [--slices S]`, 9–29 s per volume), a",
-        "feature-grid network trained there (`train_command.json` beside each model: its epochs, batch and",
-        "flags),",
+        "(`gratnet groundtruth paper-NAME --sampling simple-max --device cuda [--slices S]`, 9–48 s per volume), a",
+        "feature-grid network trained there (`train_command.json` beside each model: its epochs, batch and flags),",
         "evaluated here on the CPU (`gratnet evaluate MODEL --heightfield paper-NAME --views",
         "'45,60,5000;15,200,3000;60,315,5000' [--volume VOLUME]`): the paper's five BRDF slices at 256² and three",
         "further views chosen before any result was seen and never trained or tuned on. \"oracle\": the",
         "interpolation oracle of the volume the model was trained on (paper-pits' 41-slice and paper-scratches'",
         "21-slice volumes were scored on the GPU machine: docs/data/oracle_{pits,scratches}_slices.json;",
-        "paper-corner-cubes' 21-slice volume was computed",
-        "here on the CPU, 1,093 s). Targets (issue 15): beat the paper at (0°, 0°) with ≤ 60k parameters",
-        "(≤ 130k for corner cubes and pits), a grid ≤ 1/20 of the volume, every other slice within 1.5×.",
+        "paper-corner-cubes' 21-slice volume was computed here on the CPU, 1,093 s). Targets (issue 15): beat",
+        "the paper at (0°, 0°) with ≤ 60k parameters (≤ 130k for corner cubes and pits), a grid ≤ 1/20 of the",
+        "volume, every other slice within 1.5×.",
         "`bash scripts/reproduce_paper_models.sh [NAME …]` rebuilds them from those recorded commands.",
         "",
         *paper_datasets_table(Path(arguments.assets)),

@@ -172,6 +172,7 @@ def test_reproduce_script_replays_every_shipped_paper_models_recorded_training(t
     import shlex
     import subprocess
 
+    from gratnet.modelfile import load_model
     from tests.conftest import REPO
 
     names = sorted(path.parent.name for path in (REPO / "assets").glob("paper-*/train_command.json"))
@@ -184,7 +185,8 @@ def test_reproduce_script_replays_every_shipped_paper_models_recorded_training(t
     triples = [commands[index:index + 3] for index in range(0, len(commands), 3)]
     for name, (groundtruth, train, evaluate) in zip(names, triples, strict=True):
         recorded = shlex.split(json.loads((REPO / "assets" / name / "train_command.json").read_text())["command"])
-        slices = "41" if name == "paper-pits" else "21" if name == "paper-corner-cubes" else "11"
+        # The w-slices of the volume the model was trained on, as its model file records them.
+        slices = str(load_model(REPO / "assets" / name / "model.npz").metadata["volume"]["slices"])
         assert groundtruth[1:3] == ["groundtruth", name] and groundtruth[groundtruth.index("--slices") + 1] == slices
         volume = groundtruth[groundtruth.index("--out") + 1]
         assert train[1:3] == ["train", volume]
