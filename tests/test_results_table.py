@@ -1,0 +1,83 @@
+"""benchmarks/results_table.py: the paper-datasets table is the shipped metrics, the oracle of the volume each
+model was trained on, and the paper's figure, with verdicts that follow from them."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+
+import pytest
+
+from tests.conftest import REPO
+
+PAPER = {"paper-blazed": 0.0021, "paper-cd": 0.0178, "paper-snake": 0.0318, "paper-scratches": 0.0123,
+         "paper-pits": 0.0878}
+
+
+def _table_rows(page: str) -> dict[str, list[str]]:
+    section = page.split("## The paper's datasets against the paper")[1].split("\n## ")[0]
+    rows = [line for line in section.splitlines() if line.startswith("| paper-")]
+    return {cells[0]: cells[1:] for cells in ([cell.strip() for cell in row.strip("|").split("|")] for row in rows)}
+
+
+@pytest.fixture(scope="module")
+def page(tmp_path_factory) -> str:
+    out = tmp_path_factory.mktemp("results") / "results.md"
+    subprocess.run([sys.executable, "benchmarks/results_table.py", "--out", str(out)], cwd=REPO, check=True)
+    return out.read_text()
+
+
+def test_every_paper_row_is_its_metrics_with_the_verdicts_that_follow(page):
+    rows = _table_rows(page)
+    names = sorted(path.name for path in (REPO / "assets").glob("paper-*") if (path / "metrics.json").exists())
+    assert sorted(rows) == names and len(names) == 7
+    header = [cell.strip() for cell in page.split("| dataset |")[1].splitlines()[0].strip("|").split("|")]
+    column = {name: index for index, name in enumerate(header)}
+    for name, cells in rows.items():
+        slices = json.loads((REPO / "assets" / name / "metrics.json").read_text())["brdf_slices"]
+        normal = next(row for row in slices if row["slice"] == "(0°, 0°) 2000 RU")
+        flip = float(cells[column["FLIP (0°, 0°)"]])
+        assert flip == pytest.approx(normal["flip"], rel=1e-3)
+        verdict = cells[column["beats paper"]]
+        if name in PAPER:
+            assert cells[column["paper"]] == f"{PAPER[name]:.4g}"
+            assert verdict == ("**yes**" if normal["flip"] <= PAPER[name] else "no")
+        else:
+            assert verdict == "—"
+        others = [row["flip"] for row in slices if not row.get("extra_view") and row is not normal]
+        worst = max(others) / normal["flip"]
+        assert cells[column["other 4 slices: worst / (0°, 0°)"]] == f"{worst:.2f}× ({'yes' if worst <= 1.5 else 'no'})"
+
+
+def test_the_oracle_is_of_the_volume_the_model_was_trained_on(page):
+    """A model trained on more w-slices than the CPU here affords (pits 41, scratches 21) takes its oracle from
+    the GPU-scored table of the same slice count, never from the 11-slice volume's."""
+    rows = _table_rows(page)
+    header = [cell.strip() for cell in page.split("| dataset |")[1].splitlines()[0].strip("|").split("|")]
+    oracle_column = header.index("oracle")
+    for name in ("paper-pits", "paper-scratches"):
+        table = json.loads((REPO / "docs" / "data" / f"oracle_{name.removeprefix('paper-')}_slices.json").read_text())
+        slices = int(rows[name][header.index("volume (u*, v* × w)")].split("×")[-1])
+        expected = next(row["brdf_slices"][0]["flip"] for row in table if row["slices"] == slices)
+        assert float(rows[name][oracle_column]) == pytest.approx(expected, rel=1e-3)
+
+
+def test_a_slices_table_without_the_trained_count_gives_no_oracle(tmp_path, monkeypatch):
+    """No matching slice count: the oracle column says so (—) rather than borrowing another volume's figure."""
+    sys.path.insert(0, str(REPO / "benchmarks"))
+    try:
+        import results_table
+    finally:
+        sys.path.pop(0)
+    folder = tmp_path / "paper-pits"
+    folder.mkdir()
+    (tmp_path / "docs" / "data").mkdir(parents=True)
+    table = json.loads((REPO / "docs" / "data" / "oracle_pits_slices.json").read_text())
+    (tmp_path / "docs" / "data" / "oracle_pits_slices.json").write_text(
+        json.dumps([row for row in table if row["slices"] != 41]))
+    monkeypatch.chdir(tmp_path)  # the tables are found relative to the working folder, as the script runs
+    assert results_table._paper_oracle(folder, {}, 41) is None
+    assert results_table._paper_oracle(folder, {}, 21) == pytest.approx(
+        next(row["brdf_slices"][0]["flip"] for row in table if row["slices"] == 21))
+    assert results_table._paper_oracle(folder, {"oracle_flip": 0.5}, 41) == 0.5  # its own evaluation first
