@@ -224,6 +224,28 @@ def test_compile_error_names_the_included_file_and_line(ctx, tmp_path, body, lin
     assert "fragment" in message and "\n" not in message
 
 
+def test_an_nvidia_compile_log_names_the_included_file_and_line_as_mesas_does(tmp_path):
+    """The message format does not depend on the driver: an NVIDIA-style log ("S(L) : error C…", source string S
+    and line L as the preprocessor's #line set them) reads "broken.glsl:LINE: error …" like Mesa's."""
+    import moderngl
+
+    root = write_shaders(tmp_path, {"prog.glsl": PROGRAM, "fullscreen_test.glsl": FULLSCREEN,
+                                    "broken.glsl": "// helper\nfloat helper() {\n    return q * 2.0;\n}\n"})
+    files = preprocess("prog", "fragment", {"MAX_THINGS": 4}, root).files
+    file_id = 1 + [Path(name).name for name in files].index("broken.glsl")
+
+    class NvidiaContext:
+        def program(self, **_: str) -> None:
+            raise moderngl.Error("GLSL Compiler failed\n\nfragment_shader\n===============\n"
+                                 f"{file_id}({file_id * LINE_STRIDE + 3}) : error C1008: undefined variable \"q\"\n")
+
+    with pytest.raises(GratNetError) as caught:
+        compile_program(NvidiaContext(), "prog", {"MAX_THINGS": 4}, shader_root=root)  # type: ignore[arg-type]
+    message = str(caught.value)
+    assert "broken.glsl:3: error C1008: undefined variable" in message, message
+    assert "the fragment stage" in message and "\n" not in message
+
+
 def test_error_logs_map_to_files_in_mesa_and_parenthesised_forms():
     files = (Path("/nowhere/prog.glsl"), Path("/nowhere/inc.glsl"))
     log = (
@@ -236,7 +258,7 @@ def test_error_logs_map_to_files_in_mesa_and_parenthesised_forms():
     assert map_error_log(log, files) == [
         "/nowhere/inc.glsl:7:3: error: `q' undeclared",
         "/nowhere/inc.glsl:9:1: preprocessor error: #error stop",
-        "/nowhere/prog.glsl:4 : error C0000: syntax error",
+        "/nowhere/prog.glsl:4: error C0000: syntax error",
         "<generated header>:3:1: error: bad define",
     ]
 

@@ -62,7 +62,9 @@ _VERSION = re.compile(r"^\s*#\s*version\b")
 _IDENTIFIER = re.compile(r"^[A-Za-z_][A-Za-z0-9_]*$")
 # Mesa: "0:100012(5): error: …"; NVIDIA and others: "0(100012) : error …".
 _MESA_LOCATION = re.compile(r"^(\d+):(\d+)\((\d+)\)")
-_PAREN_LOCATION = re.compile(r"^(\d+)\((\d+)\)")
+# NVIDIA: "S(L) : error C0000: …". The " : " after the location is consumed, so that both forms read
+# "path:line:" before the message (a caller may look for "file:line:").
+_PAREN_LOCATION = re.compile(r"^(\d+)\((\d+)\)(?:\s*:\s*)?")
 
 Defines = Mapping[str, "int | float"]
 
@@ -258,7 +260,7 @@ def map_error_log(log: str, files: tuple[Path | str, ...]) -> list[str]:
 
     def paren(match: re.Match[str]) -> str:
         where, line = _locate(files, int(match.group(1)), int(match.group(2)))
-        return f"{where}:{line}"
+        return f"{where}:{line}: "
 
     messages = []
     for raw in log.splitlines():
