@@ -56,7 +56,8 @@ class TrainConfig:
     )
     loss_visible_weight: float = config_field(1.0, "weight of the samples in --loss-visible-y's band (1: off)")
     epochs: int = config_field(6, "passes over the training samples")
-    batch_size: int = config_field(32768, "samples per optimisation step")
+    batch_size: int = config_field(32768, "samples per optimisation step (feature grids trained markedly better "
+                                          "at 4096-8192 on a GPU: docs/results.md, 'Smaller batches')")
     learning_rate: float = config_field(3e-3, "Adam's initial learning rate")
     final_learning_rate_ratio: float = config_field(0.02, "cosine schedule ends at learning_rate × this")
     seed: int = config_field(0, "seed of initialisation, shuffling and the random split")
