@@ -1,0 +1,62 @@
+"""Plot the H100 batch-size runs on the paper's CD: (0°, 0°) FLIP against optimiser steps and against samples
+seen (docs/data/gpu_runs_batch.json, written from the runs' history.json and evaluation; docs/results.md,
+"Smaller batches and the display-weighted loss").
+
+python benchmarks/batch_figure.py [--data docs/data/gpu_runs_batch.json] [--out docs/images/batch_size_cd.png]
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+from pathlib import Path
+
+import matplotlib
+
+matplotlib.use("Agg")
+import matplotlib.pyplot as plt  # noqa: E402
+
+from gratnet.atomic import atomic_path  # noqa: E402
+
+NORMAL = "(0°, 0°) 2000 RU"
+#: The same recipe at every batch size (no loss weighting, encoding or grid change): the runs compared.
+PLAIN_RUNS = ("base", "b8k", "b8k-rep", "b4k", "b4k-b", "b2k")
+PAPER_CD, ORACLE_CD = 0.0178, 0.003743  # the paper's figure; the interpolation oracle (assets/paper-cd/metrics.json)
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--data", default="docs/data/gpu_runs_batch.json")
+    parser.add_argument("--out", default="docs/images/batch_size_cd.png")
+    arguments = parser.parse_args()
+    runs = [run for run in json.loads(Path(arguments.data).read_text())
+            if run["dataset"] == "paper-cd" and run["run"] in PLAIN_RUNS]
+    batches = sorted({run["batch_size"] for run in runs}, reverse=True)
+    colours = dict(zip(batches, plt.get_cmap("viridis")([0.0, 0.35, 0.65, 0.9][: len(batches)]), strict=True))
+    figure, axes = plt.subplots(1, 2, figsize=(10, 4), sharey=True)
+    for axis, key, label in ((axes[0], "steps", "optimiser steps (thousands)"),
+                             (axes[1], "samples", "samples seen (millions: epochs × 10.2 M)")):
+        for run in runs:
+            x = run["steps"] / 1e3 if key == "steps" else run["epochs"] * run["train_samples"] / 1e6
+            axis.scatter(x, run["flip"][NORMAL], color=colours[run["batch_size"]], s=50, zorder=3)
+            axis.annotate(f"{run['epochs']} ep", (x, run["flip"][NORMAL]), textcoords="offset points", xytext=(5, 4),
+                          fontsize=8)
+        axis.axhline(PAPER_CD, color="tab:red", linestyle="--", linewidth=1, label="paper (0.0178)")
+        axis.axhline(ORACLE_CD, color="grey", linestyle=":", linewidth=1, label="oracle of the volume (0.0037)")
+        axis.set_xlim(left=0)
+        axis.set_xlabel(label)
+        axis.grid(True, which="both", alpha=0.3)
+    for batch in batches:
+        axes[0].scatter([], [], color=colours[batch], label=f"batch {batch:,}")
+    axes[0].set_ylabel("mean FLIP, BRDF slice (0°, 0°) 2000 RU")
+    axes[0].set_ylim(0, 0.035)
+    axes[0].legend(fontsize=8, loc="lower left")
+    figure.suptitle("paper-cd feature grid on an H100: smaller batches, lower error (one run per point)")
+    figure.tight_layout()
+    with atomic_path(arguments.out) as temporary:
+        figure.savefig(temporary, dpi=110, format="png")
+    print(f"wrote {arguments.out}")
+
+
+if __name__ == "__main__":
+    main()
