@@ -65,11 +65,7 @@ def test_the_oracle_is_of_the_volume_the_model_was_trained_on(page):
 
 def test_a_slices_table_without_the_trained_count_gives_no_oracle(tmp_path, monkeypatch):
     """No matching slice count: the oracle column says so (—) rather than borrowing another volume's figure."""
-    sys.path.insert(0, str(REPO / "benchmarks"))
-    try:
-        import results_table
-    finally:
-        sys.path.pop(0)
+    from benchmarks import results_table
     folder = tmp_path / "paper-pits"
     folder.mkdir()
     (tmp_path / "docs" / "data").mkdir(parents=True)
