@@ -6,7 +6,8 @@
 # Usage: bash scripts/reproduce_paper_models.sh [NAME ...]   (default: every assets/paper-*)
 #   OUT=out/paper (volumes, runs, slice cache), GRATNET=.venv/bin/gratnet, DRY_RUN=1 prints the commands only.
 # Nothing is copied into assets/: compare OUT/runs/NAME/metrics.json with assets/NAME/metrics.json.
-# GPU training is not bit-reproducible: expect figures near, not equal to, the shipped ones.
+# GPU training is not bit-reproducible: expect figures near, not equal to, the shipped ones. A recorded
+# "environment" (the thread count of a CPU training, e.g. paper-cd's OMP_NUM_THREADS=1) is applied too.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 gratnet=${GRATNET:-.venv/bin/gratnet}
@@ -25,21 +26,28 @@ for name in "${names[@]}"; do
     # The recorded `gratnet train VOLUME --out DIR FLAGS…`: the volume's file name (NAME-sS.exr) gives its w-slices.
     parsed=$("$python" - "assets/$name/train_command.json" <<'PY'
 import json, re, shlex, sys
-words = shlex.split(json.load(open(sys.argv[1]))["command"])
+record = json.load(open(sys.argv[1]))
+words = shlex.split(record["command"])
 volume, rest = words[2], words[3:]
 out = rest.index("--out")
 flags = rest[:out] + rest[out + 2:]
 match = re.search(r"-s(\d+)\.exr$", volume)
-print(match.group(1) if match else 11, shlex.join(flags))
+environment = " ".join(f"{key}={value}" for key, value in record.get("environment", {}).items())
+print(match.group(1) if match else 11, environment or "-")
+print(shlex.join(flags))
 PY
 )
-    slices=${parsed%% *}
-    read -r -a flags <<< "$(eval "printf '%s ' ${parsed#* }")"
+    first=${parsed%%$'\n'*}
+    slices=${first%% *}
+    environment=${first#* }  # the recorded environment (thread count of a CPU training), "-" if none
+    read -r -a flags <<< "$(eval "printf '%s ' ${parsed#*$'\n'}")"
+    trainer=("$gratnet")
+    if [ "$environment" != "-" ]; then read -r -a assignments <<< "$environment"; trainer=(env "${assignments[@]}" "$gratnet"); fi
     volume="$out/volumes/$name-s$slices.exr"
     if [ ! -f "$volume" ]; then
         run "$gratnet" groundtruth "$name" --sampling simple-max --slices "$slices" --device auto --out "$volume"
     fi
-    run "$gratnet" train "$volume" --out "$out/runs/$name" "${flags[@]}"
+    run "${trainer[@]}" train "$volume" --out "$out/runs/$name" "${flags[@]}"
     run "$gratnet" evaluate "$out/runs/$name/model.npz" --out "$out/runs/$name" --heightfield "$name" \
         --volume "$volume" --views "$views" --cache-dir "$out/cache"
 done

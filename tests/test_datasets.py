@@ -189,6 +189,11 @@ def test_reproduce_script_replays_every_shipped_paper_models_recorded_training(t
         slices = str(load_model(REPO / "assets" / name / "model.npz").metadata["volume"]["slices"])
         assert groundtruth[1:3] == ["groundtruth", name] and groundtruth[groundtruth.index("--slices") + 1] == slices
         volume = groundtruth[groundtruth.index("--out") + 1]
+        record = json.loads((REPO / "assets" / name / "train_command.json").read_text())
+        environment = [f"{key}={value}" for key, value in record.get("environment", {}).items()]
+        if environment:  # a recorded environment (a CPU training's thread count) is replayed through env
+            assert train[:1 + len(environment)] == ["env", *environment]
+            train = train[1 + len(environment):]
         assert train[1:3] == ["train", volume]
         out = recorded.index("--out")
         assert [word for word in train[3:] if word not in ("--out", str(tmp_path / "runs" / name))] == \
