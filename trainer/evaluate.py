@@ -125,8 +125,7 @@ def evaluate_brdf_slices(
 
     rows, figure_rows, region_maps = [], [], []
     oracle_of_volume = VolumeOracle(volume) if volume is not None and config.oracle else None
-    extra = config.extra_views()
-    for theta, phi, exposure in STANDARD_SLICES + extra:
+    for index, (theta, phi, exposure) in enumerate(STANDARD_SLICES + config.extra_views()):
         slice_config = SliceConfig(theta, phi, size=config.size, exposure=exposure, ior=config.ior)
         reference = ground_truth_brdf_slice(field, optics, slice_config, config.cache_dir, config.progress)
         predicted = network_brdf_slice(model, slice_config)
@@ -138,8 +137,8 @@ def evaluate_brdf_slices(
             "slice": _slice_label(theta, phi, exposure), "theta": theta, "phi": phi, "exposure": exposure, **metrics,
             "regions": region_errors(reference, predicted, labels),
         }
-        if (theta, phi, exposure) not in STANDARD_SLICES:
-            row["extra_view"] = True  # one of --views: not the paper's
+        if index >= len(STANDARD_SLICES):
+            row["extra_view"] = True  # one of --views (even one that repeats a paper slice): not the paper's
         if oracle_of_volume is not None:
             oracle = oracle_of_volume.brdf_slice(slice_config)
             row["oracle"] = {**image_metrics(reference, oracle, mask=inside),
