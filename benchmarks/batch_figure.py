@@ -18,10 +18,8 @@ import matplotlib.pyplot as plt  # noqa: E402
 
 from gratnet.atomic import atomic_path  # noqa: E402
 
-NORMAL = "(0°, 0°) 2000 RU"
 #: The same recipe at every batch size (no loss weighting, encoding or grid change): the runs compared.
 PLAIN_RUNS = ("base", "b8k", "b8k-rep", "b4k", "b4k-b", "b2k")
-PAPER_CD, ORACLE_CD = 0.0178, 0.003743  # the paper's figure; the interpolation oracle (assets/paper-cd/metrics.json)
 
 
 def main() -> None:
@@ -29,6 +27,13 @@ def main() -> None:
     parser.add_argument("--data", default="docs/data/gpu_runs_batch.json")
     parser.add_argument("--out", default="docs/images/batch_size_cd.png")
     arguments = parser.parse_args()
+    from results_table import PAPER_FLIP_PAPER_DATASETS, SLICE_ORDER  # the sibling script (benchmarks/ is sys.path[0])
+
+    normal = SLICE_ORDER[0]  # (0°, 0°) 2000 RU
+    paper = PAPER_FLIP_PAPER_DATASETS["paper-cd"]
+    # The interpolation oracle of the volume these runs trained on, as the shipped model's evaluation scored it.
+    shipped = json.loads(Path("assets/paper-cd/metrics.json").read_text())["brdf_slices"]
+    oracle = next(row["oracle_flip"] for row in shipped if row["slice"] == normal)
     runs = [run for run in json.loads(Path(arguments.data).read_text())
             if run["dataset"] == "paper-cd" and run["run"] in PLAIN_RUNS]
     batches = sorted({run["batch_size"] for run in runs}, reverse=True)
@@ -38,11 +43,11 @@ def main() -> None:
                              (axes[1], "samples", "samples seen (millions: epochs × 10.2 M)")):
         for run in runs:
             x = run["steps"] / 1e3 if key == "steps" else run["epochs"] * run["train_samples"] / 1e6
-            axis.scatter(x, run["flip"][NORMAL], color=colours[run["batch_size"]], s=50, zorder=3)
-            axis.annotate(f"{run['epochs']} ep", (x, run["flip"][NORMAL]), textcoords="offset points", xytext=(5, 4),
+            axis.scatter(x, run["flip"][normal], color=colours[run["batch_size"]], s=50, zorder=3)
+            axis.annotate(f"{run['epochs']} ep", (x, run["flip"][normal]), textcoords="offset points", xytext=(5, 4),
                           fontsize=8)
-        axis.axhline(PAPER_CD, color="tab:red", linestyle="--", linewidth=1, label="paper (0.0178)")
-        axis.axhline(ORACLE_CD, color="grey", linestyle=":", linewidth=1, label="oracle of the volume (0.0037)")
+        axis.axhline(paper, color="tab:red", linestyle="--", linewidth=1, label=f"paper ({paper:.4g})")
+        axis.axhline(oracle, color="grey", linestyle=":", linewidth=1, label=f"oracle of the volume ({oracle:.2g})")
         axis.set_xlim(left=0)
         axis.set_xlabel(label)
         axis.grid(True, which="both", alpha=0.3)

@@ -15,10 +15,18 @@ PAPER = {"paper-blazed": 0.0021, "paper-cd": 0.0178, "paper-snake": 0.0318, "pap
          "paper-pits": 0.0878}
 
 
-def _table_rows(page: str) -> dict[str, list[str]]:
+def _cells(line: str) -> list[str]:
+    return [cell.strip() for cell in line.strip().strip("|").split("|")]
+
+
+def _paper_table(page: str) -> tuple[dict[str, int], dict[str, list[str]]]:
+    """The paper-datasets table: its column indices by header (after the dataset column) and its rows by name."""
     section = page.split("## The paper's datasets against the paper")[1].split("\n## ")[0]
-    rows = [line for line in section.splitlines() if line.startswith("| paper-")]
-    return {cells[0]: cells[1:] for cells in ([cell.strip() for cell in row.strip("|").split("|")] for row in rows)}
+    header = next(line for line in section.splitlines() if line.startswith("| dataset |"))
+    column = {name: index for index, name in enumerate(_cells(header)[1:])}
+    lines = [line for line in section.splitlines() if line.startswith("| paper-")]
+    rows = {cells[0]: cells[1:] for cells in map(_cells, lines)}
+    return column, rows
 
 
 @pytest.fixture(scope="module")
@@ -29,11 +37,9 @@ def page(tmp_path_factory) -> str:
 
 
 def test_every_paper_row_is_its_metrics_with_the_verdicts_that_follow(page):
-    rows = _table_rows(page)
+    column, rows = _paper_table(page)
     names = sorted(path.name for path in (REPO / "assets").glob("paper-*") if (path / "metrics.json").exists())
     assert sorted(rows) == names and len(names) == 7
-    header = [cell.strip() for cell in page.split("| dataset |")[1].splitlines()[0].strip("|").split("|")]
-    column = {name: index for index, name in enumerate(header)}
     for name, cells in rows.items():
         slices = json.loads((REPO / "assets" / name / "metrics.json").read_text())["brdf_slices"]
         normal = next(row for row in slices if row["slice"] == "(0°, 0°) 2000 RU")
@@ -53,14 +59,12 @@ def test_every_paper_row_is_its_metrics_with_the_verdicts_that_follow(page):
 def test_the_oracle_is_of_the_volume_the_model_was_trained_on(page):
     """A model trained on more w-slices than the CPU here affords (pits 41, scratches 21) takes its oracle from
     the GPU-scored table of the same slice count, never from the 11-slice volume's."""
-    rows = _table_rows(page)
-    header = [cell.strip() for cell in page.split("| dataset |")[1].splitlines()[0].strip("|").split("|")]
-    oracle_column = header.index("oracle")
+    column, rows = _paper_table(page)
     for name in ("paper-pits", "paper-scratches"):
         table = json.loads((REPO / "docs" / "data" / f"oracle_{name.removeprefix('paper-')}_slices.json").read_text())
-        slices = int(rows[name][header.index("volume (u*, v* × w)")].split("×")[-1])
+        slices = int(rows[name][column["volume (u*, v* × w)"]].split("×")[-1])
         expected = next(row["brdf_slices"][0]["flip"] for row in table if row["slices"] == slices)
-        assert float(rows[name][oracle_column]) == pytest.approx(expected, rel=1e-3)
+        assert float(rows[name][column["oracle"]]) == pytest.approx(expected, rel=1e-3)
 
 
 def test_a_slices_table_without_the_trained_count_gives_no_oracle(tmp_path, monkeypatch):
