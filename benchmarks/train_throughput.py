@@ -1,12 +1,14 @@
 """Trainer throughput: samples per second of `gratnet train`'s own step (trainer.train.train_step).
 
     python benchmarks/train_throughput.py [--threads 2] [--steps 30] [--device cpu] [--samples 4000000]
+                                          [--cuda-graph] [--hidden W,W,...]
 
 Builds each network of NETWORKS exactly as `gratnet train` does (TrainConfig → build_model, the same
 optimiser and schedule), puts a synthetic data set of ``--samples`` random network coordinates and
 targets on the device once (the trainer keeps the whole set resident: per-step work is an index into
 it, no host gather or copy), runs ``--warmup`` steps, then times ``--steps`` steps of ``--batch-size``
-with no host sync inside the timed loop (one synchronisation at its end). Prints one JSON line per
+with no host sync inside the timed loop (one synchronisation at its end); with ``--cuda-graph``, the steps
+are trainer/cudagraph.py's (warm-up and capture fall inside ``--warmup``, which must be ≥ 4). Prints one JSON line per
 network: parameters, grid bytes, MACs per evaluation, samples per second. The data's values do not
 change the cost (the coordinates are uniformly random like a shuffled volume).
 """
@@ -20,6 +22,7 @@ import time
 import torch
 
 from gratnet.encoding import EncodingSpec
+from trainer.cudagraph import WARMUP_STEPS, GraphedSteps
 from trainer.model import GridNetwork
 from trainer.train import build_model, make_optimizer, make_scheduler, train_step
 from trainer.train_config import TrainConfig
@@ -50,7 +53,11 @@ def main() -> None:
     parser.add_argument("--batch-size", type=int, default=32768)
     parser.add_argument("--samples", type=int, default=4_000_000)
     parser.add_argument("--only", default="", help="run only networks whose label contains this")
+    parser.add_argument("--hidden", default="", help="hidden widths for every network (overrides its own)")
+    parser.add_argument("--cuda-graph", action="store_true", help="replay each step as a CUDA graph")
     arguments = parser.parse_args()
+    if arguments.cuda_graph and arguments.warmup <= WARMUP_STEPS:
+        parser.error(f"--cuda-graph needs --warmup > {WARMUP_STEPS} (the eager warm-up steps, then the capture)")
     torch.set_num_threads(arguments.threads)
     device = torch.device(arguments.device)
     generator = torch.Generator().manual_seed(0)
@@ -59,6 +66,8 @@ def main() -> None:
     for label, overrides in NETWORKS:
         if arguments.only not in label:
             continue
+        if arguments.hidden:
+            overrides = {**overrides, "hidden": arguments.hidden}
         config = TrainConfig(batch_size=arguments.batch_size, **overrides)  # type: ignore[arg-type]
         encoding = EncodingSpec.for_grid(1001, 11, config.frequencies, config.t_frequencies)  # the paper's grid
         torch.manual_seed(0)
@@ -69,15 +78,24 @@ def main() -> None:
         order = torch.randperm(arguments.samples, generator=generator).to(device)
         batches = [order[k * config.batch_size:(k + 1) * config.batch_size]
                    for k in range(arguments.samples // config.batch_size)]
-        for step in range(arguments.warmup):
-            batch = batches[step % len(batches)]
-            train_step(model, optimizer, scheduler, coordinates[batch], targets[batch], encoding)
-        if device.type == "cuda":
-            torch.cuda.synchronize()
-        started = time.perf_counter()
-        for step in range(arguments.steps):
-            batch = batches[step % len(batches)]
-            loss = train_step(model, optimizer, scheduler, coordinates[batch], targets[batch], encoding)
+        graph = None
+        if arguments.cuda_graph:
+            graph = GraphedSteps(model, optimizer, [float(group["lr"]) for group in optimizer.param_groups],
+                                 arguments.steps + arguments.warmup, config.final_learning_rate_ratio, 0, encoding,
+                                 None, coordinates, targets, config.batch_size)
+
+        loss = torch.zeros(())
+        for number in range(arguments.warmup + arguments.steps):
+            if number == arguments.warmup:  # the timed steps start
+                if device.type == "cuda":
+                    torch.cuda.synchronize()
+                started = time.perf_counter()
+            batch = batches[number % len(batches)]
+            if graph is not None:
+                graph.step(batch)
+                loss = graph.running
+            else:
+                loss = train_step(model, optimizer, scheduler, coordinates[batch], targets[batch], encoding)
         float(loss)  # the one sync
         seconds = time.perf_counter() - started
         mlp = model.mlp if isinstance(model, GridNetwork) else model
@@ -86,6 +104,7 @@ def main() -> None:
             "network": label, "layers": mlp.sizes, "parameters": model.parameter_count,
             "grid_bytes": model.grid_bytes if isinstance(model, GridNetwork) else 0, "macs": macs,
             "threads": arguments.threads, "device": str(device), "batch_size": config.batch_size,
+            "cuda_graph": arguments.cuda_graph,
             "steps": arguments.steps, "samples_per_second": round(arguments.steps * config.batch_size / seconds),
         }, ensure_ascii=False), flush=True)
 

@@ -27,6 +27,7 @@ maps to 1 in every channel instead of clipping Z:
 from __future__ import annotations
 
 import dataclasses
+import functools
 import math
 from typing import Any, Literal
 
@@ -118,12 +119,19 @@ def network_coordinates(u: Any, v: Any, w: Any, scheme: Scheme) -> Any:
                      2.0 * key_to_t(u, v, w, scheme) - 1.0], axis=-1)
 
 
+@functools.lru_cache(maxsize=64)
+def _angular_frequencies(spec: EncodingSpec, xp: Any, dtype: Any, device: Any) -> tuple[Any, Any]:
+    """:meth:`EncodingSpec.angular_frequencies` as arrays of ``xp`` on ``device``, made once: on a GPU each
+    fresh copy is a blocking host-to-device transfer, which at small training batches stalled every step (and
+    a CUDA graph cannot capture one). Callers never write to them."""
+    omega, omega_t = spec.angular_frequencies()
+    return (xp.asarray(omega, dtype=dtype, device=device), xp.asarray(omega_t, dtype=dtype, device=device))
+
+
 def encode(coordinates: Any, spec: EncodingSpec) -> Any:
     """Sinusoidal encoding (eq. 6) of network coordinates (…, 3) → (…, spec.features)."""
     xp = _namespace(coordinates)
-    omega, omega_t = spec.angular_frequencies()
-    omega = xp.asarray(omega, dtype=coordinates.dtype, device=array_api_compat.device(coordinates))
-    omega_t = xp.asarray(omega_t, dtype=coordinates.dtype, device=array_api_compat.device(coordinates))
+    omega, omega_t = _angular_frequencies(spec, xp, coordinates.dtype, array_api_compat.device(coordinates))
     c_u, c_v, c_t = coordinates[..., 0:1], coordinates[..., 1:2], coordinates[..., 2:3]
     # All four groups in one (…, 4, L) phase array, sines and cosines stacked as (…, 4, 2, L): the same
     # elementwise products as one group at a time (bit-identical), in far fewer ops and copies (the trainer

@@ -39,3 +39,19 @@ def ctx() -> Iterator[object]:
         pytest.skip(f"no headless OpenGL 4.3 context: {error}")
     yield context
     context.release()
+
+
+@pytest.fixture(scope="session")
+def tiny_volume(tmp_path_factory: pytest.TempPathFactory) -> tuple[object, Path]:
+    """A 21² × 5 blazed-grating volume (5 µm patch, σs = 1.5 µm, 100 nm steps) and its EXR: for training tests."""
+    from gratnet.volume import write_volume
+    from trainer.fourier import OpticsConfig
+    from trainer.generators import generate
+    from trainer.groundtruth import VolumeConfig, compute_volume
+
+    optics = OpticsConfig(sigma_s_um=1.5, wavelength_step_nm=100.0)
+    volume = compute_volume(generate("blazed", size_um=5.0), VolumeConfig(resolution=21, slices=5,
+                            sampling="simple-max"), optics, progress=False)
+    path = tmp_path_factory.mktemp("volume") / "blazed.exr"
+    write_volume(path, volume)
+    return volume, path

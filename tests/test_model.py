@@ -9,10 +9,6 @@ import pytest
 import torch
 
 from gratnet.modelfile import evaluate_keys, load_model
-from gratnet.volume import write_volume
-from trainer.fourier import OpticsConfig
-from trainer.generators import generate
-from trainer.groundtruth import VolumeConfig, compute_volume
 from trainer.model import PRESETS, FunnelMLP, funnel_sizes, log_cosh_loss
 from trainer.train import split_samples, train
 from trainer.train_config import TrainConfig
@@ -38,16 +34,6 @@ def test_log_cosh_loss_is_stable_and_correct():
     value = log_cosh_loss(difference, torch.zeros(4))
     assert torch.isfinite(value)
     np.testing.assert_allclose(log_cosh_loss(difference[:3], torch.zeros(3)).item(), expected.mean().item(), rtol=1e-5)
-
-
-@pytest.fixture(scope="module")
-def tiny_volume(tmp_path_factory):
-    optics = OpticsConfig(sigma_s_um=1.5, wavelength_step_nm=100.0)
-    volume = compute_volume(generate("blazed", size_um=5.0), VolumeConfig(resolution=21, slices=5,
-                            sampling="simple-max"), optics, progress=False)
-    path = tmp_path_factory.mktemp("volume") / "blazed.exr"
-    write_volume(path, volume)
-    return volume, path
 
 
 def test_split_by_slices_holds_out_whole_slices(tiny_volume):

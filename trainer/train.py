@@ -103,6 +103,13 @@ def pick_device(name: str) -> torch.device:
     return torch.device(name)
 
 
+def uses_cuda_graph(config: TrainConfig, device: torch.device) -> bool:
+    """Whether the run replays its steps as a CUDA graph (--cuda-graph; auto: on a CUDA device)."""
+    if config.cuda_graph == "on" and device.type != "cuda":
+        raise GratNetError(f"--cuda-graph on needs a CUDA device; training runs on {device}")
+    return config.cuda_graph == "on" or (config.cuda_graph == "auto" and device.type == "cuda")
+
+
 def _raw_outputs(model: FunnelMLP | GridNetwork, coordinates: torch.Tensor, encoding: EncodingSpec) -> torch.Tensor:
     """The network's raw outputs at network coordinates: a grid network takes them as they are, the MLP encoded."""
     return model(coordinates) if isinstance(model, GridNetwork) else model(encode(coordinates, encoding))
@@ -124,14 +131,18 @@ def make_optimizer(model: FunnelMLP | GridNetwork, config: TrainConfig) -> torch
     return torch.optim.Adam(model.parameters(), lr=config.learning_rate)
 
 
+def cosine_factor(step: int, steps: int, ratio: float) -> float:
+    """The schedule's factor on each group's initial rate at ``step``: cosine from 1 down to ``ratio`` over
+    ``steps``, then ``ratio`` (trainer/cudagraph.py computes the same on the device)."""
+    return ratio + (1.0 - ratio) * 0.5 * (1.0 + math.cos(math.pi * min(step, steps) / steps))
+
+
 def make_scheduler(optimizer: torch.optim.Optimizer, config: TrainConfig, steps: int,
                grid: bool) -> torch.optim.lr_scheduler.LRScheduler:
     """Cosine from each group's rate down to ``final_learning_rate_ratio`` of it over ``steps``."""
     if grid:  # two groups: a factor, so that each ends at its own rate × the ratio
         ratio = config.final_learning_rate_ratio
-        return torch.optim.lr_scheduler.LambdaLR(
-            optimizer, lambda step: ratio + (1.0 - ratio) * 0.5 * (1.0 + math.cos(math.pi * min(step, steps) / steps))
-        )
+        return torch.optim.lr_scheduler.LambdaLR(optimizer, lambda step: cosine_factor(step, steps, ratio))
     return torch.optim.lr_scheduler.CosineAnnealingLR(
         optimizer, T_max=steps, eta_min=config.learning_rate * config.final_learning_rate_ratio
     )
@@ -213,35 +224,58 @@ def train(
     encoding, range_spec = config.encoding_for(volume), config.range_spec()
     weighting = visible_weight(config)
     train_samples, test_samples = split_samples(volume, config)
+    graphed = uses_cuda_graph(config, device)
     model = build_model(config, encoding).to(device)
     optimizer = make_optimizer(model, config)
+    base_rates = [float(group["lr"]) for group in optimizer.param_groups]
     steps_per_epoch = math.ceil(len(train_samples) / config.batch_size)
-    scheduler = make_scheduler(optimizer, config, steps_per_epoch * config.epochs, isinstance(model, GridNetwork))
+    schedule_steps = steps_per_epoch * config.epochs
+    # A graphed run keeps its schedule on the device (trainer/cudagraph.py): no torch scheduler.
+    scheduler = None if graphed else make_scheduler(optimizer, config, schedule_steps, isinstance(model, GridNetwork))
     history: dict[str, Any] = {"epochs": [], "train_seconds": 0.0}
-    start_epoch = 0
+    start_epoch = done = 0
     checkpoint_path = out_dir / "checkpoint.pt"
     if resume and checkpoint_path.exists():
         state = torch.load(checkpoint_path, map_location=device, weights_only=False)
-        # The per-epoch diagnostic does not change the training: it may differ (or be absent) on resume.
-        diagnostic = ("epoch_flip_size",)
-        saved = {key: value for key, value in state["config"].items() if key not in diagnostic}
-        if saved != {key: value for key, value in config_to_dict(config).items() if key not in diagnostic}:
+        # Neither the per-epoch diagnostic nor graph replay changes the training: they may differ on resume.
+        free = ("epoch_flip_size", "cuda_graph")
+        saved = {key: value for key, value in state["config"].items() if key not in free}
+        if saved != {key: value for key, value in config_to_dict(config).items() if key not in free}:
             raise GratNetError(
                 f"{checkpoint_path} was made with a different configuration; start afresh without --resume"
             )
+        if state["scheduler"] is None and scheduler is not None:
+            raise GratNetError(f"{checkpoint_path} was trained with --cuda-graph (on a GPU): resume it on a CUDA "
+                               "device, or start afresh without --resume")
         model.load_state_dict(state["model"])
         optimizer.load_state_dict(state["optimizer"])
-        scheduler.load_state_dict(state["scheduler"])
+        if scheduler is not None:
+            scheduler.load_state_dict(state["scheduler"])
+        # Steps taken: recorded since graph replay; before, the scheduler's count.
+        done = int(state.get("steps", state["scheduler"]["last_epoch"] if state["scheduler"] else 0))
         history, start_epoch = state["history"], state["epoch"]
-        torch.set_rng_state(state["torch_rng"])
+        torch.set_rng_state(state["torch_rng"].cpu())  # map_location moved it onto the device
     generator = torch.Generator().manual_seed(config.seed + start_epoch)
     # The whole data set resident on the device, indexed there: no per-step host gather or copy.
     coordinates_all = torch.from_numpy(train_samples.coordinates).to(device)
     targets_all = torch.from_numpy(train_samples.targets).to(device)
+    graph = None
+    if graphed:
+        from trainer.cudagraph import GraphedSteps
+
+        graph = GraphedSteps(model, optimizer, base_rates, schedule_steps, config.final_learning_rate_ratio, done,
+                             encoding, weighting, coordinates_all, targets_all, config.batch_size)
+
+    def learning_rate() -> float:
+        return graph.learning_rate() if graph is not None else scheduler.get_last_lr()[0]  # type: ignore[union-attr]
+
     for epoch in range(start_epoch, config.epochs):
         started = time.perf_counter()
         order = torch.randperm(len(train_samples), generator=generator).to(device)
         running = torch.zeros((), dtype=torch.float64, device=device)  # on the device: no per-step sync
+        if graph is not None:
+            graph.begin_epoch()
+            running = graph.running
         bar = tqdm(
             range(steps_per_epoch),
             desc=f"epoch {epoch + 1}/{config.epochs}",
@@ -251,17 +285,21 @@ def train(
         )
         for step in bar:
             batch = order[step * config.batch_size : (step + 1) * config.batch_size]
-            value = train_step(model, optimizer, scheduler, coordinates_all[batch], targets_all[batch],
-                               encoding, weighting).double()
-            running = 0.98 * running + 0.02 * value if step else value
+            if graph is not None:
+                graph.step(batch)  # updates graph.running, which ``running`` is
+            else:
+                value = train_step(model, optimizer, scheduler, coordinates_all[batch],  # type: ignore[arg-type]
+                                   targets_all[batch], encoding, weighting).double()
+                running = 0.98 * running + 0.02 * value if step else value
+                done += 1
             if progress and step % 20 == 0:  # the only host sync of the loop, and only with a progress bar
-                bar.set_postfix(loss=f"{float(running):.3e}", lr=f"{scheduler.get_last_lr()[0]:.2e}")
+                bar.set_postfix(loss=f"{float(running):.3e}", lr=f"{learning_rate():.2e}")
         seconds = time.perf_counter() - started
         record = {
             "epoch": epoch + 1,
             "train_loss": float(running),
             "seconds": round(seconds, 2),
-            "learning_rate": scheduler.get_last_lr()[0],
+            "learning_rate": learning_rate(),
         }
         if test_samples is not None:
             record["held_out_loss"] = held_out_loss(model, test_samples, encoding, device, config.batch_size)
@@ -278,7 +316,8 @@ def train(
                 {
                     "model": model.state_dict(),
                     "optimizer": optimizer.state_dict(),
-                    "scheduler": scheduler.state_dict(),
+                    "scheduler": scheduler.state_dict() if scheduler is not None else None,
+                    "steps": graph.done if graph is not None else done,
                     "history": history,
                     "epoch": epoch + 1,
                     "config": config_to_dict(config),
@@ -291,6 +330,7 @@ def train(
             "parameters": model.parameter_count,
             "layer_sizes": model.sizes,
             "device": str(device),
+            "cuda_graph": graphed,
             "train_samples": len(train_samples),
             "held_out_samples": len(test_samples or []),
             "samples_per_second": round(len(train_samples) * len(history["epochs"]) / max(history["train_seconds"],

@@ -62,6 +62,10 @@ class TrainConfig:
     final_learning_rate_ratio: float = config_field(0.02, "cosine schedule ends at learning_rate × this")
     seed: int = config_field(0, "seed of initialisation, shuffling and the random split")
     device: str = config_field("auto", "torch device: auto (CUDA when present), cpu, cuda")
+    cuda_graph: Literal["auto", "on", "off"] = config_field(
+        "auto", "replay each training step as one CUDA graph (trainer/cudagraph.py): auto (on a CUDA device), on, "
+        "off; the same step, launched at a fraction of the cost, which small batches are bound by"
+    )
     max_train_samples: int = config_field(0, "use at most this many training samples (0: all)")
     epoch_flip_size: int = config_field(0, "if > 0, after each epoch score the BRDF slice (0°, 0°) 2000 RU at this "
                                         "size (pixels, e.g. 128) with mean FLIP into history.json (needs the "
@@ -93,6 +97,10 @@ class TrainConfig:
         if not (math.isfinite(self.loss_visible_weight) and self.loss_visible_weight > 0):
             raise GratNetError(f"--loss-visible-weight must be a positive number, got {self.loss_visible_weight}")
         self.visible_band()  # checks the band
+        if self.cuda_graph not in ("auto", "on", "off"):
+            raise GratNetError(f"--cuda-graph must be auto, on or off, got {self.cuda_graph!r}")
+        if self.cuda_graph == "on" and self.device == "cpu":
+            raise GratNetError("--cuda-graph on needs a CUDA device; --device cpu was asked for")
         if self.split not in ("slices", "random", "all"):
             raise GratNetError(f"--split must be slices, random or all, got {self.split!r}")
 
