@@ -26,9 +26,9 @@ import sys
 import time
 from pathlib import Path
 
-from gratnet.config import add_arguments, add_quiet_flag, config_field, from_arguments, parse_float
+from gratnet.config import add_arguments, add_quiet_flag, config_field, from_arguments
 from gratnet.errors import GratNetError
-from viewer.render_cli import SceneConfig
+from viewer.render_cli import SceneConfig, add_scene_arguments
 
 __all__ = ["MitsubaRenderConfig", "parse_environment", "register", "run"]
 
@@ -96,21 +96,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     )
     parser.add_argument("--out", required=True, metavar="IMAGE.png|IMAGE.exr",
                         help="output: .png (display sRGB, 8-bit) or .exr (linear sRGB float, R G B)")
-    parser.add_argument("--light", dest="light_text", default=None, metavar="θ,φ",
-                        help="directional light in world space: polar angle from +z and azimuth from +x, "
-                        "degrees (default: gratnet render's, chosen from the material and mesh so that the "
-                        "diffraction shows)")
-    parser.add_argument("--point-light", dest="point_light_text", default=None, metavar="X,Y,Z",
-                        help="point light position in metres instead of --light (intensity --light-intensity)")
-    parser.add_argument("--camera", dest="camera_text", default=None, metavar="DIST,AZIMUTH,ELEVATION",
-                        help="orbit camera around the origin: metres, degrees, degrees (default: gratnet render's, "
-                        "chosen with the light: the distance that frames the mesh, azimuth -90)")
-    parser.add_argument("--exposure", type=parse_float, default=None,
-                        help="exposure: the factor applied to the radiance before display, linear (default: "
-                        "gratnet render's for the material and mesh, made for --light-intensity 1 without "
-                        "an environment)")
-    parser.add_argument("--size", dest="size_text", default="512,512", metavar="W,H",
-                        help="image size in pixels (typical: 256,256 to 1024,1024; default: 512,512)")
+    add_scene_arguments(parser, point_light="point light position in metres instead of --light (intensity "
+                        "--light-intensity)", exposure_of="the radiance (made for --light-intensity 1 without an "
+                        "environment)")
     parser.add_argument("--environment", dest="environment", default="none", metavar="none|RADIANCE|R,G,B|MAP.exr",
                         help="environment light: none (default), a constant radiance in linear sRGB (typical: "
                         "1e-5 to 1e-3 with the default exposure), or a lat-long EXR whose up is +z")

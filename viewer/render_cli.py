@@ -201,22 +201,32 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     )
     parser.add_argument("--out", required=True, metavar="IMAGE.png|IMAGE.exr",
                         help="output: .png (display sRGB, 8-bit) or .exr (linear sRGB float, R G B)")
+    add_scene_arguments(parser, point_light="point light position in metres instead of --light (irradiance 1 at 1 m)")
+    add_quiet_flag(parser)
+    add_arguments(parser, RenderConfig)
+    parser.set_defaults(handler=run)
+
+
+def add_scene_arguments(parser: argparse.ArgumentParser, *, point_light: str | None = None,
+                        exposure_of: str = "XYZ", size: str = "image size in pixels (typical: 256,256 to 1024,1024)"
+                        ) -> None:
+    """``--light``, ``--camera``, ``--exposure``, ``--size`` (and ``--point-light`` where ``point_light`` gives its
+    help): one declaration for ``render``, ``view`` and ``mitsuba-render``, so that they mean the same and have
+    the same defaults everywhere (:func:`scene_fields` parses them)."""
+    shown = "chosen from the material and mesh so that the diffraction shows"
+    same = "the same in render, view and mitsuba-render"
     parser.add_argument("--light", dest="light_text", default=None, metavar="θ,φ",
-                        help="directional light in world space: polar angle from +z and azimuth from +x, "
-                        "degrees (default: chosen from the material and mesh so that the diffraction shows)")
-    parser.add_argument("--point-light", dest="point_light_text", default=None, metavar="X,Y,Z",
-                        help="point light position in metres instead of --light (irradiance 1 at 1 m)")
+                        help=f"directional light in world space: polar angle from +z and azimuth from +x, degrees "
+                        f"(default: {shown}; {same})")
+    if point_light is not None:
+        parser.add_argument("--point-light", dest="point_light_text", default=None, metavar="X,Y,Z", help=point_light)
     parser.add_argument("--camera", dest="camera_text", default=None, metavar="DIST,AZIMUTH,ELEVATION",
                         help="orbit camera around the origin: metres, degrees, degrees (default: chosen with the "
                         "light: the distance that frames the mesh, azimuth -90)")
     parser.add_argument("--exposure", type=parse_float, default=None,
-                        help="exposure: the factor applied to XYZ before display, linear (default: chosen from the "
-                        "material and mesh so that the diffraction shows without saturating)")
-    parser.add_argument("--size", dest="size_text", default="512,512", metavar="W,H",
-                        help="image size in pixels (typical: 256,256 to 1024,1024; default: 512,512)")
-    add_quiet_flag(parser)
-    add_arguments(parser, RenderConfig)
-    parser.set_defaults(handler=run)
+                        help=f"exposure: the factor applied to {exposure_of} before display, linear (default: {shown} "
+                        f"without saturating; {same})")
+    parser.add_argument("--size", dest="size_text", default="512,512", metavar="W,H", help=f"{size}; default: 512,512")
 
 
 def scene_fields(arguments: argparse.Namespace) -> dict[str, Any]:

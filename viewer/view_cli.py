@@ -36,7 +36,7 @@ from pathlib import Path
 from gratnet.config import add_quiet_flag, parse_float, parse_int
 from gratnet.errors import GratNetError
 from viewer.defaults import fill_scene_defaults, with_fallback
-from viewer.render_cli import RENDER_PATH_HELP, RENDER_PATHS, WEIGHT_PATHS
+from viewer.render_cli import RENDER_PATH_HELP, RENDER_PATHS, WEIGHT_PATHS, add_scene_arguments
 
 __all__ = ["register", "run"]
 
@@ -54,17 +54,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                         help="shipped material name (assets/NAME/model.npz) or a model-file path (default: blazed)")
     parser.add_argument("--mesh", default="cd",
                         help="cd, sphere, plane, or the path of a Wavefront .obj file (metres, +z up; default: cd)")
-    parser.add_argument("--size", dest="size_text", default="512,512", metavar="W,H",
-                        help="render area in pixels (default: 512,512)")
-    parser.add_argument("--light", dest="light_text", default=None, metavar="θ,φ",
-                        help="directional light: polar angle from +z and azimuth from +x, degrees (default: chosen "
-                        "from the material and mesh so that the diffraction shows, as in gratnet render)")
-    parser.add_argument("--camera", dest="camera_text", default=None, metavar="DIST,AZIMUTH,ELEVATION",
-                        help="orbit camera around the origin: metres, degrees, degrees (default: chosen with the "
-                        "light: the distance that frames the mesh, azimuth -90)")
-    parser.add_argument("--exposure", type=parse_float, default=None,
-                        help="exposure: the factor applied to XYZ before display, linear (default: chosen from the "
-                        "material and mesh so that the diffraction shows without saturating)")
+    add_scene_arguments(parser, size="render area in pixels")
     parser.add_argument("--ior", type=parse_float, default=1.5,
                         help="refractive index of the Fresnel factor (typical: 1.3 to 2.5; 0: no Fresnel; "
                         "default: 1.5)")
