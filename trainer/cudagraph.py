@@ -22,7 +22,8 @@ import math
 import torch
 
 from gratnet.encoding import EncodingSpec
-from trainer.model import FunnelMLP, GridNetwork, log_cosh_loss
+from trainer.model import FunnelMLP, GridNetwork
+from trainer.train import VisibleWeight, batch_loss, cosine_factor
 
 #: Eager steps before the capture (on a side stream, as torch's documentation asks): they let autograd,
 #: cuBLAS and Adam make their state. They are ordinary training steps, counted as such.
@@ -34,10 +35,10 @@ class GraphedSteps:
 
     def __init__(self, model: FunnelMLP | GridNetwork, optimizer: torch.optim.Optimizer, base_rates: list[float],
                  schedule_steps: int, final_ratio: float, done: int, encoding: EncodingSpec,
-                 weighting: object | None, coordinates: torch.Tensor, targets: torch.Tensor,
+                 weighting: VisibleWeight | None, coordinates: torch.Tensor, targets: torch.Tensor,
                  batch_size: int) -> None:
         """``base_rates``: each parameter group's initial learning rate; ``done``: steps already taken (on
-        resume); ``weighting``: the display weighting (trainer.train.VisibleWeight) or None."""
+        resume); ``weighting``: the display weighting or None."""
         device = coordinates.device
         self.model, self.optimizer, self.encoding, self.weighting = model, optimizer, encoding, weighting
         self.coordinates, self.targets = coordinates, targets
@@ -50,6 +51,7 @@ class GraphedSteps:
         for state in optimizer.state.values():
             if "step" in state:
                 state["step"] = state["step"].to(device=device, dtype=torch.float32)
+        self.first_rate = base_rates[0]  # host side, for learning_rate()
         self.base_rates = torch.tensor(base_rates, dtype=torch.float64, device=device)
         self.counter = torch.tensor(float(done), dtype=torch.float64, device=device)
         self.done = done
@@ -64,10 +66,8 @@ class GraphedSteps:
         self.fresh.fill_(True)
 
     def learning_rate(self) -> float:
-        """The first group's rate of the next step (host side: for the progress bar and history)."""
-        from trainer.train import cosine_factor
-
-        return float(self.base_rates[0]) * cosine_factor(self.done, self.schedule_steps, self.final_ratio)
+        """The first group's rate of the next step (host side, no device read: for the progress bar and history)."""
+        return self.first_rate * cosine_factor(self.done, self.schedule_steps, self.final_ratio)
 
     def _step(self, index: torch.Tensor) -> None:
         """One optimisation step on the samples at ``index``: device work only, capturable."""
@@ -77,21 +77,13 @@ class GraphedSteps:
         rates = (self.base_rates * factor).float()
         for number, group in enumerate(self.optimizer.param_groups):
             group["lr"].copy_(rates[number])
-        coordinates, targets = self.coordinates[index], self.targets[index]
-        weight = None if self.weighting is None else self.weighting(targets)  # type: ignore[operator]
-        inputs = coordinates if isinstance(self.model, GridNetwork) else self._encode(coordinates)
-        loss = log_cosh_loss(self.model(inputs), targets, weight)
+        loss = batch_loss(self.model, self.coordinates[index], self.targets[index], self.encoding, self.weighting)
         loss.backward()
         self.optimizer.step()
         self.counter += 1.0
         value = loss.detach().double()
         self.running.copy_(torch.where(self.fresh, value, 0.98 * self.running + 0.02 * value))
         self.fresh.fill_(False)
-
-    def _encode(self, coordinates: torch.Tensor) -> torch.Tensor:
-        from gratnet.encoding import encode
-
-        return encode(coordinates, self.encoding)
 
     def step(self, batch: torch.Tensor) -> None:
         """One step on the samples at ``batch`` (indices on the device)."""

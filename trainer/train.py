@@ -170,13 +170,20 @@ def visible_weight(config: TrainConfig) -> VisibleWeight | None:
     return VisibleWeight(band, config.loss_visible_weight)
 
 
+def batch_loss(model: FunnelMLP | GridNetwork, coordinates: torch.Tensor, targets: torch.Tensor,
+               encoding: EncodingSpec, weighting: VisibleWeight | None = None) -> torch.Tensor:
+    """The training loss of a batch (LogCosh, display-weighted when ``weighting`` is given), with its graph: the
+    eager step and the CUDA-graph step (trainer/cudagraph.py) both differentiate this."""
+    weight = None if weighting is None else weighting(targets)
+    return log_cosh_loss(_raw_outputs(model, coordinates, encoding), targets, weight)
+
+
 def train_step(model: FunnelMLP | GridNetwork, optimizer: torch.optim.Optimizer,
                scheduler: torch.optim.lr_scheduler.LRScheduler, coordinates: torch.Tensor, targets: torch.Tensor,
                encoding: EncodingSpec, weighting: VisibleWeight | None = None) -> torch.Tensor:
     """One optimisation step on a batch already on the model's device; returns the loss, detached (reading
     it is the caller's choice: on a GPU that is a host sync)."""
-    weight = None if weighting is None else weighting(targets)
-    loss = log_cosh_loss(_raw_outputs(model, coordinates, encoding), targets, weight)
+    loss = batch_loss(model, coordinates, targets, encoding, weighting)
     optimizer.zero_grad(set_to_none=True)
     loss.backward()
     optimizer.step()
