@@ -11,6 +11,13 @@ For each slice of the volume, with the model's own range transform (targets y as
   one cell. Where it is as large as ``mid_cell_rms``, the volume barely resolves the signal (e.g. speckle at
   the sampling limit) and what lies between samples is not fixed by them.
 
+With ``--fine FINE.exr``, a volume of the same height field, slices and scheme on the (2R − 1)² lattice (every
+other sample of it is one of the R² lattice's, the others lie between them; ``gratnet groundtruth --res``),
+the truth at the cell centres is known, and two more figures compare with it there:
+
+- ``mid_cell_truth_rms``: RMS of (network − truth) at the cell centres: the network's own error between samples;
+- ``bilinear_truth_rms``: RMS of (bilinear − truth) there: the interpolation oracle's error between samples.
+
 The network runs through the runtime's numpy evaluator (gratnet.modelfile), as the renderers do. Prints one
 JSON line per model.
 """
@@ -28,17 +35,30 @@ from gratnet.volume import read_volume
 from trainer.train import volume_samples
 
 
-def slice_errors(network: Callable[[np.ndarray], np.ndarray], coordinates: np.ndarray, targets: np.ndarray,
-                 resolution: int) -> dict[str, float]:
-    """The three figures of the module docstring for one slice's samples (network coordinates (N, 3) and targets
-    (N, 3) on a ``resolution``² lattice); ``network`` maps network coordinates to y."""
+def on_lattice(coordinates: np.ndarray, values: np.ndarray, resolution: int) -> np.ndarray:
+    """``values`` (N, ...) of samples at network coordinates (N, 3) placed on their ``resolution``² lattice
+    (rows v, columns u); NaN where no sample lies (unreachable key vectors)."""
     to_index = (resolution - 1) / 2
     column = np.rint((coordinates[:, 0] + 1) * to_index).astype(int)
     row = np.rint((coordinates[:, 1] + 1) * to_index).astype(int)
-    lattice = np.full((resolution, resolution, 3), np.nan)
-    lattice[row, column] = targets
-    t_lattice = np.full((resolution, resolution), np.nan)
-    t_lattice[row, column] = coordinates[:, 2]
+    lattice = np.full((resolution, resolution, *values.shape[1:]), np.nan)
+    lattice[row, column] = values
+    return lattice
+
+
+def centre_truth(fine_coordinates: np.ndarray, fine_targets: np.ndarray, resolution: int) -> np.ndarray:
+    """The targets of one slice of a (2R − 1)² volume at the centres of the R² lattice's cells: (R − 1, R − 1, 3),
+    NaN where unreachable (R = ``resolution``)."""
+    return on_lattice(fine_coordinates, fine_targets, 2 * resolution - 1)[1::2, 1::2]
+
+
+def slice_errors(network: Callable[[np.ndarray], np.ndarray], coordinates: np.ndarray, targets: np.ndarray,
+                 resolution: int, truth: np.ndarray | None = None) -> dict[str, float]:
+    """The figures of the module docstring for one slice's samples (network coordinates (N, 3) and targets
+    (N, 3) on a ``resolution``² lattice); ``network`` maps network coordinates to y. ``truth``: the targets at
+    the cell centres (:func:`centre_truth`), for the two figures against the truth."""
+    lattice = on_lattice(coordinates, targets, resolution)
+    t_lattice = on_lattice(coordinates, coordinates[:, 2], resolution)
     corners = np.stack([lattice[:-1, :-1], lattice[1:, :-1], lattice[:-1, 1:], lattice[1:, 1:]])
     complete = ~np.isnan(corners).any(axis=(0, 3))
     bilinear = corners.mean(axis=0)[complete]
@@ -47,11 +67,18 @@ def slice_errors(network: Callable[[np.ndarray], np.ndarray], coordinates: np.nd
     centres = np.stack([-1 + (2 * cell_column + 1) / (resolution - 1), -1 + (2 * cell_row + 1) / (resolution - 1),
                         t_corners.mean(axis=0)[complete]], axis=1)
 
-    return {
+    at_centres = network(centres)
+    figures = {
         "on_sample_rms": float(np.sqrt(np.mean((network(coordinates) - targets) ** 2))),
-        "mid_cell_rms": float(np.sqrt(np.mean((network(centres) - bilinear) ** 2))),
+        "mid_cell_rms": float(np.sqrt(np.mean((at_centres - bilinear) ** 2))),
         "corner_spread_rms": float(np.sqrt(np.mean((corners[:, complete] - bilinear) ** 2))),
     }
+    if truth is not None:
+        known = truth[complete]
+        kept = ~np.isnan(known).any(axis=1)  # the truth lattice reaches no further than the samples
+        figures["mid_cell_truth_rms"] = float(np.sqrt(np.mean((at_centres[kept] - known[kept]) ** 2)))
+        figures["bilinear_truth_rms"] = float(np.sqrt(np.mean((bilinear[kept] - known[kept]) ** 2)))
+    return figures
 
 
 def main() -> None:
@@ -59,18 +86,35 @@ def main() -> None:
     parser.add_argument("volume", help="the ground-truth volume the models were trained on")
     parser.add_argument("models", nargs="+", help="model files (model.npz)")
     parser.add_argument("--slices", default="2,5,8", help="volume slice indices, comma-separated")
+    parser.add_argument("--fine", metavar="FINE.exr", help="the same volume on the (2R − 1)² lattice: the truth "
+                        "between samples (module docstring)")
     arguments = parser.parse_args()
     volume = read_volume(arguments.volume)
     slices = [int(part) for part in arguments.slices.split(",")]
+    if not slices or min(slices) < 0 or max(slices) >= volume.slices:
+        parser.error(f"--slices {arguments.slices} out of range for a {volume.slices}-slice volume")
+    fine = read_volume(arguments.fine) if arguments.fine else None
+    if fine is not None:
+        expected = (2 * volume.resolution - 1, volume.slices, volume.metadata.get("scheme"))
+        found = (fine.resolution, fine.slices, fine.metadata.get("scheme"))
+        if found != expected:
+            parser.error(f"--fine must be a {expected[0]}² × {expected[1]} volume of scheme {expected[2]!r} "
+                         f"(twice the lattice of {arguments.volume}), got {found[0]}² × {found[1]}, {found[2]!r}")
     for path in arguments.models:
         model = load_model(path)
         coordinates, targets, slice_index = volume_samples(volume, model.range)
+        fine_samples = volume_samples(fine, model.range) if fine is not None else None
         rows = {}
         for index in slices:
             chosen = slice_index == index
+            truth = None
+            if fine_samples is not None:
+                fine_chosen = fine_samples[2] == index
+                truth = centre_truth(fine_samples[0][fine_chosen], fine_samples[1][fine_chosen].astype(np.float64),
+                                     volume.resolution)
             rows[index] = slice_errors(lambda points: mlp_forward(model, network_inputs(model, points)),  # noqa: B023
                                        coordinates[chosen].astype(np.float64),
-                                       targets[chosen].astype(np.float64), volume.resolution)
+                                       targets[chosen].astype(np.float64), volume.resolution, truth)
         print(json.dumps({"model": path, "slices": rows}), flush=True)
 
 
