@@ -160,7 +160,8 @@ def plot(path: str, profiles: list[tuple[float, np.ndarray, np.ndarray]], resolu
         axes.axvline(0.5 / lattice_spacing(resolution, scheme, centre[0]), color="black", linestyle=style,
                      label=f"Nyquist along u of the {resolution}² lattice")
     axes.set_ylim(1e-8, 10)
-    axes.set_xlim(0, float(profiles[0][1].max()) / 2)
+    widest = extent_um / (min(profile[0] for profile in profiles) / 1e3)  # the band limit of the shortest λ
+    axes.set_xlim(0, min(1.15 * widest, float(profiles[0][1].max())))
     axes.set_xlabel("frequency of F over u (cycles per unit of u) = surface offset Δx / λ")
     axes.set_ylabel("radially averaged power (relative)")
     axes.set_title(f"{name}: F's spectrum near (u, v) = ({centre[0]:g}, {centre[1]:g}); thin lines: 6σs / λ",
