@@ -1,7 +1,9 @@
 """How finely a volume's u*/v* lattice must sample F: F's own spectrum over (u, v) against the lattice's Nyquist.
 
-    python benchmarks/lattice_band_limit.py [paper-scratches] [--centre 0.5,0] [--w -1.5] [--span 0.25]
+    python benchmarks/lattice_band_limit.py HEIGHTFIELD [--centre 0.5,0] [--w -1.5] [--span 0.25]
         [--points 512] [--wavelengths 380,550,780] [--resolutions 1001,2001] [--plot PNG]
+
+HEIGHTFIELD and its optics and load flags (--sigma-s, --dx-um, …) are those of ``gratnet groundtruth``.
 
 Physics (docs/physics.md, "How finely to sample u and v"): at one λ and w, F = |P|² with P the Fourier transform
 of the windowed field g·e^{ikwh} (eq. 1). F's own spectrum over (u, v) is therefore that field's autocorrelation:
@@ -35,9 +37,8 @@ import numpy as np
 
 from gratnet.atomic import atomic_path, check_output_file
 from gratnet.volume import volume_axes
-from trainer import datasets
-from trainer.fourier import FTerm, OpticsConfig, PreparedSurface, prepare_surface
-from trainer.loaders import load_heightfield
+from trainer.cli_support import add_heightfield_input, read_heightfield_input
+from trainer.fourier import FTerm, PreparedSurface, prepare_surface
 from trainer.sampling import Scheme, check_scheme, grid_to_key
 from trainer.spectral import monochromatic
 
@@ -87,8 +88,7 @@ def radial_profile(power: np.ndarray, f_u: np.ndarray, f_v: np.ndarray, bins: in
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("heightfield", nargs="?", default="paper-scratches", help="preset, generator or file")
-    parser.add_argument("--sigma-s", type=float, help="σs (µm); default: the preset's, else the default optics'")
+    add_heightfield_input(parser)  # the ground-truth subcommands' HEIGHTFIELD with its optics and load flags
     parser.add_argument("--centre", default="0.5,0", help="key vector (u, v) at the patch centre")
     parser.add_argument("--w", type=float, default=-1.5, help="w of the patch (constant)")
     parser.add_argument("--span", type=float, default=0.25, help="patch side in units of u")
@@ -108,10 +108,9 @@ def main() -> None:
     check_scheme(arguments.scheme)
     if arguments.plot:
         check_output_file(arguments.plot, "--plot")
-    preset = datasets.PRESETS.get(arguments.heightfield)
-    sigma_s_um = arguments.sigma_s or (preset.sigma_s_um if preset else OpticsConfig.sigma_s_um)
-    optics = OpticsConfig(sigma_s_um=sigma_s_um)
-    surface = prepare_surface(load_heightfield(arguments.heightfield), optics)
+    field, optics, _ = read_heightfield_input(arguments)
+    sigma_s_um = optics.sigma_s_um
+    surface = prepare_surface(field, optics)
 
     profiles = []
     for wavelength_nm in wavelengths:
