@@ -30,6 +30,7 @@ from collections.abc import Callable
 
 import numpy as np
 
+from gratnet.encoding import RangeSpec
 from gratnet.modelfile import load_model, mlp_forward, network_inputs
 from gratnet.volume import read_volume
 from trainer.train import volume_samples
@@ -100,10 +101,15 @@ def main() -> None:
         if found != expected:
             parser.error(f"--fine must be a {expected[0]}² × {expected[1]} volume of scheme {expected[2]!r} "
                          f"(twice the lattice of {arguments.volume}), got {found[0]}² × {found[1]}, {found[2]!r}")
+    Samples = tuple[np.ndarray, np.ndarray, np.ndarray]  # volume_samples: coordinates, targets, slice index
+    # Per range transform: models that share one share the volumes' samples (the fine volume's are 4× as many).
+    samples: dict[RangeSpec, tuple[Samples, Samples | None]] = {}
     for path in arguments.models:
         model = load_model(path)
-        coordinates, targets, slice_index = volume_samples(volume, model.range)
-        fine_samples = volume_samples(fine, model.range) if fine is not None else None
+        if model.range not in samples:
+            samples[model.range] = (volume_samples(volume, model.range),
+                                    volume_samples(fine, model.range) if fine is not None else None)
+        (coordinates, targets, slice_index), fine_samples = samples[model.range]
         rows = {}
         for index in slices:
             chosen = slice_index == index
