@@ -33,13 +33,23 @@ from trainer.train_config import TrainConfig
 
 @dataclasses.dataclass
 class Samples:
-    """Network coordinates (N, 3) and targets (N, 3), float32."""
+    """Network coordinates (N, 3) and targets (N, 3), float32; the volume slice of each sample (N,)."""
 
     coordinates: np.ndarray
     targets: np.ndarray
+    slice_index: np.ndarray
 
     def __len__(self) -> int:
         return len(self.targets)
+
+    def subset(self, keep: np.ndarray) -> Samples:
+        """The samples at ``keep`` (a mask or indices)."""
+        return Samples(self.coordinates[keep], self.targets[keep], self.slice_index[keep])
+
+
+def slice_parameters(volume: Volume) -> np.ndarray:
+    """The slice parameter t_s ∈ [0, 1] of each of the volume's w-slices (its metadata's, else s/(S − 1))."""
+    return np.asarray(volume.metadata.get("slice_t") or list(np.linspace(0, 1, volume.slices)), dtype=np.float64)
 
 
 def volume_samples(volume: Volume, range_spec: RangeSpec) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -50,7 +60,7 @@ def volume_samples(volume: Volume, range_spec: RangeSpec) -> tuple[np.ndarray, n
     key = grid_to_key(volume_axes(volume.resolution), scheme)
     u_grid, v_grid = np.meshgrid(key, key, indexing="xy")
     reachable = u_grid**2 + v_grid**2 <= 4.0 + 1e-12
-    t_values = volume.metadata.get("slice_t") or list(np.linspace(0, 1, volume.slices))
+    t_values = slice_parameters(volume)
     coordinates, targets, slice_index = [], [], []
     for index, t in enumerate(t_values):
         w = slice_w(scheme, float(t), key, key)
@@ -82,15 +92,15 @@ def split_samples(volume: Volume, config: TrainConfig) -> tuple[Samples, Samples
         test_mask = rng.random(len(targets)) < config.test_fraction
     else:
         test_mask = np.zeros(len(targets), dtype=bool)
-    train = Samples(coordinates[~test_mask], targets[~test_mask])
+    everything = Samples(coordinates, targets, slice_index)
+    train = everything.subset(~test_mask)
     if len(train) == 0:  # else 0 steps per epoch, and a model of random weights is written as if trained
         reason = (f"the {volume.resolution}² grid has no sample with u² + v² ≤ 4" if len(targets) == 0
                   else f"--split {config.split} holds out all {len(targets)} samples")
         raise GratNetError(f"no training samples: {reason}; hold out fewer slices or use a larger volume")
     if config.max_train_samples and len(train) > config.max_train_samples:
-        keep = rng.choice(len(train), config.max_train_samples, replace=False)
-        train = Samples(train.coordinates[keep], train.targets[keep])
-    test = Samples(coordinates[test_mask], targets[test_mask]) if test_mask.any() else None
+        train = train.subset(rng.choice(len(train), config.max_train_samples, replace=False))
+    test = everything.subset(test_mask) if test_mask.any() else None
     return train, test
 
 
@@ -246,7 +256,9 @@ def train(
         state = torch.load(checkpoint_path, map_location=device, weights_only=False)
         # Neither the per-epoch diagnostic nor graph replay changes the training: they may differ on resume.
         free = ("epoch_flip_size", "cuda_graph")
-        saved = {key: value for key, value in state["config"].items() if key not in free}
+        # Options added since a checkpoint was written take their defaults, which is how it was trained.
+        saved = {**config_to_dict(TrainConfig()), **state["config"]}
+        saved = {key: value for key, value in saved.items() if key not in free}
         if saved != {key: value for key, value in config_to_dict(config).items() if key not in free}:
             raise GratNetError(
                 f"{checkpoint_path} was made with a different configuration; start afresh without --resume"
@@ -266,6 +278,15 @@ def train(
     # The whole data set resident on the device, indexed there: no per-step host gather or copy.
     coordinates_all = torch.from_numpy(train_samples.coordinates).to(device)
     targets_all = torch.from_numpy(train_samples.targets).to(device)
+    off_lattice, lattice_data = None, (coordinates_all, targets_all)
+    drawn = round(config.off_lattice * len(train_samples))
+    if drawn:
+        from trainer.offlattice import OffLattice
+
+        off_lattice = OffLattice(train_samples.coordinates, train_samples.targets, train_samples.slice_index,
+                                 2.0 * slice_parameters(volume) - 1.0, volume.resolution, device)
+        # Each epoch's samples are refilled in place (a CUDA graph holds these buffers' addresses).
+        coordinates_all, targets_all = torch.empty_like(coordinates_all), torch.empty_like(targets_all)
     graph = None
     if graphed:
         from trainer.cudagraph import GraphedSteps
@@ -278,6 +299,11 @@ def train(
 
     for epoch in range(start_epoch, config.epochs):
         started = time.perf_counter()
+        if off_lattice is not None:  # a random (1 − F) of the lattice samples, and F·N fresh points between them
+            kept = len(train_samples) - drawn
+            keep = torch.randperm(len(train_samples), generator=generator)[:kept].to(device)
+            coordinates_all[:kept], targets_all[:kept] = lattice_data[0][keep], lattice_data[1][keep]
+            coordinates_all[kept:], targets_all[kept:] = off_lattice.draw(drawn, generator)
         order = torch.randperm(len(train_samples), generator=generator).to(device)
         running = torch.zeros((), dtype=torch.float64, device=device)  # on the device: no per-step sync
         if graph is not None:

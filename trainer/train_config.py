@@ -55,6 +55,12 @@ class TrainConfig:
         "2000-5000 RU (empty: every sample weighs 1)"
     )
     loss_visible_weight: float = config_field(1.0, "weight of the samples in --loss-visible-y's band (1: off)")
+    off_lattice: float = config_field(
+        0.0, "fraction F in [0, 1) of each epoch's samples drawn afresh between the volume's samples: uniform points "
+        "of u*/v* cells whose four corners are training samples, with the corners' bilinear value (in the "
+        "range-transformed y) as target (trainer/offlattice.py); the epoch keeps its size, a random 1 − F of the "
+        "lattice samples filling the rest (0: the lattice samples only)"
+    )
     epochs: int = config_field(6, "passes over the training samples")
     batch_size: int = config_field(32768, "samples per optimisation step (feature grids trained markedly better "
                                           "at 4096-8192 on a GPU: docs/results.md, 'Smaller batches')")
@@ -97,6 +103,8 @@ class TrainConfig:
         if not (math.isfinite(self.loss_visible_weight) and self.loss_visible_weight > 0):
             raise GratNetError(f"--loss-visible-weight must be a positive number, got {self.loss_visible_weight}")
         self.visible_band()  # checks the band
+        if not (math.isfinite(self.off_lattice) and 0 <= self.off_lattice < 1):
+            raise GratNetError(f"--off-lattice must be a fraction in [0, 1), got {self.off_lattice}")
         if self.cuda_graph not in ("auto", "on", "off"):
             raise GratNetError(f"--cuda-graph must be auto, on or off, got {self.cuda_graph!r}")
         if self.cuda_graph == "on" and self.device == "cpu":
