@@ -62,14 +62,18 @@ def smoothstep_coordinates(coordinates: Any, nodes_uvt: Sequence[int]) -> Any:
     return xp.stack(axes, axis=-1)
 
 
-def level_resolutions(levels: int, finest: int, t_resolution: int) -> list[tuple[int, int]]:
+def level_resolutions(levels: int, finest: int, t_resolution: int | Sequence[int],
+                      step: int = 2) -> list[tuple[int, int]]:
     """(R_l, T_l) per level, coarse to fine: the finest has ``finest`` nodes per u*/v* axis and each
-    coarser level half the intervals (``R_l − 1 = (finest − 1)/2^(levels−1−l)``, at least 2 nodes); every
-    level has ``t_resolution`` nodes along t."""
-    if levels < 1 or finest < 2 or t_resolution < 2:
-        raise GratNetError(f"a feature grid needs ≥ 1 level, ≥ 2 nodes per u*/v* axis and ≥ 2 along t, "
-                           f"got {levels} levels, {finest} and {t_resolution}")
-    return [(max(2, round((finest - 1) / 2 ** (levels - 1 - level)) + 1), t_resolution) for level in range(levels)]
+    coarser level 1/``step`` of the intervals of the next (``R_l − 1 = (finest − 1)/step^(levels−1−l)``, at least
+    2 nodes); ``t_resolution`` nodes along t on every level, or one count per level (coarse to fine)."""
+    per_level = [t_resolution] * levels if isinstance(t_resolution, int) else [int(t) for t in t_resolution]
+    if levels < 1 or finest < 2 or step < 2 or len(per_level) != levels or min(per_level) < 2:
+        raise GratNetError(f"a feature grid needs ≥ 1 level, ≥ 2 nodes per u*/v* axis, a level step ≥ 2 and ≥ 2 "
+                           f"nodes along t on each of its levels, got {levels} levels, {finest} nodes, step {step} "
+                           f"and t {t_resolution}")
+    return [(max(2, round((finest - 1) / step ** (levels - 1 - level)) + 1), per_level[level])
+            for level in range(levels)]
 
 
 def grid_features(grids: Sequence[Any], coordinates: Any, interpolation: str = "linear") -> Any:

@@ -55,6 +55,22 @@ def test_nodes_sit_at_both_ends_and_outside_points_clamp():
 def test_level_resolutions_halve_the_intervals():
     assert level_resolutions(3, 251, 11) == [(63, 11), (126, 11), (251, 11)]
     assert level_resolutions(1, 501, 6) == [(501, 6)]
+    # One t count per level, and a coarser step between levels.
+    assert level_resolutions(3, 1001, [11, 11, 2], step=4) == [(63, 11), (251, 11), (1001, 2)]
+    for bad in ([11, 2], [11, 11, 1]):
+        with pytest.raises(GratNetError, match="≥ 2 nodes along t on each"):
+            level_resolutions(3, 1001, bad)
+    with pytest.raises(GratNetError, match="level step ≥ 2"):
+        level_resolutions(3, 1001, 11, step=1)
+    # The trainer's flags reach it: --grid-level-t per level, --grid-level-step between levels.
+    from trainer.train_config import TrainConfig
+
+    config = TrainConfig(architecture="grid", grid_levels=3, grid_resolution=1001, grid_level_t="11,11,2",
+                         grid_level_step=4, grid_features=2)
+    assert config.grid_shapes() == [(11, 63, 63, 2), (11, 251, 251, 2), (2, 1001, 1001, 2)]
+    for bad, message in (("11,x,2", "comma-separated integers"), ("11,2", "on each of its levels")):
+        with pytest.raises(GratNetError, match=message):
+            TrainConfig(architecture="grid", grid_levels=3, grid_level_t=bad)
     with pytest.raises(GratNetError):
         level_resolutions(2, 1, 11)
 
@@ -212,7 +228,9 @@ def _random_grid_model(features: int, levels: int, dtype: str, seed: int = 5) ->
     """A random feature-grid model: 2 hidden layers of 21, outputs mostly inside (0, 1)."""
     rng = np.random.default_rng(seed)
     spec = EncodingSpec.for_grid(101, 5, 4, 2)
-    grids = [(0.5 * rng.standard_normal((5, nodes, nodes, features))).astype(dtype) for nodes in (7, 13, 25)[:levels]]
+    # Levels differ along t too (--grid-level-t), down to the fewest nodes a level may have (2).
+    grids = [(0.5 * rng.standard_normal((t_nodes, nodes, nodes, features))).astype(dtype)
+             for nodes, t_nodes in list(zip((7, 13, 25), (5, 3, 2), strict=True))[:levels]]
     sizes = [levels * features + spec.features, 21, 21, 3]
     weights = [(rng.standard_normal((b, a)) / np.sqrt(a)).astype(np.float32) for a, b in zip(sizes[:-1], sizes[1:],
                                                                                              strict=True)]

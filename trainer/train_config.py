@@ -40,6 +40,10 @@ class TrainConfig:
     grid_resolution: int = config_field(251, "grid: nodes per u*/v* axis of the finest level (251 = every 4th of a "
                                         "1001² volume's samples)")
     grid_t_resolution: int = config_field(11, "grid: nodes along t of every level (11 = the volume's slices)")
+    grid_level_t: str = config_field("", "grid: nodes along t per level, coarse to fine, comma-separated (overrides "
+                                     "--grid-t-resolution; e.g. 11,11,2 for a fine level that varies little in t)")
+    grid_level_step: int = config_field(2, "grid: ratio of u*/v* node intervals between neighbouring levels (2: "
+                                        "each coarser level has half the intervals of the next)")
     grid_features: int = config_field(2, "grid: features per level (1 to 4: one RGBA texture per level; 2 keeps the "
                                       "default grid at 3.65 MB as float16)")
     grid_init: float = config_field(1e-4, "grid: initial features uniform in ±this")
@@ -87,9 +91,9 @@ class TrainConfig:
         if self.architecture not in ("mlp", "grid"):
             raise GratNetError(f"--architecture must be mlp or grid, got {self.architecture!r}")
         if self.architecture == "grid":
-            from gratnet.featuregrid import MAX_FEATURES, level_resolutions
+            from gratnet.featuregrid import MAX_FEATURES
 
-            level_resolutions(self.grid_levels, self.grid_resolution, self.grid_t_resolution)  # checks the sizes
+            self.grid_shapes()  # checks the sizes
             if not 1 <= self.grid_features <= MAX_FEATURES:
                 raise GratNetError(f"--grid-features must be from 1 to {MAX_FEATURES}, got {self.grid_features}")
             if not (self.grid_init >= 0 and self.grid_learning_rate > 0):
@@ -122,8 +126,15 @@ class TrainConfig:
             return []
         from gratnet.featuregrid import level_resolutions
 
+        t_nodes: int | list[int] = self.grid_t_resolution
+        if self.grid_level_t.strip():
+            try:
+                t_nodes = [int(part) for part in self.grid_level_t.split(",")]
+            except ValueError:
+                raise GratNetError(f"--grid-level-t must be comma-separated integers (one per level), got "
+                                   f"{self.grid_level_t!r}") from None
         return [(t, r, r, self.grid_features)
-                for r, t in level_resolutions(self.grid_levels, self.grid_resolution, self.grid_t_resolution)]
+                for r, t in level_resolutions(self.grid_levels, self.grid_resolution, t_nodes, self.grid_level_step)]
 
     def visible_band(self) -> tuple[float, float] | None:
         """The display-weighted loss's band as range-transformed targets (y_low, y_high) of CIE Y, or None when
