@@ -33,15 +33,14 @@ import numpy as np
 from gratnet.encoding import RangeSpec
 from gratnet.modelfile import load_model, mlp_forward, network_inputs
 from gratnet.volume import read_volume
+from trainer.offlattice import lattice_position
 from trainer.train import volume_samples
 
 
 def on_lattice(coordinates: np.ndarray, values: np.ndarray, resolution: int) -> np.ndarray:
     """``values`` (N, ...) of samples at network coordinates (N, 3) placed on their ``resolution``² lattice
     (rows v, columns u); NaN where no sample lies (unreachable key vectors)."""
-    to_index = (resolution - 1) / 2
-    column = np.rint((coordinates[:, 0] + 1) * to_index).astype(int)
-    row = np.rint((coordinates[:, 1] + 1) * to_index).astype(int)
+    row, column = lattice_position(coordinates, resolution)
     lattice = np.full((resolution, resolution, *values.shape[1:]), np.nan)
     lattice[row, column] = values
     return lattice

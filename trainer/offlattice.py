@@ -26,6 +26,15 @@ import torch
 from gratnet.errors import GratNetError
 
 
+def lattice_position(coordinates: np.ndarray, resolution: int) -> tuple[np.ndarray, np.ndarray]:
+    """(row, column) (int64) on the ``resolution``² u*/v* lattice of samples at network coordinates (N, 3):
+    the nearest node, c = −1 + 2k/(R − 1) inverted."""
+    to_index = (resolution - 1) / 2
+    row = np.rint((coordinates[:, 1].astype(np.float64) + 1) * to_index).astype(np.int64)
+    column = np.rint((coordinates[:, 0].astype(np.float64) + 1) * to_index).astype(np.int64)
+    return row, column
+
+
 class OffLattice:
     """The training samples placed on their lattice, and draws of off-lattice points from them (on ``device``)."""
 
@@ -35,9 +44,7 @@ class OffLattice:
         ``resolution``² lattice of slice ``slice_index`` (N,); ``slice_c_t[s]``: slice s's c_t = 2 t_s − 1."""
         if resolution < 2:
             raise GratNetError(f"--off-lattice needs a volume of at least 2² samples per slice, got {resolution}²")
-        to_index = (resolution - 1) / 2
-        column = np.rint((coordinates[:, 0].astype(np.float64) + 1) * to_index).astype(np.int64)
-        row = np.rint((coordinates[:, 1].astype(np.float64) + 1) * to_index).astype(np.int64)
+        row, column = lattice_position(coordinates, resolution)
         slices = len(slice_c_t)
         flat = (slice_index.astype(np.int64) * resolution + row) * resolution + column
         present = np.zeros(slices * resolution * resolution, dtype=bool)
