@@ -34,9 +34,10 @@ from typing import Any
 
 import numpy as np
 
-from gratnet.atomic import atomic_path, write_text_atomic
+from gratnet.atomic import write_text_atomic
 from gratnet.config import config_field
 from gratnet.errors import GratNetError
+from gratnet.figures import save_figure
 from gratnet.modelfile import ModelFile, load_model
 from viewer.renderer import BAKED_MAX_MACS
 
@@ -420,8 +421,7 @@ def plot_pareto(results: list[dict[str, Any]], output: Path) -> None:
         if rows:
             axis.legend(fontsize=7)
     figure.tight_layout()
-    with atomic_path(output) as temporary:
-        figure.savefig(temporary, dpi=120, format="png")
+    save_figure(figure, output, dpi=120)
     plt.close(figure)
 
 

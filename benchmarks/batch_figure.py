@@ -16,7 +16,7 @@ import matplotlib
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 
-from gratnet.atomic import atomic_path  # noqa: E402
+from gratnet.figures import save_figure
 
 #: The same recipe at every batch size (no loss weighting, encoding or grid change): the runs compared.
 PLAIN_RUNS = ("base", "b8k", "b8k-rep", "b4k", "b4k-b", "b2k")
@@ -58,8 +58,7 @@ def main() -> None:
     axes[0].legend(fontsize=8, loc="lower left")
     figure.suptitle("paper-cd feature grid on an H100: smaller batches, lower error (one run per point)")
     figure.tight_layout()
-    with atomic_path(arguments.out) as temporary:
-        figure.savefig(temporary, dpi=110, format="png")
+    save_figure(figure, arguments.out, dpi=110)
     print(f"wrote {arguments.out}")
 
 

@@ -19,7 +19,7 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
-from gratnet.atomic import atomic_path  # noqa: E402
+from gratnet.figures import save_figure
 
 
 def main() -> None:
@@ -59,8 +59,7 @@ def main() -> None:
     axes[1].grid(True, axis="y", alpha=0.3)
     figure.suptitle("paper-scratches, 11 w-slices, 10 CPU epochs: a finer feature grid (one run per setting)")
     figure.tight_layout()
-    with atomic_path(arguments.out) as temporary:
-        figure.savefig(temporary, format="png", dpi=110)
+    save_figure(figure, arguments.out, dpi=110)
     plt.close(figure)
     print(f"wrote {arguments.out}")
 

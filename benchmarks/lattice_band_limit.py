@@ -35,7 +35,8 @@ import json
 
 import numpy as np
 
-from gratnet.atomic import atomic_path, check_output_file
+from gratnet.atomic import check_output_file
+from gratnet.figures import save_figure
 from gratnet.volume import volume_axes
 from trainer.cli_support import add_heightfield_input, read_heightfield_input
 from trainer.fourier import FTerm, PreparedSurface, prepare_surface
@@ -167,8 +168,7 @@ def plot(path: str, profiles: list[tuple[float, np.ndarray, np.ndarray]], resolu
                    fontsize=9)
     axes.legend(fontsize=6.5, ncol=2)
     figure.tight_layout()
-    with atomic_path(path) as temporary:
-        figure.savefig(temporary, format="png")
+    save_figure(figure, path)
 
 
 if __name__ == "__main__":

@@ -19,7 +19,7 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
-from gratnet.atomic import atomic_path  # noqa: E402
+from gratnet.figures import save_figure
 
 
 def main() -> None:
@@ -55,8 +55,7 @@ def main() -> None:
         panel.legend(fontsize=7, loc="center left", bbox_to_anchor=(1.01, 0.5))
     figure.suptitle("paper-scratches, 10 CPU epochs at batch 2,048: one change at a time (one run per point)")
     figure.tight_layout()
-    with atomic_path(arguments.out) as temporary:
-        figure.savefig(temporary, format="png", dpi=100)
+    save_figure(figure, arguments.out, dpi=100)
     plt.close(figure)
     print(f"wrote {arguments.out}")
 

@@ -71,7 +71,8 @@ def _plot(rows: list[dict], output: Path) -> None:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    from gratnet.atomic import atomic_path
+    from gratnet.figures import save_figure
+
 
     labels = [f"{row['material']}\n{row['slice'].split(' ')[0]} {row['slice'].split(' ')[1]}" for row in rows]
     positions = np.arange(len(rows))
@@ -84,8 +85,7 @@ def _plot(rows: list[dict], output: Path) -> None:
     axis.set_title("Pixels a display-exact skip must shade, standard BRDF slices (256²)", fontsize=9)
     axis.legend(fontsize=7)
     figure.tight_layout()
-    with atomic_path(output) as temporary:
-        figure.savefig(temporary, dpi=110, format="png")
+    save_figure(figure, output, dpi=110)
     plt.close(figure)
 
 

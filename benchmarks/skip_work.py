@@ -142,6 +142,8 @@ def plot(rows: list[dict[str, Any]], target: Path) -> None:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
+    from gratnet.figures import save_figure
+
     labels = [f"{Path(row['model']).parent.name}\n{row['view']}" for row in rows]
     x = np.arange(len(rows))
     figure, axes = plt.subplots(figsize=(max(6.0, 0.9 * len(rows)), 4.0))
@@ -155,7 +157,7 @@ def plot(rows: list[dict[str, Any]], target: Path) -> None:
     axes.set_title("MLP evaluations, skipping off / on")
     figure.tight_layout()
     target.parent.mkdir(parents=True, exist_ok=True)
-    figure.savefig(target, dpi=120)
+    save_figure(figure, target, dpi=120)
     plt.close(figure)
 
 

@@ -49,6 +49,8 @@ def main() -> None:
         matplotlib.use("Agg")
         import matplotlib.pyplot as plt
 
+        from gratnet.figures import save_figure
+
         figure, axes = plt.subplots(figsize=(6, 3.6), dpi=130)
         axes.semilogy(spans, paper, "o-", label="paper's Taylor series (float64)")
         axes.semilogy(spans, ours, "s-", label="GratNet (zoom DFT, float32)")
@@ -58,7 +60,7 @@ def main() -> None:
         axes.set_title("w = −2, λ = 380 nm")
         axes.legend()
         figure.tight_layout()
-        figure.savefig(arguments.plot)
+        save_figure(figure, arguments.plot)
 
 
 if __name__ == "__main__":

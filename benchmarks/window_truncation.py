@@ -53,6 +53,8 @@ def main() -> None:
         matplotlib.use("Agg")
         import matplotlib.pyplot as plt
 
+        from gratnet.figures import save_figure
+
         figure, axes = plt.subplots(figsize=(7, 3.5), dpi=130)
         centre = len(u) // 2
         for extent, (luminance, _, _) in slices.items():
@@ -63,7 +65,7 @@ def main() -> None:
         axes.set_title(f"Window truncation error, {arguments.material}")
         axes.legend()
         figure.tight_layout()
-        figure.savefig(arguments.plot)
+        save_figure(figure, arguments.plot)
 
 
 if __name__ == "__main__":

@@ -15,7 +15,8 @@ import math
 from pathlib import Path
 from typing import Any
 
-from gratnet.atomic import atomic_path, write_text_atomic
+from gratnet.atomic import write_text_atomic
+from gratnet.figures import save_figure
 
 COLUMNS = ["run", "dataset", "preset", "variant", "seed", "parameters", "macs_per_pixel", "train_samples", "epochs",
            "train_seconds", "train_loss", "held_out_loss", "held_out_psnr_db", "flip_mean", "flip_0_0",
@@ -82,8 +83,7 @@ def plot_pareto(rows: list[dict[str, Any]], output: Path) -> None:
     axis.set_title("sweep: error against network cost", fontsize=9)
     axis.grid(True, which="both", alpha=0.3)
     figure.tight_layout()
-    with atomic_path(output) as temporary:
-        figure.savefig(temporary, dpi=120, format="png")
+    save_figure(figure, output, dpi=120)
     plt.close(figure)
 
 

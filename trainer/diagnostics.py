@@ -149,7 +149,8 @@ def region_figure(path: str | os.PathLike[str], rows: list[tuple[str, np.ndarray
     from matplotlib.colors import ListedColormap
     from matplotlib.patches import Patch
 
-    from gratnet.atomic import atomic_path
+    from gratnet.figures import save_figure
+
 
     if not rows:
         raise GratNetError("region_figure needs at least one (label, labels) panel")
@@ -165,8 +166,7 @@ def region_figure(path: str | os.PathLike[str], rows: list[tuple[str, np.ndarray
         handles = [Patch(color=colour, label=name) for name, colour in zip(REGIONS, REGION_COLOURS, strict=True)]
         figure.legend(handles=handles, loc="outside lower center", ncol=len(REGIONS), fontsize=8)
         figure.suptitle("Regions of the ground-truth BRDF slices (trainer/diagnostics.py)", fontsize=9)
-        with atomic_path(path) as temporary:
-            figure.savefig(temporary, format="png")
+        save_figure(figure, path)
     finally:
         plt.close(figure)
 
@@ -184,7 +184,8 @@ def plot_history(history: dict[str, Any], path: str | os.PathLike[str]) -> bool:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    from gratnet.atomic import atomic_path
+    from gratnet.figures import save_figure
+
 
     numbers = [record["epoch"] for record in epochs]
     figure, loss_axis = plt.subplots(figsize=(6.0, 3.6), dpi=120, layout="constrained")
@@ -208,8 +209,7 @@ def plot_history(history: dict[str, Any], path: str | os.PathLike[str]) -> bool:
             handles, names = handles + more_handles, names + more_names
         loss_axis.legend(handles, names, fontsize=8, loc="upper right")
         loss_axis.set_title("Training curves", fontsize=10)
-        with atomic_path(path) as temporary:
-            figure.savefig(temporary, format="png")
+        save_figure(figure, path)
     finally:
         plt.close(figure)
     return True

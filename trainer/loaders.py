@@ -20,6 +20,7 @@ import numpy as np
 from gratnet.atomic import atomic_path
 from gratnet.config import config_field
 from gratnet.errors import GratNetError
+from gratnet.figures import save_figure
 from trainer.heightfield import HeightField
 
 IMAGE_SUFFIXES = (".png", ".exr")
@@ -392,5 +393,4 @@ def preview_png(field: HeightField, path: str | os.PathLike[str]) -> None:
     axes.set_ylabel("y (µm)")
     title = field.source if len(field.source) <= 90 else field.source[:87] + "…"
     axes.set_title(title, fontsize=7)
-    with atomic_path(path) as temporary:
-        figure.savefig(temporary, format="png")
+    save_figure(figure, path)

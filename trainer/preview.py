@@ -6,9 +6,9 @@ import os
 
 import numpy as np
 
-from gratnet.atomic import atomic_path
 from gratnet.display import xyz_to_display_srgb8
 from gratnet.errors import GratNetError
+from gratnet.figures import save_figure
 from gratnet.volume import Volume, volume_axes
 
 
@@ -40,8 +40,7 @@ def save_slice_preview(volume: Volume, path: str | os.PathLike[str], slice_index
         f"exposure {exposure:g} (display sRGB)", fontsize=8,
     )
     figure.tight_layout()
-    with atomic_path(path) as temporary:
-        figure.savefig(temporary, format="png")
+    save_figure(figure, path)
     plt.close(figure)
 
 

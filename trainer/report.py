@@ -12,8 +12,9 @@ from urllib.parse import quote
 
 import numpy as np
 
-from gratnet.atomic import atomic_path, write_text_atomic
+from gratnet.atomic import write_text_atomic
 from gratnet.errors import GratNetError
+from gratnet.figures import save_figure
 from trainer.metrics import _check_pair, _display_srgb, _flip, _psnr
 
 #: Width of one image panel in the comparison figure, inches.
@@ -72,8 +73,7 @@ def comparison_figure(
                     axis.set_title(name, fontsize=9)
         if title:
             figure.suptitle(title, fontsize=10)
-        with atomic_path(path) as temporary:
-            figure.savefig(temporary, format="png", dpi=FIGURE_DPI)
+        save_figure(figure, path, dpi=FIGURE_DPI)
     finally:
         plt.close(figure)
 
