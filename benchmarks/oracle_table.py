@@ -6,10 +6,14 @@ project's own metrics (mean FLIP, PSNR of CIE XYZ inside the view disc) and spli
 involved: this is the floor a network trained on that grid could reach if it interpolated perfectly.
 
     python benchmarks/oracle_table.py VOLUME_DIR [--size 256] [--cache-dir out/cache] [--json out.json]
-        [--figure docs/images/oracle_slices.png] [--device cpu|cuda]
+        [--figure docs/images/oracle_slices.png] [--device cpu|cuda] [--uv-stride 1,2]
 
 Prints one JSON line per volume and a markdown table (FLIP per slice) on stdout. The ground-truth slices
 are cached in --cache-dir (the same cache `gratnet evaluate` uses), so a second run is cheap.
+
+--uv-stride 1,2 also scores each volume with only every 2nd u*/v* sample kept (a 501² lattice from a 1001²
+one, the same w-slices): how the oracle's error depends on the lattice spacing, i.e. whether a finer u*/v*
+lattice (more samples per slice) or more w-slices would lower it, without computing a finer volume.
 """
 
 from __future__ import annotations
@@ -25,7 +29,7 @@ import numpy as np
 from tqdm import tqdm
 
 from gratnet.atomic import atomic_path, write_text_atomic
-from gratnet.volume import read_volume
+from gratnet.volume import Volume, read_volume
 from trainer.brdfslice import SliceConfig, slice_view_directions
 from trainer.diagnostics import REGIONS, VolumeOracle, region_errors, region_labels
 from trainer.evaluate import STANDARD_SLICES, _slice_label, ground_truth_brdf_slice
@@ -35,11 +39,20 @@ from trainer.metrics import image_metrics
 from trainer.report import comparison_figure
 
 
+def decimated(volume: Volume, stride: int) -> Volume:
+    """The volume with every ``stride``-th u*/v* sample kept (both ends included: (R − 1) must divide by it)."""
+    if stride < 1 or (volume.resolution - 1) % stride:
+        raise SystemExit(f"oracle_table: --uv-stride {stride} does not divide the {volume.resolution}² lattice's "
+                         f"{volume.resolution - 1} intervals")
+    return Volume(np.ascontiguousarray(volume.xyz[:, ::stride, ::stride]), dict(volume.metadata))
+
+
 def oracle_rows(volume_path: Path, size: int, cache_dir: str, progress: bool,
-                device: str | None = None) -> tuple[dict[str, Any], list]:
-    """Oracle metrics of one volume (one dict) and its figure rows (label, reference, oracle)."""
+                device: str | None = None, uv_stride: int = 1) -> tuple[dict[str, Any], list]:
+    """Oracle metrics of one volume (one dict) and its figure rows (label, reference, oracle); ``uv_stride``:
+    keep every such u*/v* sample only (:func:`decimated`)."""
     started = time.perf_counter()
-    volume = read_volume(volume_path)
+    volume = decimated(read_volume(volume_path), uv_stride)
     metadata = volume.metadata
     source = str(metadata.get("source", ""))
     if not source.startswith(("generator:", "dataset:")):
@@ -58,9 +71,10 @@ def oracle_rows(volume_path: Path, size: int, cache_dir: str, progress: bool,
         label = _slice_label(theta, phi, exposure)
         slices.append({"slice": label, **image_metrics(reference, predicted, mask=inside),
                        "regions": region_errors(reference, predicted, labels)})
-        figure.append((f"{volume_path.stem} {label}", reference, predicted))
+        figure.append((f"{volume_path.stem} {volume.resolution}² {label}", reference, predicted))
     row = {
-        "volume": volume_path.name, "source": source, "resolution": volume.resolution, "slices": volume.slices,
+        "volume": volume_path.name, "source": source, "resolution": volume.resolution, "uv_stride": uv_stride,
+        "slices": volume.slices,
         "scheme": metadata.get("scheme"), "sigma_s_um": optics.sigma_s_um, "size": size,
         "volume_bytes": int(volume.xyz.astype(np.float32).nbytes), "brdf_slices": slices,
         "seconds": round(time.perf_counter() - started, 1),
@@ -94,7 +108,15 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--quiet", action="store_true", help="no progress bars")
     parser.add_argument("--device", default="cpu", help="where uncached ground-truth slices are computed: cpu "
                         "(numpy) or cuda (as gratnet groundtruth --device)")
+    parser.add_argument("--uv-stride", default="1", help="comma-separated strides: score each volume with every "
+                        "N-th u*/v* sample kept, for each N (1: the volume as it is)")
     arguments = parser.parse_args(argv)
+    try:
+        strides = [int(text) for text in arguments.uv_stride.split(",")]
+    except ValueError:
+        parser.error(f"--uv-stride takes comma-separated whole numbers, got {arguments.uv_stride!r}")
+    if min(strides) < 1:
+        parser.error(f"--uv-stride: every stride must be ≥ 1, got {arguments.uv_stride!r}")
     from trainer.groundtruth import ComputeConfig
 
     device = ComputeConfig(arguments.device).resolve()
@@ -104,10 +126,11 @@ def main(argv: list[str] | None = None) -> int:
         return 2
     rows, figure_rows = [], []
     for path in tqdm(paths, desc="volumes", disable=arguments.quiet):
-        row, figure = oracle_rows(path, arguments.size, arguments.cache_dir, not arguments.quiet, device)
-        print(json.dumps(row), flush=True)
-        rows.append(row)
-        figure_rows.extend(figure)
+        for stride in strides:
+            row, figure = oracle_rows(path, arguments.size, arguments.cache_dir, not arguments.quiet, device, stride)
+            print(json.dumps(row), flush=True)
+            rows.append(row)
+            figure_rows.extend(figure)
     if arguments.json:
         write_text_atomic(arguments.json, json.dumps(rows, indent=1) + "\n")
     if arguments.figure:
