@@ -7,6 +7,7 @@ involved: this is the floor a network trained on that grid could reach if it int
 
     python benchmarks/oracle_table.py VOLUME_DIR [--size 256] [--cache-dir out/cache] [--json out.json]
         [--figure docs/images/oracle_slices.png] [--device cpu|cuda] [--uv-stride 1,2]
+        [--stride-figure docs/images/oracle_uv_stride.png]
 
 Prints one JSON line per volume and a markdown table (FLIP per slice) on stdout. The ground-truth slices
 are cached in --cache-dir (the same cache `gratnet evaluate` uses), so a second run is cheap.
@@ -98,6 +99,44 @@ def markdown(rows: list[dict[str, Any]]) -> str:
     return "\n".join(lines) + "\n"
 
 
+def stride_figure(rows: list[dict[str, Any]], path: Path) -> None:
+    """One panel per volume: each slice's oracle FLIP against the u*/v* nodes per axis (log-log), and the
+    worst slice over the (0°, 0°) slice beside each lattice."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from gratnet.figures import save_figure
+
+    volumes = list(dict.fromkeys(row["volume"] for row in rows))
+    figure, axes = plt.subplots(1, len(volumes), figsize=(4.2 * len(volumes), 3.6), squeeze=False)
+    for axis, name in zip(axes[0], volumes, strict=True):
+        mine = sorted((row for row in rows if row["volume"] == name), key=lambda row: row["resolution"])
+        nodes = [row["resolution"] for row in mine]
+        for index, label in enumerate(slice_["slice"] for slice_ in mine[0]["brdf_slices"]):
+            axis.plot(nodes, [row["brdf_slices"][index]["flip"] for row in mine], "o-", label=label)
+        for row in mine:
+            flips = [slice_["flip"] for slice_ in row["brdf_slices"]]
+            axis.annotate(f"{max(flips[1:]) / flips[0]:.2f}×", (row["resolution"], max(flips)),
+                          textcoords="offset points", xytext=(0, 6), ha="center", fontsize=8)
+        axis.set_xscale("log")
+        axis.set_yscale("log")
+        axis.set_xticks(nodes, [f"{n}²" for n in nodes])
+        axis.minorticks_off()
+        axis.set_xlabel("u*/v* nodes of the lattice")
+        axis.set_ylabel("oracle mean FLIP")
+        axis.set_title(f"{name} ({mine[0]['slices']} w-slices)", fontsize=9)
+        axis.grid(True, which="major", alpha=0.3)
+        axis.margins(y=0.2)
+    axes[0][0].legend(fontsize=7)
+    figure.suptitle("Interpolation oracle against lattice spacing (labels: worst other slice / (0°, 0°))",
+                    fontsize=9)
+    figure.tight_layout()
+    save_figure(figure, path, dpi=100)
+    plt.close(figure)
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("volumes", type=Path, help="folder of ground-truth volumes (*.exr)")
@@ -110,6 +149,8 @@ def main(argv: list[str] | None = None) -> int:
                         "(numpy) or cuda (as gratnet groundtruth --device)")
     parser.add_argument("--uv-stride", default="1", help="comma-separated strides: score each volume with every "
                         "N-th u*/v* sample kept, for each N (1: the volume as it is)")
+    parser.add_argument("--stride-figure", type=Path, help="PNG: each slice's oracle FLIP against the lattice's "
+                        "nodes, one panel per volume (with --uv-stride of two or more strides)")
     arguments = parser.parse_args(argv)
     try:
         strides = [int(text) for text in arguments.uv_stride.split(",")]
@@ -117,6 +158,8 @@ def main(argv: list[str] | None = None) -> int:
         parser.error(f"--uv-stride takes comma-separated whole numbers, got {arguments.uv_stride!r}")
     if min(strides) < 1:
         parser.error(f"--uv-stride: every stride must be ≥ 1, got {arguments.uv_stride!r}")
+    if arguments.stride_figure and len(set(strides)) < 2:
+        parser.error("--stride-figure needs --uv-stride with two or more strides")
     from trainer.groundtruth import ComputeConfig
 
     device = ComputeConfig(arguments.device).resolve()
@@ -136,6 +179,8 @@ def main(argv: list[str] | None = None) -> int:
     if arguments.figure:
         with atomic_path(arguments.figure) as temporary:
             comparison_figure(temporary, figure_rows, title="interpolation oracle: ground truth | oracle | FLIP")
+    if arguments.stride_figure:
+        stride_figure(rows, arguments.stride_figure)
     print(markdown(rows))
     return 0
 
