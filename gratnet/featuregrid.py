@@ -22,8 +22,11 @@ import array_api_compat
 
 from gratnet.errors import GratNetError
 
-#: Most features per level: one RGBA texture per level in the shader.
-MAX_FEATURES = 4
+#: Most features per level: the shader packs a level's C features into ceil(C/4) RGBA textures ("chunks"),
+#: so 8 costs a level two textures (shaders/featuregrid.glsl).
+MAX_FEATURES = 8
+#: Features per texture (RGBA) in the shader: chunk k of a level holds features 4k … 4k + 3.
+CHUNK_FEATURES = 4
 #: How features are interpolated between nodes: ``linear`` (trilinear, C⁰: its kinks at the cell faces show
 #: as a lattice of lines in slices) or ``smoothstep`` (trilinear with each axis' cell fraction f replaced by
 #: f²(3 − 2f): C¹, the same eight nodes, and on a GPU still one hardware-filtered fetch).
@@ -35,6 +38,11 @@ def check_interpolation(interpolation: str) -> str:
     if interpolation not in INTERPOLATIONS:
         raise GratNetError(f"grid interpolation must be one of {', '.join(INTERPOLATIONS)}, got {interpolation!r}")
     return interpolation
+
+
+def grid_chunks(features: int) -> int:
+    """Textures per level in the shader for ``features`` features per level: ``ceil(features / 4)``."""
+    return -(-int(features) // CHUNK_FEATURES)
 
 
 def _cell(xp: Any, c: Any, nodes: int) -> tuple[Any, Any]:

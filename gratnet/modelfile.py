@@ -19,7 +19,7 @@ File layout (a contract; also documented in ``docs/formats.md``, section "Model 
 
 A *feature-grid* model (docs/physics.md "Feature-grid network") has, in addition, ``grid_0``, ``grid_1``, …
 (coarse to fine; ``float16`` or ``float32``, all of one dtype; ``(T_l, R_l, R_l, C)``: axes c_t, c_v, c_u,
-feature, ``1 ≤ C ≤ 4`` the same for every level, every axis ≥ 2 nodes) and the JSON key ``grid``
+feature, ``1 ≤ C ≤ 8`` the same for every level, every axis ≥ 2 nodes) and the JSON key ``grid``
 (``{"levels": [[T_l, R_l, R_l, C], …], "dtype": "float16"|"float32"}``, and ``"interpolation":
 "smoothstep"`` when the grids are interpolated so; absent means ``linear``); such files have ``format_version``
 2 (a GratNet that reads only version 1 then says so), and ``layer_sizes[0]`` is ``L·C`` grid features plus
@@ -385,7 +385,8 @@ def _check_grids(grids: object, where: str, *, from_file: bool) -> list[np.ndarr
             raise GratNetError(f"{where}: {label} must be float16 or float32, got {array.dtype}{corrupt}")
         if array.ndim != 4 or min(array.shape[:3]) < 2 or not 1 <= array.shape[3] <= MAX_FEATURES:
             raise GratNetError(f"{where}: {label} has shape {array.shape}; a feature grid is (T, R, R, C) with "
-                               f"T, R ≥ 2 nodes and 1 ≤ C ≤ {MAX_FEATURES} features")
+                               f"T, R ≥ 2 nodes and 1 ≤ C ≤ {MAX_FEATURES} features (the shader reads a level "
+                               f"as ceil(C/4) RGBA textures)")
         if array.shape[1] != array.shape[2]:
             raise GratNetError(f"{where}: {label} has shape {array.shape}; u* and v* need the same node count")
         if checked and (array.dtype != checked[0].dtype or array.shape[3] != checked[0].shape[3]):

@@ -1,9 +1,11 @@
 // Learned feature grids (docs/physics.md "Feature-grid network", eq. 6g); mirrors gratnet/featuregrid.py.
 //
-// Compiled in only with #define GRID_LEVELS (levels) and GRID_FEATURES (C, 1..4), set from the model file:
-// one 3D texture per level, (R_u, R_v, T) texels of C channels (R16F.. RGBA16F or 32F), node i of an axis
-// of N nodes at c = -1 + 2i/(N-1), i.e. at the texel centre (i + 0.5)/N. The MLP's input is the L*C grid
-// features, level 0 first, then the encoding (encoding.glsl).
+// Compiled in only with #define GRID_LEVELS (levels), GRID_FEATURES (C, 1..8) and GRID_CHUNKS (ceil(C/4)), set
+// from the model file: GRID_CHUNKS 3D textures per level ("chunks"; u_grid[level * GRID_CHUNKS + k] holds
+// features 4k..4k+3 of the level), each (R_u, R_v, T) texels of up to 4 channels (R16F.. RGBA16F or 32F; the
+// last chunk has only the channels it needs, C - 4k), node i of an axis of N nodes at c = -1 + 2i/(N-1), i.e.
+// at the texel centre (i + 0.5)/N. The MLP's input is the L*C grid features, level 0 first, then the encoding
+// (encoding.glsl).
 //
 // u_grid_smoothstep (the model file's grid interpolation): 1 moves p within its cell so that linear
 // interpolation there is smoothstep interpolation (f -> f^2 (3 - 2f) per axis; gratnet.featuregrid
@@ -15,10 +17,12 @@
 //      on NVIDIA hardware): cheaper, less exact (docs/benchmarks.md, "Feature-grid network").
 
 #ifdef GRID_LEVELS
-uniform highp sampler3D u_grid[GRID_LEVELS];
+uniform highp sampler3D u_grid[GRID_LEVELS * GRID_CHUNKS];
 uniform int u_grid_hardware_filter;
 uniform int u_grid_smoothstep;
-vec4 g_grid_features[GRID_LEVELS];  // this fragment's features, level by level (.x .. first C lanes)
+// This fragment's features, chunk by chunk as u_grid: lanes 0..3 of [level * GRID_CHUNKS + k] are the level's
+// features 4k..4k+3 (a last chunk's lanes beyond C hold no feature).
+vec4 g_grid_features[GRID_LEVELS * GRID_CHUNKS];
 
 vec4 grid_level_features(highp sampler3D grid, vec3 c) {
     vec3 nodes = vec3(textureSize(grid, 0));
@@ -46,17 +50,20 @@ vec4 grid_level_features(highp sampler3D grid, vec3 c) {
     return sum;
 }
 
-// Fetch every level's features at the network coordinates of the key set by encoding_set_key.
+// Fetch every level's features at the network coordinates of the key set by encoding_set_key. Each chunk
+// redoes its level's cell arithmetic (a few flops beside its eight fetches): one texture per level, as
+// before chunks, is then the same code.
 void grid_set_key() {
-    for (int level = 0; level < GRID_LEVELS; ++level) {
-        g_grid_features[level] = grid_level_features(u_grid[level], g_coordinates);
+    for (int chunk = 0; chunk < GRID_LEVELS * GRID_CHUNKS; ++chunk) {
+        g_grid_features[chunk] = grid_level_features(u_grid[chunk], g_coordinates);
     }
 }
 
 float network_input_feature(int f) {
     if (f < GRID_LEVELS * GRID_FEATURES) {
         int level = f / GRID_FEATURES;
-        return g_grid_features[level][f - level * GRID_FEATURES];
+        int within = f - level * GRID_FEATURES;  // the level's feature, in chunk within / 4, lane within % 4
+        return g_grid_features[level * GRID_CHUNKS + within / 4][within % 4];
     }
     return encoded_feature(f - GRID_LEVELS * GRID_FEATURES);
 }

@@ -92,12 +92,12 @@ def test_smoothstep_interpolation_is_the_smoothstep_of_the_cell_fraction():
         grid_features([grid], points, "cubic")
 
 
-@pytest.mark.parametrize("interpolation", ["linear", "smoothstep"])
-def test_torch_grid_sample_matches_the_numpy_evaluator(interpolation):
+@pytest.mark.parametrize(("interpolation", "features"), [("linear", 4), ("smoothstep", 4), ("linear", 6)])
+def test_torch_grid_sample_matches_the_numpy_evaluator(interpolation, features):
     torch.manual_seed(0)
     encoding = EncodingSpec.for_grid(21, 5, 3, 2)
-    network = GridNetwork(encoding, [(3, 5, 5, 4), (5, 9, 9, 4)], [8], init=1.0, grid_dtype="float32",
-                          interpolation=interpolation)
+    network = GridNetwork(encoding, [(3, 5, 5, features), (5, 9, 9, features)], [8], init=1.0,
+                          grid_dtype="float32", interpolation=interpolation)
     points = torch.rand(300, 3, dtype=torch.float64) * 2.2 - 1.1  # some outside [−1, 1]: clamped alike
     with torch.no_grad():
         expected = network.double().features(points).numpy()
@@ -194,6 +194,40 @@ def test_bad_grids_are_refused_with_a_clear_message(tmp_path):
         load_model(tmp_path / "corrupt.npz")
 
 
+def test_up_to_8_features_per_level_and_9_refused(tmp_path):
+    """C = 8 (two RGBA textures per level in the shader) saves and loads; C = 9 is refused with the limit named,
+    by the model-file writer and loader and by the trainer's --grid-features."""
+    rng = np.random.default_rng(7)
+    encoding = EncodingSpec.for_grid(21, 5, 2, 1)
+
+    def model_with(features: int) -> ModelFile:
+        sizes = [2 * features + encoding.features, 3]
+        return ModelFile(sizes, [rng.normal(size=(3, sizes[0])).astype(np.float32)], [np.zeros(3, np.float32)],
+                         "relu", "clamp", encoding, RangeSpec(), "simple-max",
+                         grids=[rng.normal(size=(2, n, n, features)).astype(np.float16) for n in (3, 5)])
+
+    save_model(tmp_path / "eight.npz", model_with(8))
+    assert [grid.shape for grid in load_model(tmp_path / "eight.npz").grids] == [(2, 3, 3, 8), (2, 5, 5, 8)]
+    message = r"1 ≤ C ≤ 8 features \(the shader reads a level as ceil\(C/4\) RGBA textures\)"
+    with pytest.raises(GratNetError, match=message):
+        save_model(tmp_path / "nine.npz", model_with(9))
+    # A file with 9 features per level (written past the writer's check): the loader refuses it alike.
+    with np.load(tmp_path / "eight.npz") as archive:
+        arrays = {name: archive[name] for name in archive.files}
+    header = json.loads(str(arrays["metadata_json"]))
+    for level, nodes in enumerate((3, 5)):
+        arrays[f"grid_{level}"] = np.zeros((2, nodes, nodes, 9), np.float16)
+        header["grid"]["levels"][level] = [2, nodes, nodes, 9]
+    arrays["metadata_json"] = np.array(json.dumps(header))
+    np.savez(tmp_path / "nine.npz", **arrays)
+    with pytest.raises(GratNetError, match=message):
+        load_model(tmp_path / "nine.npz")
+    assert TrainConfig(architecture="grid", grid_features=8).grid_shapes()[0][3] == 8
+    for bad in (0, 9):
+        with pytest.raises(GratNetError, match=f"--grid-features must be from 1 to 8, got {bad}"):
+            TrainConfig(architecture="grid", grid_features=bad)
+
+
 def test_grid_training_smoke_and_torch_numpy_round_trip(tmp_path):
     from trainer.fourier import OpticsConfig
     from trainer.generators import generate
@@ -251,7 +285,9 @@ def _keys(count: int = 400) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
 
 @pytest.mark.parametrize(("features", "levels", "dtype", "interpolation"),
                          [(2, 3, "float16", "linear"), (4, 2, "float32", "linear"), (3, 1, "float16", "linear"),
-                          (2, 3, "float16", "smoothstep"), (4, 1, "float32", "smoothstep")])
+                          (2, 3, "float16", "smoothstep"), (4, 1, "float32", "smoothstep"),
+                          # Two RGBA textures per level (featuregrid.glsl's chunks): full, and a partial last one.
+                          (6, 3, "float16", "linear"), (5, 2, "float32", "smoothstep"), (8, 1, "float16", "linear")])
 @pytest.mark.parametrize("grid_filter", ["manual", "hardware"])
 def test_gpu_grid_model_matches_numpy(ctx, features, levels, dtype, interpolation, grid_filter):
     from viewer.renderer import NetworkRenderer
@@ -272,17 +308,20 @@ def test_gpu_grid_model_matches_numpy(ctx, features, levels, dtype, interpolatio
     np.testing.assert_allclose(actual, expected, rtol=1e-4 if grid_filter == "manual" else 1e-2, atol=1e-12)
 
 
-def test_gpu_grid_features_alone_match_numpy(ctx):
+@pytest.mark.parametrize(("features", "picked"), [(4, (4, 5, 0)),
+                                                 # level 1 features 5, 0 and level 0 feature 4: second textures
+                                                 (6, (11, 6, 4))])
+def test_gpu_grid_features_alone_match_numpy(ctx, features, picked):
     """A network that outputs three grid features: the interpolation itself, without the MLP's mixing."""
     from gratnet.modelfile import mlp_forward, network_inputs
     from viewer.renderer import NetworkRenderer
 
     rng = np.random.default_rng(6)
     spec = EncodingSpec.for_grid(101, 5, 4, 2)
-    grids = [rng.uniform(0, 1, (5, nodes, nodes, 4)).astype(np.float16) for nodes in (7, 33)]
-    weights = np.zeros((3, 8 + spec.features), np.float32)
-    weights[0, 4], weights[1, 5], weights[2, 0] = 1.0, 1.0, 1.0  # level 1 features 0, 1 and level 0 feature 0
-    model = ModelFile([8 + spec.features, 3], [weights], [np.zeros(3, np.float32)], "relu", "none", spec,
+    grids = [rng.uniform(0, 1, (5, nodes, nodes, features)).astype(np.float16) for nodes in (7, 33)]
+    weights = np.zeros((3, 2 * features + spec.features), np.float32)
+    weights[[0, 1, 2], list(picked)] = 1.0  # input column = level · C + feature
+    model = ModelFile([2 * features + spec.features, 3], [weights], [np.zeros(3, np.float32)], "relu", "none", spec,
                       RangeSpec(), "simple-max", grids=grids)
     u, v, w = _keys(2000)
     for interpolation in ("linear", "smoothstep"):
@@ -298,12 +337,13 @@ def test_gpu_grid_features_alone_match_numpy(ctx):
             np.testing.assert_allclose(actual, expected, rtol=0, atol=tolerance)
 
 
-def test_gpu_grid_brdf_slice_matches_numpy(ctx):
+@pytest.mark.parametrize(("features", "levels"), [(4, 2), (6, 3)])
+def test_gpu_grid_brdf_slice_matches_numpy(ctx, features, levels):
     from gratnet.brdf import a_term, direction, slice_view_directions
     from viewer.renderer import NetworkRenderer
 
     size, theta, phi, exposure = 24, 30.0, 40.0, 2.0
-    model = _random_grid_model(4, 2, "float16")
+    model = _random_grid_model(features, levels, "float16")
     views, inside = slice_view_directions(size)
     light = direction(theta, phi)
     key = -(light + views)
@@ -317,35 +357,39 @@ def test_gpu_grid_brdf_slice_matches_numpy(ctx):
     np.testing.assert_allclose(exposed, expected, rtol=1e-4, atol=1e-3 * float(np.abs(expected).max()))
 
 
-@pytest.mark.parametrize("interpolation", ["linear", "smoothstep"])
-def test_baked_path_evaluates_grid_models_like_numpy(ctx, interpolation):
+@pytest.mark.parametrize(("features", "levels", "interpolation"),
+                         [(3, 2, "linear"), (3, 2, "smoothstep"), (6, 3, "linear"), (5, 2, "smoothstep")])
+def test_baked_path_evaluates_grid_models_like_numpy(ctx, features, levels, interpolation):
     """The baked MLP reads the grid features (featuregrid.glsl, included before mlp.glsl) as its first inputs:
     the same outputs as numpy. Only when asked for: auto keeps grid models on the texture path."""
     from viewer.renderer import NetworkRenderer, choose_weights_path
 
-    model = _random_grid_model(3, 2, "float16")
+    model = _random_grid_model(features, levels, "float16")
     model.grid_interpolation = interpolation
     assert choose_weights_path(ctx, model, "auto") == "texture"
     assert choose_weights_path(ctx, model, "baked") == "baked"
     u, v, w = _keys()
     expected = evaluate_keys(model, u, v, w)
+    last = levels * -(-features // 4) - 1  # the last chunk of the last level
     with NetworkRenderer(ctx, model, weights_path="baked") as renderer:
-        assert renderer.weights_path == "baked" and "g_grid_features[1]" in renderer.baked_source
+        assert renderer.weights_path == "baked" and f"g_grid_features[{last}]" in renderer.baked_source
+        assert f"g_grid_features[{last + 1}]" not in renderer.baked_source
         baked = renderer.evaluate_keys(u, v, w)
     np.testing.assert_allclose(baked, expected, rtol=1e-4, atol=1e-12)
     with pytest.raises(GratNetError, match="grid filter"):
         NetworkRenderer(ctx, model, grid_filter="cubic")
 
 
-@pytest.mark.parametrize("interpolation", ["linear", "smoothstep"])
-def test_deferred_path_renders_grid_models_like_the_forward_path(ctx, interpolation):
+@pytest.mark.parametrize(("features", "levels", "interpolation"),
+                         [(4, 2, "linear"), (4, 2, "smoothstep"), (6, 3, "linear"), (5, 2, "smoothstep")])
+def test_deferred_path_renders_grid_models_like_the_forward_path(ctx, features, levels, interpolation):
     """The deferred compute pass fetches the same grids (mlp.glsl includes featuregrid.glsl) for every weights
     source it reads the MLP from, and equals the forward path at every pixel of a disc scene."""
     from viewer.camera import Camera, Light
     from viewer.meshes import compact_disc
     from viewer.scene import SceneRenderer
 
-    model = _random_grid_model(4, 2, "float16")
+    model = _random_grid_model(features, levels, "float16")
     model.grid_interpolation = interpolation
     mesh, camera, light = compact_disc(segments=32), Camera(0.2, -90.0, 50.0), Light.directional(30.0, 180.0)
     forward = SceneRenderer(ctx, model, weights_path="texture", render_path="forward")
@@ -364,3 +408,28 @@ def test_deferred_path_renders_grid_models_like_the_forward_path(ctx, interpolat
         finally:
             deferred.release()
         np.testing.assert_allclose(actual, expected, rtol=1e-5, atol=1e-6 * np.abs(expected).max())
+
+
+def test_grid_textures_beyond_the_context_are_refused(ctx):
+    """A model whose levels × ceil(C/4) grid textures do not fit the context's texture units is refused with a
+    clear message before any shader is compiled (here: 2 textures per level, one level too many)."""
+    from viewer.renderer import NetworkRenderer, check_grid_texture_units
+
+    per_stage = min(int(ctx.info["GL_MAX_TEXTURE_IMAGE_UNITS"]), int(ctx.info["GL_MAX_COMPUTE_TEXTURE_IMAGE_UNITS"]))
+    levels = (per_stage - 4) // 2 + 1  # 4: the other samplers a program may have
+    rng = np.random.default_rng(8)
+    spec = EncodingSpec.for_grid(21, 5, 2, 1)
+    sizes = [levels * 6 + spec.features, 3]
+    model = ModelFile(sizes, [rng.normal(size=(3, sizes[0])).astype(np.float32)], [np.zeros(3, np.float32)],
+                      "relu", "clamp", spec, RangeSpec(), "simple-max",
+                      grids=[rng.normal(size=(2, 3, 3, 6)).astype(np.float16) for _ in range(levels)])
+    with pytest.raises(GratNetError, match=f"needs {2 * levels} grid textures .* use fewer levels or features"):
+        NetworkRenderer(ctx, model, weights_path="texture")
+    # The limits themselves, and GL 4.3's minima where the context does not say (16 samplers per stage).
+    limits = {"GL_MAX_COMBINED_TEXTURE_IMAGE_UNITS": 96, "GL_MAX_TEXTURE_IMAGE_UNITS": 32,
+              "GL_MAX_COMPUTE_TEXTURE_IMAGE_UNITS": 32}
+    check_grid_texture_units(limits, 28)
+    for info, textures in ((limits, 29), ({**limits, "GL_MAX_COMBINED_TEXTURE_IMAGE_UNITS": 20}, 13), ({}, 13)):
+        with pytest.raises(GratNetError, match=f"needs {textures} grid textures"):
+            check_grid_texture_units(info, textures)
+    check_grid_texture_units({}, 12)

@@ -24,6 +24,7 @@ from __future__ import annotations
 import numpy as np
 
 from gratnet.errors import GratNetError
+from gratnet.featuregrid import CHUNK_FEATURES, grid_chunks
 from gratnet.modelfile import LEAKY_RELU_SLOPE, ModelFile, texture_layout
 
 __all__ = ["baked_encoded_inputs", "baked_mlp_source", "float_literal"]
@@ -129,12 +130,16 @@ def baked_mlp_source(model: ModelFile, name: str = "model") -> str:
     # them (output-major): on llvmpipe at 28k MACs this ran 2x faster than input-major with SiLU. No loop
     # and no array: a const mat4[] indexed in a loop over encoded_block(i) took minutes of JIT at 28k MACs.
     ob = out_blocks(0)
-    # A feature-grid model's inputs are its grid features first (featuregrid.glsl fetches them into
-    # g_grid_features[level], the first C lanes), then the encoding: its columns follow the grids'.
+    # A feature-grid model's inputs are its grid features first (featuregrid.glsl fetches chunk k of level l,
+    # the level's features 4k … 4k + 3, into g_grid_features[l * chunks + k]; a last chunk's lanes beyond C
+    # hold none), then the encoding: its columns follow the grids'.
     grid_width = model.grid_feature_count
     channels = int(model.grids[0].shape[-1]) if model.grids else 0
-    encoded = [("", f"g_grid_features[{level}]", [level * channels + c if c < channels else -1 for c in range(4)])
-               for level in range(len(model.grids))]
+    chunks = grid_chunks(channels)
+    encoded = [("", f"g_grid_features[{level * chunks + k}]",
+                [level * channels + c if c < channels else -1
+                 for c in range(CHUNK_FEATURES * k, CHUNK_FEATURES * (k + 1))])
+               for level in range(len(model.grids)) for k in range(chunks)]
     encoded += [(declaration, name, [f + grid_width if f >= 0 else -1 for f in features])
                 for declaration, name, features in baked_encoded_inputs(model)]
     lines.append(f"    // layer 1: {model.weights[0].shape[1]} -> {model.weights[0].shape[0]}")

@@ -371,7 +371,8 @@ def _cache_key(scene: SceneRenderer) -> str:
 
 
 def _grid_signature(model: ModelFile) -> str:
-    """A feature-grid model's levels (their fetches cost both paths alike, but not alike to a pure MLP)."""
+    """A feature-grid model's levels (their fetches cost both paths alike, but not alike to a pure MLP); each
+    level's shape names its C, hence its ceil(C/4) textures."""
     if not model.grids:
         return "mlp"
     return "grid:" + ",".join("x".join(map(str, np.shape(grid))) for grid in model.grids)

@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import logging
 import math
+from collections.abc import Mapping
 from pathlib import Path
 
 import moderngl
@@ -23,6 +24,7 @@ from gratnet.bounds import DISPLAY_SKIP_THRESHOLD, OutputBounds, display_skip_ma
 from gratnet.brdf import direction
 from gratnet.display import xyz_to_display_srgb8
 from gratnet.errors import GratNetError
+from gratnet.featuregrid import CHUNK_FEATURES, grid_chunks
 from gratnet.modelfile import LEAKY_RELU_SLOPE, ModelFile, pack_texture, texture_layout
 from viewer.baked import baked_mlp_source
 from viewer.glsl import GeneratedSource, compile_program
@@ -33,6 +35,7 @@ __all__ = [
     "STATISTICS_KEYS",
     "WEIGHTS_PATHS",
     "NetworkRenderer",
+    "check_grid_texture_units",
     "choose_weights_path",
     "model_defines",
     "xyz_to_linear_srgb_matrix",
@@ -63,7 +66,12 @@ STATISTICS_KEYS = ("fragments", "evaluations", "skipped_a_zero", "skipped_bound"
 _SKIP_COUNTER_BINDING = 5  # SSBO binding of the counters (shaders/skip.glsl)
 _SKIP_COUNTER_SLOTS = 8
 _SKIP_BOUND_UNIT = 3  # texture unit of u_skip_bound (weights: 0; evaluate_keys/display inputs: 1, 2)
-_GRID_UNIT = 8  # texture unit of a feature-grid model's level 0 (level l: _GRID_UNIT + l; featuregrid.glsl)
+#: Texture unit of a feature-grid model's first grid texture: chunk k of level l (featuregrid.glsl) is on unit
+#: _GRID_UNIT + l * chunks + k, chunks = ceil(C/4) (level l: _GRID_UNIT + l when C ≤ 4).
+_GRID_UNIT = 8
+#: Samplers a program may have besides the grids, on units 0–3 (u_weights; evaluate_keys' u_inputs, u_inputs2;
+#: u_skip_bound): a stage's sampler limit must leave room for them beside the grid textures.
+_OTHER_SAMPLERS = 4
 #: How a feature-grid model's grids are interpolated (shaders/featuregrid.glsl): ``manual`` (eight texelFetches,
 #: float32 weights: eq. 6g exactly) or ``hardware`` (one GL_LINEAR texture() call; GPUs may quantise the weights).
 GRID_FILTERS = ("manual", "hardware")
@@ -81,8 +89,30 @@ def model_defines(model: ModelFile) -> dict[str, int | float]:
         "LEAKY_RELU_SLOPE": float(LEAKY_RELU_SLOPE),
     }
     if model.grids:  # shaders/featuregrid.glsl is compiled in only for feature-grid models
-        defines.update({"GRID_LEVELS": len(model.grids), "GRID_FEATURES": int(model.grids[0].shape[-1])})
+        features = int(model.grids[0].shape[-1])
+        defines.update({"GRID_LEVELS": len(model.grids), "GRID_FEATURES": features,
+                        "GRID_CHUNKS": grid_chunks(features)})
     return defines
+
+
+def check_grid_texture_units(info: Mapping[str, object], textures: int) -> None:
+    """Refuse (:class:`GratNetError`) a feature-grid model whose ``textures`` grid textures (levels × chunks) do
+    not fit the context (``ctx.info``): their units _GRID_UNIT … must exist, and the fragment and compute
+    stages must take them beside the programs' other samplers. Missing limits count as GL 4.3's minima."""
+    def limit(name: str, minimum: int) -> int:
+        value = info.get(name, minimum)
+        return int(value) if isinstance(value, (int, np.integer)) else minimum
+
+    if textures == 0:
+        return
+    combined = limit("GL_MAX_COMBINED_TEXTURE_IMAGE_UNITS", 96)
+    per_stage = min(limit("GL_MAX_TEXTURE_IMAGE_UNITS", 16), limit("GL_MAX_COMPUTE_TEXTURE_IMAGE_UNITS", 16))
+    if _GRID_UNIT + textures > combined or _OTHER_SAMPLERS + textures > per_stage:
+        raise GratNetError(
+            f"the feature-grid model needs {textures} grid textures (levels × ceil(features/4)) on texture units "
+            f"{_GRID_UNIT}…{_GRID_UNIT + textures - 1}, plus up to {_OTHER_SAMPLERS} other samplers per shader, but "
+            f"this OpenGL context has {combined} texture units and {per_stage} samplers per fragment/compute shader: "
+            f"use fewer levels or features per level")
 
 
 def _split_frequency(value: float) -> tuple[float, float]:
@@ -222,14 +252,22 @@ class NetworkRenderer:
         self._weights = ctx.texture((width, height), 4, np.ascontiguousarray(texture).tobytes(), dtype="f4")
         self._weights.filter = (moderngl.NEAREST, moderngl.NEAREST)  # texelFetch ignores it; be explicit
         self._weights.repeat_x = self._weights.repeat_y = False
+        # A feature-grid model's grids: per level (T, R_v, R_u, C) → ceil(C/4) (R_u, R_v, T) textures, chunk k
+        # holding features 4k … 4k + 3 in float channels; a last partial chunk has only the C − 4k channels it
+        # needs (no padding bytes; the shader reads no lane beyond C, the baked MLP weighs them 0). With C ≤ 4:
+        # one texture per level, exactly as before chunks. Units: _GRID_UNIT + level * chunks + k.
         self._grids: list[moderngl.Texture] = []
-        for grid in model.grids:  # (T, R_v, R_u, C) → a (R_u, R_v, T) texture of C float channels
+        if model.grids:
+            check_grid_texture_units(ctx.info, len(model.grids) * grid_chunks(model.grids[0].shape[-1]))
+        for grid in model.grids:
             dtype = "f2" if grid.dtype == np.float16 else "f4"
-            level = ctx.texture3d((grid.shape[2], grid.shape[1], grid.shape[0]), grid.shape[3],
-                                  np.ascontiguousarray(grid).tobytes(), dtype=dtype)
-            level.filter = (moderngl.LINEAR, moderngl.LINEAR)  # texelFetch ignores it; texture() filters
-            level.repeat_x = level.repeat_y = level.repeat_z = False  # clamp to edge: eq. 6g clamps c
-            self._grids.append(level)
+            for first in range(0, grid.shape[3], CHUNK_FEATURES):
+                chunk = grid[..., first:first + CHUNK_FEATURES]
+                texture3d = ctx.texture3d((grid.shape[2], grid.shape[1], grid.shape[0]), chunk.shape[3],
+                                          np.ascontiguousarray(chunk).tobytes(), dtype=dtype)
+                texture3d.filter = (moderngl.LINEAR, moderngl.LINEAR)  # texelFetch ignores it; texture() filters
+                texture3d.repeat_x = texture3d.repeat_y = texture3d.repeat_z = False  # clamp to edge: eq. 6g clamps c
+                self._grids.append(texture3d)
         self._programs: dict[str, moderngl.Program] = {}
         self._vertex_arrays: dict[str, moderngl.VertexArray] = {}
         # Skipping work (gratnet/bounds.py, shaders/skip.glsl): the bound table and the counters are made on
@@ -306,8 +344,8 @@ class NetworkRenderer:
         on the baked path."""
         if self.weights_path == "texture":
             self._weights.use(location=location)
-        for level, grid in enumerate(self._grids):  # a feature-grid model's grids, on their fixed units
-            grid.use(location=_GRID_UNIT + level)
+        for index, grid in enumerate(self._grids):  # a feature-grid model's grid textures, on their fixed units
+            grid.use(location=_GRID_UNIT + index)
 
     def _draw(self, name: str, framebuffer: moderngl.Framebuffer,
               textures: tuple[tuple[moderngl.Texture, int], ...] = (),
@@ -321,7 +359,7 @@ class NetworkRenderer:
             with scope:
                 framebuffer.use()  # the scope binds the framebuffer but leaves the viewport as it was
                 weights = ((self._weights, 0),) if self.weights_path == "texture" else ()
-                weights += tuple((grid, _GRID_UNIT + level) for level, grid in enumerate(self._grids))
+                weights += tuple((grid, _GRID_UNIT + index) for index, grid in enumerate(self._grids))
                 for texture, unit in (*weights, *textures):
                     texture.use(location=unit)
                 if scissor is not None:
@@ -642,6 +680,9 @@ class NetworkRenderer:
         for program in self._programs.values():
             program.release()
         self._weights.release()
+        for grid in self._grids:
+            grid.release()
+        self._grids.clear()
         self._skip_placeholder.release()
         for resource in (self._skip_texture, self._skip_counters):
             if resource is not None:
