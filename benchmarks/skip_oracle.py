@@ -73,7 +73,6 @@ def _plot(rows: list[dict], output: Path) -> None:
 
     from gratnet.figures import save_figure
 
-
     labels = [f"{row['material']}\n{row['slice'].split(' ')[0]} {row['slice'].split(' ')[1]}" for row in rows]
     positions = np.arange(len(rows))
     figure, axis = plt.subplots(figsize=(max(8.0, 0.45 * len(rows)), 4.2))

@@ -151,7 +151,6 @@ def region_figure(path: str | os.PathLike[str], rows: list[tuple[str, np.ndarray
 
     from gratnet.figures import save_figure
 
-
     if not rows:
         raise GratNetError("region_figure needs at least one (label, labels) panel")
     colormap = ListedColormap(["#ffffff", *REGION_COLOURS])
@@ -185,7 +184,6 @@ def plot_history(history: dict[str, Any], path: str | os.PathLike[str]) -> bool:
     import matplotlib.pyplot as plt
 
     from gratnet.figures import save_figure
-
 
     numbers = [record["epoch"] for record in epochs]
     figure, loss_axis = plt.subplots(figsize=(6.0, 3.6), dpi=120, layout="constrained")
