@@ -1,7 +1,7 @@
 """Trainer throughput: samples per second of `gratnet train`'s own step (trainer.train.train_step).
 
     python benchmarks/train_throughput.py [--threads 2] [--steps 30] [--device cpu] [--samples 4000000]
-                                          [--cuda-graph] [--hidden W,W,...]
+                                          [--cuda-graph] [--hidden W,W,...] [--allocator trainer|glibc-default]
 
 Builds each network of NETWORKS exactly as `gratnet train` does (TrainConfig → build_model, the same
 optimiser and schedule), puts a synthetic data set of ``--samples`` random network coordinates and
@@ -17,11 +17,13 @@ from __future__ import annotations
 
 import argparse
 import json
+import resource
 import time
 
 import torch
 
 from gratnet.encoding import EncodingSpec
+from trainer.allocator import keep_freed_memory
 from trainer.cudagraph import WARMUP_STEPS, GraphedSteps
 from trainer.model import GridNetwork
 from trainer.train import build_model, make_optimizer, make_scheduler, train_step
@@ -38,6 +40,8 @@ NETWORKS: tuple[tuple[str, dict[str, object]], ...] = (
                                   "grid_t_resolution": 6}),
     ("grid 251²+501² T5 C2, small", {"architecture": "grid", "preset": "small", "grid_features": 2, "grid_levels": 2,
                                      "grid_resolution": 501, "grid_t_resolution": 5}),
+    ("grid 3×251² T11,11,21 C4, 160-96-48-24 (paper-scratches candidate)", {
+        "architecture": "grid", "hidden": "160,96,48,24", "grid_features": 4, "grid_level_t": "11,11,21"}),
     ("grid 3×251² T11 C2, 64-32-16, L=8 L_t=2", {"architecture": "grid", "hidden": "64,32,16", "grid_features": 2,
                                                   "frequencies": 8, "t_frequencies": 2}),
 )
@@ -55,11 +59,16 @@ def main() -> None:
     parser.add_argument("--only", default="", help="run only networks whose label contains this")
     parser.add_argument("--hidden", default="", help="hidden widths for every network (overrides its own)")
     parser.add_argument("--cuda-graph", action="store_true", help="replay each step as a CUDA graph")
+    parser.add_argument("--allocator", choices=("trainer", "glibc-default"), default="trainer",
+                        help="trainer: keep freed memory as `gratnet train` does on a CPU (trainer/allocator.py); "
+                        "glibc-default: leave malloc's thresholds as they are (to measure what that costs)")
     arguments = parser.parse_args()
     if arguments.cuda_graph and arguments.warmup <= WARMUP_STEPS:
         parser.error(f"--cuda-graph needs --warmup > {WARMUP_STEPS} (the eager warm-up steps, then the capture)")
     torch.set_num_threads(arguments.threads)
     device = torch.device(arguments.device)
+    if arguments.allocator == "trainer" and device.type == "cpu":
+        keep_freed_memory()
     generator = torch.Generator().manual_seed(0)
     coordinates = (torch.rand(arguments.samples, 3, generator=generator) * 2 - 1).to(device)
     targets = torch.rand(arguments.samples, 3, generator=generator).to(device)
@@ -89,7 +98,7 @@ def main() -> None:
             if number == arguments.warmup:  # the timed steps start
                 if device.type == "cuda":
                     torch.cuda.synchronize()
-                started = time.perf_counter()
+                started, faults = time.perf_counter(), resource.getrusage(resource.RUSAGE_SELF).ru_minflt
             batch = batches[number % len(batches)]
             if graph is not None:
                 graph.step(batch)
@@ -98,13 +107,15 @@ def main() -> None:
                 loss = train_step(model, optimizer, scheduler, coordinates[batch], targets[batch], encoding)
         float(loss)  # the one sync
         seconds = time.perf_counter() - started
+        faults = resource.getrusage(resource.RUSAGE_SELF).ru_minflt - faults
         mlp = model.mlp if isinstance(model, GridNetwork) else model
         macs = sum(a * b for a, b in zip(mlp.sizes[:-1], mlp.sizes[1:], strict=False))
         print(json.dumps({
             "network": label, "layers": mlp.sizes, "parameters": model.parameter_count,
             "grid_bytes": model.grid_bytes if isinstance(model, GridNetwork) else 0, "macs": macs,
             "threads": arguments.threads, "device": str(device), "batch_size": config.batch_size,
-            "cuda_graph": arguments.cuda_graph,
+            "cuda_graph": arguments.cuda_graph, "allocator": arguments.allocator,
+            "page_faults_per_step": round(faults / arguments.steps),
             "steps": arguments.steps, "samples_per_second": round(arguments.steps * config.batch_size / seconds),
         }, ensure_ascii=False), flush=True)
 

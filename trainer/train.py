@@ -26,6 +26,7 @@ from gratnet.encoding import EncodingSpec, RangeSpec, encode, network_coordinate
 from gratnet.errors import GratNetError
 from gratnet.modelfile import ModelFile
 from gratnet.volume import Volume, volume_axes
+from trainer.allocator import keep_freed_memory
 from trainer.model import FunnelMLP, GridNetwork, log_cosh_loss, parse_hidden
 from trainer.sampling import grid_to_key, slice_w
 from trainer.train_config import TrainConfig
@@ -237,6 +238,8 @@ def train(
     """
     out_dir = make_folder(out_dir)
     device = pick_device(config.device)
+    if device.type == "cpu":  # each step's large buffers stay mapped: no page faults per step (trainer/allocator.py)
+        keep_freed_memory()
     torch.manual_seed(config.seed)
     encoding, range_spec = config.encoding_for(volume), config.range_spec()
     weighting = visible_weight(config)
