@@ -1,21 +1,26 @@
-"""How small a network's error at the volume's samples must be for a FLIP target: the oracle of a noisy volume.
+"""How small a network's error must be for a FLIP target: FLIP against an error of known size and kind.
 
-    python benchmarks/error_budget.py VOLUME.exr --heightfield paper-scratches [--model MODEL.npz]
-        [--sigmas 2.5e-4,5e-4,1e-3,2e-3] [--views '0,0,2000;…'] [--cache-dir out/cache]
-        [--json OUT.json] [--figure OUT.png] [--target 0.0123]
+    python benchmarks/error_budget.py MODEL.npz --heightfield paper-scratches [--volume VOLUME.exr]
+        [--sigmas 5e-4,1e-3,1.5e-3,2e-3,3e-3] [--views '0,0,2000;30,0,5000'] [--cache-dir out/cache]
+        [--target 0.0123] [--json OUT.json] [--figure OUT.png]
 
-A network trained on a volume errs at the volume's own samples by some RMS σ in the range-transformed y
-(eq. 7; what the LogCosh loss sees) and renders between them. This adds Gaussian noise of RMS σ to every
-reachable sample's y, maps back to CIE XYZ and scores the interpolation oracle of that noisy volume
-(trilinear in u*, v*, t, trainer/diagnostics.py) on the BRDF slices against the exact ground truth, as
-`gratnet evaluate` scores a network (mean FLIP over the 256² image). Two noise models bracket a network's
-errors: ``independent`` (each of X, Y, Z its own noise: colour and brightness errors) and ``shared`` (one
-noise for all three: brightness only). FLIP against σ then says what error at the samples a target needs.
+Errors are measured in the range-transformed y of eq. 7 (what the LogCosh loss sees), per BRDF-slice pixel:
+y(network at the pixel's key vector) − y(exact ground truth there), with XYZ = slice / (exposure · A). For each
+view (mean FLIP over the 256² image, exactly as `gratnet evaluate` scores it):
 
-With ``--model``, the model's own σ is measured at a random subset of the samples (and its error's
-correlation between channels), and the noisy oracle at that σ is scored beside the network's measured FLIP:
-where they agree, the noise model predicts the network, and the σ read off for the target is what its fit
-at the samples must reach. Noise is drawn from a fixed seed: each σ is one draw.
+- ``network``: the model's FLIP and the RMS σ_px of its y error over the disc's pixels;
+- ``shuffled``: the truth plus the network's own per-pixel errors randomly permuted over the disc's pixels (the
+  same error values, no spatial structure). When it scores like the network, FLIP sees the size of the errors,
+  not their pattern;
+- ``scaled``: the truth plus the network's own errors (in place) times k, for k in :data:`SCALES`, and the k at
+  which FLIP crosses ``--target``: by how much this network's errors, as they are, must shrink;
+- ``white``: the truth plus Gaussian noise of RMS σ in y on every pixel (independent per X, Y, Z), for each
+  ``--sigmas``: FLIP against σ, and the σ at which it crosses ``--target`` (log-log interpolation): the
+  per-pixel error a network may make to reach the target.
+
+With ``--volume`` (the volume the model was trained on), also the oracle of that volume with Gaussian noise of
+RMS σ added to every reachable sample's y (``samples`` rows), and the model's own σ at a random subset of the
+samples: the error budget at the samples, if errors there were white. Every noise is drawn from a fixed seed.
 """
 
 from __future__ import annotations
@@ -32,18 +37,21 @@ import numpy as np
 
 from gratnet.atomic import atomic_path
 from gratnet.encoding import RangeSpec, range_forward, range_inverse
-from gratnet.modelfile import load_model, mlp_forward, network_inputs
+from gratnet.modelfile import ModelFile, load_model, mlp_forward, network_inputs
 from gratnet.volume import Volume, read_volume, volume_axes
-from trainer.brdfslice import SliceConfig, slice_view_directions
+from trainer.brdfslice import SliceConfig, expose_slice, slice_geometry
 from trainer.diagnostics import VolumeOracle
-from trainer.evaluate import STANDARD_SLICES, ground_truth_brdf_slice, network_brdf_slice
+from trainer.evaluate import ground_truth_brdf_slice, network_brdf_slice
 from trainer.fourier import OpticsConfig
 from trainer.loaders import LoadOptions, load_heightfield
 from trainer.metrics import image_metrics
 from trainer.sampling import grid_to_key
 from trainer.train import volume_samples
 
-NOISE_MODELS = ("independent", "shared")
+#: Factors k of the ``scaled`` rows.
+SCALES = (0.25, 0.35, 0.5, 0.7, 1.0)
+#: Views scored by default: the paper's (0°, 0°) slice and one oblique one.
+DEFAULT_VIEWS = "0,0,2000;30,0,5000"
 
 
 def reachable_mask(volume: Volume) -> np.ndarray:
@@ -53,32 +61,55 @@ def reachable_mask(volume: Volume) -> np.ndarray:
     return u_grid**2 + v_grid**2 <= 4.0 + 1e-12
 
 
-def noisy_volume(volume: Volume, range_spec: RangeSpec, sigma: float, model: str, seed: int = 0) -> Volume:
-    """``volume`` with Gaussian noise of RMS ``sigma`` added to every reachable sample's y = T(XYZ) (``model``:
-    one of :data:`NOISE_MODELS`), mapped back through T⁻¹; unreachable samples stay 0."""
-    if model not in NOISE_MODELS:
-        raise SystemExit(f"error_budget: noise model must be one of {', '.join(NOISE_MODELS)}, got {model!r}")
+def noisy_volume(volume: Volume, range_spec: RangeSpec, sigma: float, seed: int = 0) -> Volume:
+    """``volume`` with Gaussian noise of RMS ``sigma`` (independent per channel) added to every reachable
+    sample's y = T(XYZ), mapped back through T⁻¹; unreachable samples stay 0."""
     rng = np.random.default_rng(seed)
     reachable = reachable_mask(volume)
     xyz = np.zeros_like(volume.xyz)
-    for index in range(volume.slices):  # one slice at a time: float64 y of a whole volume is 0.5 GB more
+    for index in range(volume.slices):  # a slice at a time: float64 y of a whole volume is 0.5 GB more
         y = range_forward(volume.xyz[index][reachable].astype(np.float64), range_spec)
-        shape = y.shape if model == "independent" else (y.shape[0], 1)
-        y = y + sigma * rng.standard_normal(shape)
-        xyz[index][reachable] = range_inverse(y, range_spec).astype(np.float32)
+        xyz[index][reachable] = range_inverse(y + sigma * rng.standard_normal(y.shape), range_spec).astype(np.float32)
     return Volume(xyz, dict(volume.metadata))
 
 
-def model_sample_error(model_path: str, volume: Volume, count: int, seed: int = 0) -> dict[str, float]:
-    """RMS of (network − target) in y at ``count`` random reachable samples of ``volume``, and the mean
-    correlation of that error between the X, Y and Z channels."""
-    model = load_model(model_path)
+def sample_error(model: ModelFile, volume: Volume, count: int, seed: int = 0, chunk: int = 200_000) -> float:
+    """RMS of (network − target) in y at ``count`` random reachable samples of ``volume``."""
     coordinates, targets, _ = volume_samples(volume, model.range)
     pick = np.random.default_rng(seed).choice(len(coordinates), size=min(count, len(coordinates)), replace=False)
-    error = mlp_forward(model, network_inputs(model, coordinates[pick].astype(np.float64))) - targets[pick]
-    correlation = np.corrcoef(error.T)
-    return {"rms": float(np.sqrt(np.mean(error**2))), "samples": int(len(pick)),
-            "channel_correlation": float(np.mean(correlation[np.triu_indices(3, 1)]))}
+    squares = 0.0
+    for start in range(0, len(pick), chunk):  # chunks: the MLP's activations of 2 M points are gigabytes
+        part = pick[start:start + chunk]
+        squares += float(np.sum((mlp_forward(model, network_inputs(model, coordinates[part].astype(np.float64)))
+                                 - targets[part]) ** 2))
+    return float(np.sqrt(squares / (3 * len(pick))))
+
+
+def pixel_y(config: SliceConfig, image: np.ndarray, range_spec: RangeSpec) -> np.ndarray:
+    """y = T(image / (exposure · A)) of the disc's pixels (N, 3): a slice's exposed values back to the network's
+    range-transformed domain."""
+    light, views, inside = slice_geometry(config)
+    scale = expose_slice(config, light, views, inside, np.ones(views.shape))[inside]
+    return range_forward(image[inside] / np.where(scale > 0, scale, 1.0), range_spec)
+
+
+def image_of(config: SliceConfig, y: np.ndarray, range_spec: RangeSpec) -> np.ndarray:
+    """The exposed slice (size, size, 3) whose disc pixels have range-transformed values ``y`` (N, 3)."""
+    light, views, inside = slice_geometry(config)
+    xyz = np.zeros(views.shape)
+    xyz[inside] = range_inverse(y, range_spec)
+    return expose_slice(config, light, views, inside, xyz)
+
+
+def crossing(sigmas: list[float], flips: list[float], target: float) -> float | None:
+    """σ where FLIP(σ) reaches ``target``, interpolated in log-log between the measured points (None if the
+    measured FLIPs do not bracket it)."""
+    for (s0, f0), (s1, f1) in zip(zip(sigmas, flips, strict=True), zip(sigmas[1:], flips[1:], strict=True),
+                                  strict=False):
+        if min(f0, f1) <= target <= max(f0, f1) and f0 != f1 and s0 > 0:
+            fraction = (np.log(target) - np.log(f0)) / (np.log(f1) - np.log(f0))
+            return float(np.exp(np.log(s0) + fraction * (np.log(s1) - np.log(s0))))
+    return None
 
 
 def parse_floats(text: str, what: str) -> list[float]:
@@ -86,24 +117,47 @@ def parse_floats(text: str, what: str) -> list[float]:
         values = [float(part) for part in text.split(",") if part.strip()]
     except ValueError:
         sys.exit(f"error_budget: {what} must be comma-separated numbers, got {text!r}")
-    if not values or min(values) < 0:
-        sys.exit(f"error_budget: {what} must be non-negative numbers, got {text!r}")
+    if not values or not all(np.isfinite(values)):
+        sys.exit(f"error_budget: {what} must be finite numbers, got {text!r}")
     return values
 
 
 def parse_views(text: str) -> list[tuple[float, float, float]]:
-    if not text:
-        return list(STANDARD_SLICES[:1])
     views = []
     for part in filter(None, (item.strip() for item in text.split(";"))):
         values = parse_floats(part, "--views")
-        if len(values) != 3:
-            sys.exit(f"error_budget: --views: each view is 'θ,φ,RU', got {part!r}")
+        if len(values) != 3 or not (0 <= values[0] < 90 and values[2] > 0):
+            sys.exit(f"error_budget: --views: each view is 'θ,φ,RU' with 0 ≤ θ < 90 and RU > 0, got {part!r}")
         views.append((values[0], values[1], values[2]))
     return views
 
 
-def figure(path: str, rows: list[dict[str, Any]], target: float | None, measured: dict[str, Any] | None) -> None:
+def view_rows(model: ModelFile, config: SliceConfig, reference: np.ndarray, sigmas: list[float],
+              seed: int = 0) -> dict[str, Any]:
+    """The network, shuffled and white rows of the module docstring for one view."""
+    _, _, inside = slice_geometry(config)
+    truth = pixel_y(config, reference, model.range)
+    network = network_brdf_slice(model, config)
+    error = pixel_y(config, network, model.range) - truth
+    rng = np.random.default_rng(seed)
+
+    def flip_of(y: np.ndarray) -> float:
+        return image_metrics(reference, image_of(config, y, model.range), mask=inside)["flip"]
+
+    return {
+        "network": {"flip": image_metrics(reference, network, mask=inside)["flip"],
+                    "sigma_px": float(np.sqrt(np.mean(error**2))),
+                    "channel_correlation": float(np.mean(np.corrcoef(error.T)[np.triu_indices(3, 1)]))},
+        "shuffled": {"flip": flip_of(truth + error[rng.permutation(len(error))])},
+        "scaled": [{"k": k, "flip": flip_of(truth + k * error)} for k in SCALES],
+        "white": [{"sigma": sigma, "flip": flip_of(truth + sigma * rng.standard_normal(truth.shape))}
+                  for sigma in sigmas],
+    }
+
+
+def figure(path: str, result: dict[str, Any], target: float | None) -> None:
+    """Left: FLIP against white noise σ per pixel, each view's network (★) and its shuffled errors (×) at its own
+    σ, and the noisy-samples oracle (dashed) where measured. Right: FLIP against k, the network's errors × k."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -111,93 +165,102 @@ def figure(path: str, rows: list[dict[str, Any]], target: float | None, measured
 
     from gratnet.figures import save_figure
 
-    fig, ax = plt.subplots(figsize=(6.4, 4.2))
-    views = sorted({tuple(row["view"]) for row in rows})
-    for view in views:
-        for model, style in zip(NOISE_MODELS, ("-o", "--s"), strict=True):
-            points = sorted((row["sigma"], row["flip"]) for row in rows if tuple(row["view"]) == view
-                            and row["noise"] == model and row["sigma"] > 0)
-            if points:
-                ax.plot(*zip(*points, strict=True), style, label=f"({view[0]:g}°, {view[1]:g}°), {model} noise")
-    if target is not None:
-        ax.axhline(target, color="k", lw=0.8, ls=":", label=f"target {target:g}")
-    if measured is not None:
-        ax.axvline(measured["rms"], color="tab:red", lw=0.8, ls=":", label=f"the model's σ ({measured['rms']:.2e})")
-        for view, flip in measured["network_flip"].items():
-            ax.plot([measured["rms"]], [flip], "r*", ms=10, label=f"the model's FLIP at {view}")
-    ax.set_xscale("log")
-    ax.set_yscale("log")
-    ax.set_xlabel("RMS noise σ added to every sample (range-transformed y)")
-    ax.set_ylabel("mean FLIP of the noisy volume's oracle")
-    ax.set_title("Error budget: FLIP against the error at the samples")
-    ax.legend(fontsize=7)
-    ax.grid(True, which="both", alpha=0.3)
+    fig, (left, right) = plt.subplots(1, 2, figsize=(11.5, 4.6), sharey=True)
+    for index, view in enumerate(result["views"]):
+        colour = f"C{index}"
+        left.plot([row["sigma"] for row in view["white"]], [row["flip"] for row in view["white"]], "-o", color=colour,
+                  ms=3, lw=1, label=view["label"])
+        left.plot([view["network"]["sigma_px"]], [view["network"]["flip"]], "*", color=colour, ms=11)
+        left.plot([view["network"]["sigma_px"]], [view["shuffled"]["flip"]], "x", color=colour, ms=7)
+        if view.get("samples"):
+            left.plot([row["sigma"] for row in view["samples"]], [row["flip"] for row in view["samples"]], "--",
+                      color=colour, lw=1, alpha=0.7)
+        right.plot([row["k"] for row in view["scaled"]], [row["flip"] for row in view["scaled"]], "-o", color=colour,
+                   ms=3, lw=1, label=view["label"])
+    for ax in (left, right):
+        if target is not None:
+            ax.axhline(target, color="k", lw=0.8, ls=":")
+        ax.set_xscale("log")
+        ax.set_yscale("log")
+        ax.grid(True, which="both", alpha=0.3)
+    left.set_xlabel("RMS error σ per pixel in the range-transformed y")
+    left.set_ylabel("mean FLIP")
+    left.set_title("truth + white noise σ (lines); ★ the network at its σ,\n× its errors shuffled over the pixels"
+                   + ("; dashed: noise at the samples" if any(v.get("samples") for v in result["views"]) else ""),
+                   fontsize=9)
+    right.set_xlabel("k: the network's own errors scaled by k")
+    right.set_title("truth + k × the network's errors" + (f" (dotted: target {target:g})" if target else ""),
+                    fontsize=9)
+    right.legend(fontsize=7, loc="lower right")
     save_figure(fig, path)
     plt.close(fig)
 
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("volume", help="ground-truth volume (.exr)")
+    parser.add_argument("model", help="model file (.npz)")
     parser.add_argument("--heightfield", required=True, help="height field or paper dataset of the ground truth")
-    parser.add_argument("--model", help="a model trained on this volume: its σ at the samples and its FLIP")
-    parser.add_argument("--sigmas", default="2.5e-4,5e-4,1e-3,2e-3", help="RMS noise levels in y, comma-separated")
-    parser.add_argument("--noise", default="independent,shared", help="noise models, comma-separated")
-    parser.add_argument("--views", default="", help="'θ,φ,RU' triples separated by ';' (default: (0°, 0°) 2000 RU)")
-    parser.add_argument("--range-power", type=float, default=4.0, help="n of the power-log transform (no --model)")
+    parser.add_argument("--volume", help="the volume the model was trained on: adds the noisy-samples oracle")
+    parser.add_argument("--sigmas", default="5e-4,1e-3,1.5e-3,2e-3,3e-3", help="RMS noise levels in y")
+    parser.add_argument("--views", default=DEFAULT_VIEWS, help="'θ,φ,RU' triples separated by ';'")
     parser.add_argument("--size", type=int, default=256, help="slice width and height (pixels)")
     parser.add_argument("--cache-dir", default="out/cache", help="ground-truth slice cache (as gratnet evaluate's)")
     parser.add_argument("--samples", type=int, default=2_000_000, help="samples at which the model's σ is measured")
-    parser.add_argument("--target", type=float, help="a FLIP target to draw")
+    parser.add_argument("--target", type=float, help="a FLIP target: report the σ that reaches it, and draw it")
     parser.add_argument("--json", help="write the figures here (JSON)")
     parser.add_argument("--figure", help="write a plot of FLIP against σ here (PNG)")
     args = parser.parse_args()
-    sigmas = parse_floats(args.sigmas, "--sigmas")
-    noises = [part.strip() for part in args.noise.split(",") if part.strip()]
-    if not noises or any(noise not in NOISE_MODELS for noise in noises):
-        sys.exit(f"error_budget: --noise must name some of {', '.join(NOISE_MODELS)}, got {args.noise!r}")
+    sigmas = sorted(parse_floats(args.sigmas, "--sigmas"))
+    if min(sigmas) <= 0:
+        sys.exit(f"error_budget: --sigmas must be positive, got {args.sigmas!r}")
     views = parse_views(args.views)
-    for path in filter(None, (args.volume, args.model)):
+    if not views or args.size < 2 or args.samples < 1:
+        sys.exit("error_budget: give at least one view, --size ≥ 2 and --samples ≥ 1")
+    if args.target is not None and not args.target > 0:
+        sys.exit(f"error_budget: --target must be a positive FLIP, got {args.target}")
+    for path in filter(None, (args.model, args.volume)):
         if not Path(path).is_file():
             sys.exit(f"error_budget: no such file: {path}")
 
-    volume = read_volume(args.volume)
+    model = load_model(args.model)
     field = load_heightfield(args.heightfield, LoadOptions())
-    optics = OpticsConfig.from_volume_metadata(volume.metadata)
-    range_spec = load_model(args.model).range if args.model else RangeSpec(power=args.range_power)
-    _, inside = slice_view_directions(args.size)
-    configs = [SliceConfig(theta, phi, size=args.size, exposure=exposure, ior=1.5) for theta, phi, exposure in views]
-    references = [ground_truth_brdf_slice(field, optics, config, args.cache_dir) for config in configs]
-    labels = [f"({view[0]:g}°, {view[1]:g}°)" for view in views]
-
-    measured = None
-    if args.model:
-        measured = model_sample_error(args.model, volume, args.samples)
-        model = load_model(args.model)
-        measured["network_flip"] = {label: image_metrics(reference, network_brdf_slice(model, config),
-                                                         mask=inside)["flip"]
-                                    for label, config, reference in zip(labels, configs, references, strict=True)}
-        print(f"model: σ at {measured['samples']} samples = {measured['rms']:.3e} (y), channel correlation "
-              f"{measured['channel_correlation']:.2f}; FLIP {measured['network_flip']}", flush=True)
-        sigmas = sorted({*sigmas, measured["rms"]})
-    rows = []
-    for noise in noises:
-        for sigma in [0.0, *sigmas] if noise == noises[0] else sigmas:
-            started = time.perf_counter()
-            oracle = VolumeOracle(noisy_volume(volume, range_spec, sigma, noise) if sigma > 0 else volume)
-            for view, label, config, reference in zip(views, labels, configs, references, strict=True):
-                flip = image_metrics(reference, oracle.brdf_slice(config), mask=inside)["flip"]
-                rows.append({"noise": noise if sigma > 0 else "none", "sigma": sigma, "view": list(view),
-                             "flip": flip})
-                print(f"{noise if sigma > 0 else 'no noise':>11}  σ = {sigma:.3e}  {label}  FLIP {flip:.4f}  "
-                      f"({time.perf_counter() - started:.0f} s)", flush=True)
-    result = {"volume": args.volume, "model": args.model, "range": dataclasses.asdict(range_spec),
-              "measured": measured, "rows": rows}
+    optics = OpticsConfig.from_volume_metadata(model.metadata["volume"])  # as gratnet evaluate's
+    volume = read_volume(args.volume) if args.volume else None
+    result: dict[str, Any] = {"model": args.model, "volume": args.volume, "heightfield": args.heightfield,
+                              "range": dataclasses.asdict(model.range), "target": args.target, "views": []}
+    if volume is not None:
+        result["model_sample_sigma"] = sample_error(model, volume, args.samples)
+        print(f"the model's σ at {args.samples} random samples of the volume: {result['model_sample_sigma']:.3e}",
+              flush=True)
+    for theta, phi, exposure in views:
+        started = time.perf_counter()
+        config = SliceConfig(theta, phi, size=args.size, exposure=exposure, ior=1.5)
+        reference = ground_truth_brdf_slice(field, optics, config, args.cache_dir)
+        row = {"label": f"({theta:g}°, {phi:g}°) {exposure:g} RU", "view": [theta, phi, exposure],
+               **view_rows(model, config, reference, sigmas)}
+        if args.target is not None:
+            row["white_sigma_at_target"] = crossing(sigmas, [item["flip"] for item in row["white"]], args.target)
+            row["scale_at_target"] = crossing([item["k"] for item in row["scaled"]],
+                                              [item["flip"] for item in row["scaled"]], args.target)
+        if volume is not None:
+            row["samples"] = [{"sigma": sigma, "flip": image_metrics(
+                reference, VolumeOracle(noisy_volume(volume, model.range, sigma)).brdf_slice(config),
+                mask=slice_geometry(config)[2])["flip"]} for sigma in sigmas]
+        result["views"].append(row)
+        network = row["network"]
+        print(f"{row['label']}: network FLIP {network['flip']:.4f} at σ_px {network['sigma_px']:.2e} (channel "
+              f"correlation {network['channel_correlation']:.2f}); its errors shuffled {row['shuffled']['flip']:.4f}; "
+              "white σ → FLIP " + ", ".join(f"{item['sigma']:.1e} → {item['flip']:.4f}" for item in row["white"])
+              + (f"; σ at the target {row['white_sigma_at_target']:.2e}" if row.get("white_sigma_at_target") else "")
+              + "; its errors × k → FLIP " + ", ".join(f"{item['k']:g} → {item['flip']:.4f}" for item in row["scaled"])
+              + (f"; k at the target {row['scale_at_target']:.2f}" if row.get("scale_at_target") else "")
+              + ("; at the samples " + ", ".join(f"{item['sigma']:.1e} → {item['flip']:.4f}" for item in row["samples"])
+                 if "samples" in row else "") + f" ({time.perf_counter() - started:.0f} s)", flush=True)
     if args.json:
         with atomic_path(args.json) as temporary:
             Path(temporary).write_text(json.dumps(result, indent=1))
     if args.figure:
-        figure(args.figure, rows, args.target, measured)
+        figure(args.figure, result, args.target)
 
 
 if __name__ == "__main__":
