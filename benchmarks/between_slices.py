@@ -25,15 +25,19 @@ from pathlib import Path
 import numpy as np
 
 from gratnet.atomic import atomic_path
-from gratnet.brdf import slice_view_directions
 from gratnet.encoding import network_coordinates
+from gratnet.errors import GratNetError
 from gratnet.modelfile import load_model
 from gratnet.volume import read_volume
 from trainer.brdfslice import SliceConfig, slice_geometry
 from trainer.diagnostics import VolumeOracle
-from trainer.evaluate import STANDARD_SLICES, ground_truth_brdf_slice, network_brdf_slice
-from trainer.fourier import OpticsConfig
-from trainer.loaders import LoadOptions, load_heightfield
+from trainer.evaluate import (
+    STANDARD_SLICES,
+    EvaluateConfig,
+    ground_truth_brdf_slice,
+    model_ground_truth_inputs,
+    network_brdf_slice,
+)
 from trainer.metrics import flip
 
 #: Pixels whose true Y (exposed) is below this are left out of the log-ratio median (display black).
@@ -69,19 +73,6 @@ def binned(reference: np.ndarray, test: np.ndarray, distance: np.ndarray, inside
     return rows
 
 
-def parse_views(text: str) -> list[tuple[float, float, float]]:
-    if not text:
-        return list(STANDARD_SLICES)
-    views = []
-    for part in filter(None, (item.strip() for item in text.split(";"))):
-        try:
-            theta, phi, exposure = (float(value) for value in part.split(","))
-        except ValueError:
-            sys.exit(f"between_slices: --views: each view is 'θ,φ,RU', got {part!r}")
-        views.append((theta, phi, exposure))
-    return views
-
-
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("model", help="model file (.npz)")
@@ -93,7 +84,10 @@ def main() -> None:
     parser.add_argument("--bins", type=int, default=5, help="bins of d over [0, 0.5]")
     parser.add_argument("--json", help="also write the figures here (JSON)")
     args = parser.parse_args()
-    views = parse_views(args.views)
+    try:  # gratnet evaluate's own parsing and checks of --views
+        views = list(EvaluateConfig(views=args.views).extra_views()) or list(STANDARD_SLICES)
+    except GratNetError as error:
+        sys.exit(f"between_slices: {error}")
     if args.bins < 1:
         sys.exit("between_slices: --bins must be ≥ 1")
     for path in filter(None, (args.model, args.volume)):
@@ -101,13 +95,11 @@ def main() -> None:
             sys.exit(f"between_slices: no such file: {path}")
 
     model = load_model(args.model)
-    field = load_heightfield(args.heightfield, LoadOptions())
-    optics = OpticsConfig.from_volume_metadata(model.metadata["volume"])  # as gratnet evaluate's
+    field, optics = model_ground_truth_inputs(model, args.heightfield)
     scheme = model.metadata["volume"]["scheme"]
     slices = int(model.metadata["volume"]["slices"])
     oracle = VolumeOracle(read_volume(args.volume)) if args.volume else None
     edges = np.linspace(0.0, 0.5, args.bins + 1)
-    _, disc = slice_view_directions(args.size)
     results = []
     for theta, phi, exposure in views:
         config = SliceConfig(theta, phi, size=args.size, exposure=exposure, ior=1.5)

@@ -37,13 +37,12 @@ import numpy as np
 
 from gratnet.atomic import atomic_path
 from gratnet.encoding import RangeSpec, range_forward, range_inverse
+from gratnet.errors import GratNetError
 from gratnet.modelfile import ModelFile, load_model, mlp_forward, network_inputs
 from gratnet.volume import Volume, read_volume, volume_axes
 from trainer.brdfslice import SliceConfig, expose_slice, slice_geometry
 from trainer.diagnostics import VolumeOracle
-from trainer.evaluate import ground_truth_brdf_slice, network_brdf_slice
-from trainer.fourier import OpticsConfig
-from trainer.loaders import LoadOptions, load_heightfield
+from trainer.evaluate import EvaluateConfig, ground_truth_brdf_slice, model_ground_truth_inputs, network_brdf_slice
 from trainer.metrics import image_metrics
 from trainer.sampling import grid_to_key
 from trainer.train import volume_samples
@@ -120,16 +119,6 @@ def parse_floats(text: str, what: str) -> list[float]:
     if not values or not all(np.isfinite(values)):
         sys.exit(f"error_budget: {what} must be finite numbers, got {text!r}")
     return values
-
-
-def parse_views(text: str) -> list[tuple[float, float, float]]:
-    views = []
-    for part in filter(None, (item.strip() for item in text.split(";"))):
-        values = parse_floats(part, "--views")
-        if len(values) != 3 or not (0 <= values[0] < 90 and values[2] > 0):
-            sys.exit(f"error_budget: --views: each view is 'θ,φ,RU' with 0 ≤ θ < 90 and RU > 0, got {part!r}")
-        views.append((values[0], values[1], values[2]))
-    return views
 
 
 def view_rows(model: ModelFile, config: SliceConfig, reference: np.ndarray, sigmas: list[float],
@@ -213,7 +202,10 @@ def main() -> None:
     sigmas = sorted(parse_floats(args.sigmas, "--sigmas"))
     if min(sigmas) <= 0:
         sys.exit(f"error_budget: --sigmas must be positive, got {args.sigmas!r}")
-    views = parse_views(args.views)
+    try:  # gratnet evaluate's own parsing and checks of --views
+        views = EvaluateConfig(views=args.views).extra_views()
+    except GratNetError as error:
+        sys.exit(f"error_budget: {error}")
     if not views or args.size < 2 or args.samples < 1:
         sys.exit("error_budget: give at least one view, --size ≥ 2 and --samples ≥ 1")
     if args.target is not None and not args.target > 0:
@@ -223,8 +215,7 @@ def main() -> None:
             sys.exit(f"error_budget: no such file: {path}")
 
     model = load_model(args.model)
-    field = load_heightfield(args.heightfield, LoadOptions())
-    optics = OpticsConfig.from_volume_metadata(model.metadata["volume"])  # as gratnet evaluate's
+    field, optics = model_ground_truth_inputs(model, args.heightfield)
     volume = read_volume(args.volume) if args.volume else None
     result: dict[str, Any] = {"model": args.model, "volume": args.volume, "heightfield": args.heightfield,
                               "range": dataclasses.asdict(model.range), "target": args.target, "views": []}

@@ -106,6 +106,15 @@ def ground_truth_brdf_slice(
     return xyz
 
 
+def model_ground_truth_inputs(model: ModelFile, heightfield: str) -> tuple[HeightField, OpticsConfig]:
+    """The height field ``heightfield`` (a file, a generator or a paper dataset; default load options) and the
+    optics ``model``'s volume was computed with: what `gratnet evaluate MODEL --heightfield …` computes its
+    ground-truth slices from (and so shares their cache)."""
+    from trainer.loaders import LoadOptions, load_heightfield
+
+    return load_heightfield(heightfield, LoadOptions()), OpticsConfig.from_volume_metadata(model.metadata["volume"])
+
+
 def _slice_label(theta: float, phi: float, exposure: float) -> str:
     return f"({theta:g}°, {phi:g}°) {exposure:g} RU"
 
