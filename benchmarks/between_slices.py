@@ -82,14 +82,17 @@ def main() -> None:
     parser.add_argument("--size", type=int, default=256, help="slice width and height (pixels)")
     parser.add_argument("--cache-dir", default="out/cache", help="ground-truth slice cache (as gratnet evaluate's)")
     parser.add_argument("--bins", type=int, default=5, help="bins of d over [0, 0.5]")
+    parser.add_argument("--t-nodes", type=int, default=0,
+                        help="measure d from a uniform lattice of this many t nodes instead of the volume's w-slices "
+                        "(e.g. a coarse grid level's, --grid-level-t)")
     parser.add_argument("--json", help="also write the figures here (JSON)")
     args = parser.parse_args()
     try:  # gratnet evaluate's own parsing and checks of --views
         views = list(EvaluateConfig(views=args.views).extra_views()) or list(STANDARD_SLICES)
     except GratNetError as error:
         sys.exit(f"between_slices: {error}")
-    if args.bins < 1:
-        sys.exit("between_slices: --bins must be ≥ 1")
+    if args.bins < 1 or args.t_nodes == 1 or args.t_nodes < 0:
+        sys.exit("between_slices: --bins must be ≥ 1 and --t-nodes 0 (the w-slices) or ≥ 2")
     for path in filter(None, (args.model, args.volume)):
         if not Path(path).is_file():
             sys.exit(f"between_slices: no such file: {path}")
@@ -97,7 +100,7 @@ def main() -> None:
     model = load_model(args.model)
     field, optics = model_ground_truth_inputs(model, args.heightfield)
     scheme = model.metadata["volume"]["scheme"]
-    slices = int(model.metadata["volume"]["slices"])
+    slices = args.t_nodes or int(model.metadata["volume"]["slices"])
     oracle = VolumeOracle(read_volume(args.volume)) if args.volume else None
     edges = np.linspace(0.0, 0.5, args.bins + 1)
     results = []
@@ -105,12 +108,12 @@ def main() -> None:
         config = SliceConfig(theta, phi, size=args.size, exposure=exposure, ior=1.5)
         reference = ground_truth_brdf_slice(field, optics, config, args.cache_dir)
         distance, inside = slice_distance(config, scheme, slices)
-        row = {"view": [theta, phi, exposure], "slices": slices,
+        row = {"view": [theta, phi, exposure], "t_nodes": slices,
                "network": binned(reference, network_brdf_slice(model, config), distance, inside, edges)}
         if oracle is not None:
             row["oracle"] = binned(reference, oracle.brdf_slice(config), distance, inside, edges)
         results.append(row)
-        print(f"({theta:g}°, {phi:g}°) {exposure:g} RU, {slices} w-slices:")
+        print(f"({theta:g}°, {phi:g}°) {exposure:g} RU, d from {slices} uniform t nodes:")
         print("  d (slice spacings)   pixels   FLIP network   FLIP oracle   med|ln Y ratio| network   oracle")
         for index, bin_row in enumerate(row["network"]):
             oracle_row = row["oracle"][index] if oracle is not None else {}
