@@ -151,6 +151,24 @@ def from_arguments(config_class: type[ConfigT], arguments: argparse.Namespace, p
     return config_class(**values)
 
 
+def changed_flags(config: Any, prefix: str = "") -> list[str]:
+    """The command-line flags that rebuild ``config`` from its class's defaults: one ``--flag value`` (or
+    ``--flag`` / ``--no-flag`` for booleans) per CLI field whose value differs from its default, in field order."""
+    words: list[str] = []
+    for field in dataclasses.fields(config):
+        if not field.init or field.metadata.get("cli") is False or field.default is dataclasses.MISSING:
+            continue
+        value = getattr(config, field.name)
+        if value == field.default:
+            continue
+        flag = _flag_of(field, prefix)
+        if isinstance(value, bool):
+            words.append(flag if value else "--no-" + flag[2:])
+        else:
+            words += [flag, str(value)]
+    return words
+
+
 def config_to_dict(config: Any) -> dict[str, Any]:
     """A JSON-ready dict of a (possibly nested) dataclass config."""
     def convert(value: Any) -> Any:

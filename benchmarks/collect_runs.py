@@ -1,0 +1,166 @@
+"""Gather finished training runs into one JSON record and a Markdown table (docs/results.md's run tables).
+
+    python benchmarks/collect_runs.py RUN[=LABEL] … [--json docs/data/NAME.json] [--meta KEY=VALUE …]
+
+Each RUN is a folder written by `gratnet train` (model.config.json, history.json) and evaluated by `gratnet
+evaluate` (metrics.json in RUN/eval or in RUN itself, as in assets/NAME); RUN/error_budget.json, written by
+benchmarks/error_budget.py --json, is added when present. Per run the record holds the command that rebuilds it
+(the flags that differ from `gratnet train`'s defaults), grid and volume bytes, parameters, training seconds,
+the final training loss, the per-epoch (0°, 0°) FLIP of --epoch-flip-size, and per view the FLIP, PSNR (XYZ,
+dB), the interpolation oracle's FLIP and the error budget. Nothing is recomputed: every figure is read from the
+files the runs wrote, so a table in the docs can be regenerated from them.
+"""
+
+from __future__ import annotations
+
+import argparse
+import datetime
+import json
+import shlex
+import sys
+from pathlib import Path
+from typing import Any
+
+from gratnet.atomic import atomic_path
+from gratnet.config import changed_flags
+from gratnet.errors import GratNetError
+from trainer.train_config import TrainConfig
+
+#: The view every ratio is taken against: the paper's headline BRDF slice.
+HEADLINE = "(0°, 0°) 2000 RU"
+
+
+def _read_json(path: Path) -> Any:
+    try:
+        return json.loads(path.read_text())
+    except (OSError, ValueError) as error:
+        raise GratNetError(f"cannot read {path}: {error}") from error
+
+
+def metrics_path(run: Path) -> Path:
+    """RUN/eval/metrics.json (a training folder evaluated into eval/) or RUN/metrics.json (a shipped asset)."""
+    for candidate in (run / "eval" / "metrics.json", run / "metrics.json"):
+        if candidate.is_file():
+            return candidate
+    raise GratNetError(f"{run}: no eval/metrics.json or metrics.json (run `gratnet evaluate` on its model first)")
+
+
+def check_run(run: Path) -> None:
+    """Raise with one clear message if ``run`` lacks a file the record needs."""
+    if not run.is_dir():
+        raise GratNetError(f"{run}: not a folder")
+    for name in ("model.config.json", "history.json"):
+        if not (run / name).is_file():
+            raise GratNetError(f"{run}: no {name} (not a `gratnet train` output folder)")
+    metrics_path(run)
+
+
+def train_command(train: dict[str, Any], volume: str | None) -> str:
+    """`gratnet train VOLUME --out RUN FLAGS…` with only the flags that differ from the defaults."""
+    known = {name: value for name, value in train.items() if name in TrainConfig.__dataclass_fields__}
+    config = TrainConfig(**known)
+    return shlex.join(["gratnet", "train", Path(volume).name if volume else "VOLUME", "--out", "RUN",
+                       *changed_flags(config)])
+
+
+def collect_run(run: Path, label: str) -> dict[str, Any]:
+    """One run's record (see the module docstring)."""
+    check_run(run)
+    model_config = _read_json(run / "model.config.json")
+    history = _read_json(run / "history.json")
+    metrics = _read_json(metrics_path(run))
+    epochs = history.get("epochs", [])
+    slices = metrics.get("brdf_slices", [])
+    record: dict[str, Any] = {
+        "run": label,
+        "folder": str(run),
+        "command": train_command(model_config.get("train", {}), model_config.get("volume")),
+        "grid_bytes": history.get("grid_bytes", 0),
+        "volume_bytes": history.get("volume_bytes"),
+        "parameters": history.get("parameters"),
+        "train_seconds": history.get("train_seconds"),
+        "final_loss": epochs[-1]["train_loss"] if epochs else None,
+        "epoch_slice_flip_128": [epoch.get("slice_flip") for epoch in epochs],
+        "flip": {view["slice"]: view["flip"] for view in slices},
+        "psnr_xyz": {view["slice"]: view["psnr_xyz"] for view in slices},
+        "oracle_flip": {view["slice"]: view["oracle_flip"] for view in slices if view.get("oracle_flip") is not None},
+    }
+    budget_file = run / "error_budget.json"
+    if budget_file.is_file():
+        budget = _read_json(budget_file)
+        target = budget.get("target")
+        record["error_budget"] = {
+            view["label"]: {
+                "network": view["network"]["flip"],
+                "sigma_px": view["network"]["sigma_px"],
+                "shuffled": view["shuffled"]["flip"],
+                f"k_at_{target}": view.get("scale_at_target"),
+                f"white_sigma_at_{target}": view.get("white_sigma_at_target"),
+            }
+            for view in budget.get("views", [])
+        }
+    return record
+
+
+def markdown_table(runs: list[dict[str, Any]]) -> str:
+    """One row per run: grid bytes and share, loss, training time, FLIP per view, their mean and the worst
+    other view against (0°, 0°), and PSNR at (0°, 0°). Views are those of the first run, in its order."""
+    views = list(runs[0]["flip"])
+    head = ["run", "grid (share of the volume)", "final loss", "training", *views, "mean", "worst other / (0°, 0°)",
+            "PSNR (0°, 0°)"]
+    lines = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
+    for run in runs:
+        flips = [run["flip"].get(view) for view in views]
+        present = [value for value in flips if value is not None]
+        headline = run["flip"].get(HEADLINE)
+        others = [value for view, value in run["flip"].items() if view != HEADLINE]
+        share = (f"{run['grid_bytes'] / 1e6:.2f} MB ({100 * run['grid_bytes'] / run['volume_bytes']:.1f} %)"
+                 if run.get("volume_bytes") else f"{run['grid_bytes'] / 1e6:.2f} MB")
+        cells = [
+            run["run"], share,
+            f"{run['final_loss']:.3g}" if run.get("final_loss") is not None else "—",
+            f"{run['train_seconds']:,.0f} s" if run.get("train_seconds") is not None else "—",
+            *(f"{value:.4f}" if value is not None else "—" for value in flips),
+            f"{sum(present) / len(present):.4f}" if present else "—",
+            f"{max(others) / headline:.2f}×" if headline and others else "—",
+            f"{run['psnr_xyz'][HEADLINE]:.1f} dB" if HEADLINE in run["psnr_xyz"] else "—",
+        ]
+        lines.append("| " + " | ".join(cells) + " |")
+    return "\n".join(lines)
+
+
+def parse_run(text: str) -> tuple[Path, str]:
+    """``RUN`` or ``RUN=LABEL`` → (folder, label); the label defaults to the folder's name."""
+    folder, _, label = text.partition("=")
+    return Path(folder), label or Path(folder).name
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("runs", nargs="+", metavar="RUN[=LABEL]", help="training output folders")
+    parser.add_argument("--json", type=Path, help="write the record here (atomically)")
+    parser.add_argument("--meta", action="append", default=[], metavar="KEY=VALUE",
+                        help="a top-level field of the record (machine, volume, evaluate command …); repeatable")
+    args = parser.parse_args()
+    try:
+        runs = [parse_run(text) for text in args.runs]
+        meta = {}
+        for item in args.meta:
+            key, separator, value = item.partition("=")
+            if not separator or not key:
+                raise GratNetError(f"--meta needs KEY=VALUE, got {item!r}")
+            meta[key] = value
+        for folder, _ in runs:
+            check_run(folder)
+        records = [collect_run(folder, label) for folder, label in runs]
+    except GratNetError as error:
+        sys.exit(f"collect_runs: {error}")
+    print(markdown_table(records))
+    if args.json:
+        record = {"date": datetime.date.today().isoformat(), **meta, "runs": records}
+        with atomic_path(args.json) as temporary:
+            temporary.write_text(json.dumps(record, indent=1, ensure_ascii=False) + "\n")
+
+
+if __name__ == "__main__":
+    main()
