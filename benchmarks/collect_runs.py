@@ -1,6 +1,7 @@
 """Gather finished training runs into one JSON record and a Markdown table (docs/results.md's run tables).
 
     python benchmarks/collect_runs.py RUN[=LABEL] … [--json docs/data/NAME.json] [--meta KEY=VALUE …]
+        [--figure docs/images/NAME.png]
 
 Each RUN is a folder written by `gratnet train` (model.config.json, history.json) and evaluated by `gratnet
 evaluate` (metrics.json in RUN/eval or in RUN itself, as in assets/NAME); RUN/error_budget.json, written by
@@ -8,7 +9,8 @@ benchmarks/error_budget.py --json, is added when present. Per run the record hol
 (the flags that differ from `gratnet train`'s defaults), grid and volume bytes, parameters, training seconds,
 the final training loss, the per-epoch (0°, 0°) FLIP of --epoch-flip-size, and per view the FLIP, PSNR (XYZ,
 dB), the interpolation oracle's FLIP and the error budget. Nothing is recomputed: every figure is read from the
-files the runs wrote, so a table in the docs can be regenerated from them.
+files the runs wrote, so a table in the docs can be regenerated from them. --figure plots every run's training
+loss and its per-epoch (0°, 0°) FLIP against the epoch, side by side.
 """
 
 from __future__ import annotations
@@ -16,6 +18,7 @@ from __future__ import annotations
 import argparse
 import datetime
 import json
+import math
 import shlex
 import sys
 from pathlib import Path
@@ -80,6 +83,7 @@ def collect_run(run: Path, label: str) -> dict[str, Any]:
         "parameters": history.get("parameters"),
         "train_seconds": history.get("train_seconds"),
         "final_loss": epochs[-1]["train_loss"] if epochs else None,
+        "epoch_loss": [epoch.get("train_loss") for epoch in epochs],
         "epoch_slice_flip_128": [epoch.get("slice_flip") for epoch in epochs],
         "flip": {view["slice"]: view["flip"] for view in slices},
         "psnr_xyz": {view["slice"]: view["psnr_xyz"] for view in slices},
@@ -129,6 +133,37 @@ def markdown_table(runs: list[dict[str, Any]]) -> str:
     return "\n".join(lines)
 
 
+def plot_runs(runs: list[dict[str, Any]], target: Path) -> None:
+    """Two panels against the epoch: the training loss (log scale) and the (0°, 0°) 2000 RU FLIP at 128² that
+    `gratnet train --epoch-flip-size 128` records; a run without one is left out of that panel."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from gratnet.figures import save_figure
+
+    figure, (loss_axis, flip_axis) = plt.subplots(1, 2, figsize=(10.0, 3.8), dpi=110, layout="constrained")
+    try:
+        for run in runs:
+            losses = [math.nan if value is None else value for value in run["epoch_loss"]]
+            line, = loss_axis.plot(range(1, len(losses) + 1), losses, marker=".", label=run["run"])
+            flips = [math.nan if value is None else value for value in run["epoch_slice_flip_128"]]
+            if not all(math.isnan(value) for value in flips):
+                flip_axis.plot(range(1, len(flips) + 1), flips, marker="o", markersize=3, color=line.get_color(),
+                               label=run["run"])
+        loss_axis.set_yscale("log")
+        loss_axis.set_xlabel("epoch")
+        loss_axis.set_ylabel("training loss (LogCosh of range-transformed XYZ)")
+        loss_axis.legend(fontsize=7)
+        flip_axis.set_xlabel("epoch")
+        flip_axis.set_ylabel(f"mean FLIP, {HEADLINE} at 128²")
+        flip_axis.grid(alpha=0.3)
+        save_figure(figure, target)
+    finally:
+        plt.close(figure)
+
+
 def parse_run(text: str) -> tuple[Path, str]:
     """``RUN`` or ``RUN=LABEL`` → (folder, label); the label defaults to the folder's name."""
     folder, _, label = text.partition("=")
@@ -141,6 +176,7 @@ def main() -> None:
     parser.add_argument("--json", type=Path, help="write the record here (atomically)")
     parser.add_argument("--meta", action="append", default=[], metavar="KEY=VALUE",
                         help="a top-level field of the record (machine, volume, evaluate command …); repeatable")
+    parser.add_argument("--figure", type=Path, help="write the loss and per-epoch FLIP curves here (PNG)")
     args = parser.parse_args()
     try:
         runs = [parse_run(text) for text in args.runs]
@@ -160,6 +196,8 @@ def main() -> None:
         record = {"date": datetime.date.today().isoformat(), **meta, "runs": records}
         with atomic_path(args.json) as temporary:
             temporary.write_text(json.dumps(record, indent=1, ensure_ascii=False) + "\n")
+    if args.figure:
+        plot_runs(records, args.figure)
 
 
 if __name__ == "__main__":

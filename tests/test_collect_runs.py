@@ -86,3 +86,13 @@ def test_a_folder_without_the_files_is_refused_with_one_message(tmp_path):
 def test_labels_default_to_the_folder_name():
     assert parse_run("out/run-a") == (Path("out/run-a"), "run-a")
     assert parse_run("out/run-a=four features") == (Path("out/run-a"), "four features")
+
+
+def test_the_figure_is_written_for_runs_with_and_without_per_epoch_flip(tmp_path):
+    from benchmarks.collect_runs import plot_runs
+
+    with_flip = collect_run(_fake_run(tmp_path / "a"), "a")
+    without = collect_run(_fake_run(tmp_path / "b"), "b")
+    without["epoch_slice_flip_128"] = [None, None]
+    plot_runs([with_flip, without], tmp_path / "curves.png")
+    assert (tmp_path / "curves.png").stat().st_size > 1000
