@@ -8,6 +8,8 @@ import numpy as np
 import pytest
 import torch
 
+from gratnet.encoding import EncodingSpec
+from gratnet.errors import GratNetError
 from gratnet.modelfile import evaluate_keys, load_model
 from trainer.model import PRESETS, FunnelMLP, funnel_sizes, log_cosh_loss
 from trainer.train import split_samples, train
@@ -159,3 +161,35 @@ def test_display_weighted_training_trains_on_the_weighted_loss(tiny_volume, tmp_
     first = train(volume, TrainConfig(**base), tmp_path / "plain", progress=False)[1]
     second = train(volume, TrainConfig(**base, **band), tmp_path / "weighted", progress=False)[1]
     assert max(float(np.abs(a - b).max()) for a, b in zip(first.weights, second.weights, strict=True)) > 1e-4
+
+
+@pytest.mark.parametrize("architecture", ["mlp", "grid"])
+def test_adam_epsilon_reaches_every_parameter_group_and_sets_the_step_of_tiny_gradients(architecture):
+    """Adam's first step is lr·g/(|g| + ε): with gradients of 1e-10 (the grids' scale late in training), ε = 1e-8
+    shrinks it about a hundredfold and ε = 1e-15 leaves the full lr step."""
+    from trainer.train import build_model, make_optimizer
+
+    def first_step(epsilon: float) -> list[float]:
+        torch.manual_seed(0)
+        config = TrainConfig(architecture=architecture, preset="tiny", grid_levels=1, grid_resolution=5,
+                             grid_t_resolution=2, device="cpu", adam_epsilon=epsilon)
+        model = build_model(config, EncodingSpec())
+        optimizer = make_optimizer(model, config)
+        assert all(group["eps"] == epsilon for group in optimizer.param_groups)
+        pairs = [(parameter, group["lr"]) for group in optimizer.param_groups for parameter in group["params"]]
+        assert len(pairs) == len(list(model.parameters()))
+        before = [parameter.detach().clone() for parameter, _ in pairs]
+        for parameter, _ in pairs:
+            parameter.grad = torch.full_like(parameter, 1e-10)
+        optimizer.step()
+        return [float((parameter.detach() - start).abs().max()) / rate
+                for (parameter, rate), start in zip(pairs, before, strict=True)]
+
+    np.testing.assert_allclose(first_step(1e-15), 1.0, rtol=1e-4)
+    np.testing.assert_allclose(first_step(1e-8), 1e-10 / (1e-10 + 1e-8), rtol=1e-3)
+
+
+@pytest.mark.parametrize("epsilon", [0.0, -1e-8, float("nan")])
+def test_adam_epsilon_must_be_positive(epsilon):
+    with pytest.raises(GratNetError, match="--adam-epsilon"):
+        TrainConfig(adam_epsilon=epsilon)

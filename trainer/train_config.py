@@ -71,6 +71,11 @@ class TrainConfig:
                                           "at 4096-8192 on a GPU: docs/results.md, 'Smaller batches')")
     learning_rate: float = config_field(3e-3, "Adam's initial learning rate")
     final_learning_rate_ratio: float = config_field(0.02, "cosine schedule ends at learning_rate × this")
+    adam_epsilon: float = config_field(
+        1e-8, "Adam's ε (torch's default 1e-8). The LogCosh loss of range-transformed targets is ~1e-6, so the "
+        "grids' sqrt(v) ends near 1e-10 and ε, not sqrt(v), sets their step (docs/results.md, 'Adam's ε'); 1e-15 "
+        "as in instant-NGP lets Adam normalise them"
+    )
     seed: int = config_field(0, "seed of initialisation, shuffling and the random split")
     device: str = config_field("auto", "torch device: auto (CUDA when present), cpu, cuda")
     cuda_graph: Literal["auto", "on", "off"] = config_field(
@@ -87,6 +92,8 @@ class TrainConfig:
             raise GratNetError(f"--epochs and --batch-size must be ≥ 1, got {self.epochs}, {self.batch_size}")
         if not self.learning_rate > 0:
             raise GratNetError(f"--learning-rate must be positive, got {self.learning_rate}")
+        if not (math.isfinite(self.adam_epsilon) and self.adam_epsilon > 0):
+            raise GratNetError(f"--adam-epsilon must be a positive number, got {self.adam_epsilon}")
         if not 0 <= self.epoch_flip_size <= 1024:
             raise GratNetError(f"--epoch-flip-size must be from 0 (off) to 1024 pixels, got {self.epoch_flip_size}")
         if self.architecture not in ("mlp", "grid"):
