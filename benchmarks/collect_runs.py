@@ -5,12 +5,15 @@
 
 Each RUN is a folder written by `gratnet train` (model.config.json, history.json) and evaluated by `gratnet
 evaluate` (metrics.json in RUN/eval or in RUN itself, as in assets/NAME); RUN/error_budget.json, written by
-benchmarks/error_budget.py --json, is added when present. Per run the record holds the command that rebuilds it
-(the flags that differ from `gratnet train`'s defaults), grid and volume bytes, parameters, training seconds,
-the final training loss, the per-epoch (0°, 0°) FLIP of --epoch-flip-size, and per view the FLIP, PSNR (XYZ,
-dB), the interpolation oracle's FLIP and the error budget. Nothing is recomputed: every figure is read from the
-files the runs wrote, so a table in the docs can be regenerated from them. --figure plots every run's training
-loss and its per-epoch (0°, 0°) FLIP against the epoch, side by side.
+benchmarks/error_budget.py --json, is added when present. A run stopped before its end has only its
+checkpoint.pt: its configuration and epochs so far are read from there, with no views.
+
+Per run the record holds the command that rebuilds it (the flags that differ from `gratnet train`'s
+defaults), grid and volume bytes, parameters, training seconds, the training loss and the (0°, 0°) FLIP of
+--epoch-flip-size per epoch, and per view the FLIP, PSNR (XYZ, dB), the interpolation oracle's FLIP and the
+error budget. Nothing is recomputed: every figure is read from the files the runs wrote, so a table in the
+docs can be regenerated from them. --figure plots every run's training loss and its per-epoch (0°, 0°)
+FLIP against the epoch, side by side.
 """
 
 from __future__ import annotations
@@ -49,13 +52,27 @@ def metrics_path(run: Path) -> Path:
 
 
 def check_run(run: Path) -> None:
-    """Raise with one clear message if ``run`` lacks a file the record needs."""
+    """Raise with one clear message if ``run`` lacks a file the record needs: a finished run's
+    model.config.json, history.json and metrics, or a stopped run's checkpoint.pt."""
     if not run.is_dir():
         raise GratNetError(f"{run}: not a folder")
+    if not (run / "model.config.json").is_file() and (run / "checkpoint.pt").is_file():
+        return  # stopped before its end: its checkpoint holds the configuration and the epochs so far
     for name in ("model.config.json", "history.json"):
         if not (run / name).is_file():
-            raise GratNetError(f"{run}: no {name} (not a `gratnet train` output folder)")
+            raise GratNetError(f"{run}: no {name} and no checkpoint.pt (not a `gratnet train` output folder)")
     metrics_path(run)
+
+
+def _stopped_run(run: Path) -> tuple[dict[str, Any], dict[str, Any]]:
+    """(model config, history) of a run stopped before its end, from its checkpoint.pt."""
+    import torch
+
+    try:
+        state = torch.load(run / "checkpoint.pt", map_location="cpu", weights_only=False)
+    except (OSError, RuntimeError, EOFError) as error:
+        raise GratNetError(f"cannot read {run / 'checkpoint.pt'}: {error}") from error
+    return {"train": state["config"], "volume": None}, state["history"]
 
 
 def train_command(train: dict[str, Any], volume: str | None) -> str:
@@ -66,19 +83,34 @@ def train_command(train: dict[str, Any], volume: str | None) -> str:
                        *changed_flags(config)])
 
 
+def _grid_bytes(config: TrainConfig) -> int:
+    """Bytes of the run's grids as the model file stores them (``--grid-dtype``)."""
+    size = 2 if config.grid_dtype == "float16" else 4
+    return sum(t * rv * ru * c for t, rv, ru, c in config.grid_shapes()) * size
+
+
 def collect_run(run: Path, label: str) -> dict[str, Any]:
     """One run's record (see the module docstring)."""
     check_run(run)
-    model_config = _read_json(run / "model.config.json")
-    history = _read_json(run / "history.json")
-    metrics = _read_json(metrics_path(run))
+    stopped = not (run / "model.config.json").is_file()
+    if stopped:
+        model_config, history = _stopped_run(run)
+        metrics: dict[str, Any] = {}
+    else:
+        model_config = _read_json(run / "model.config.json")
+        history = _read_json(run / "history.json")
+        metrics = _read_json(metrics_path(run))
     epochs = history.get("epochs", [])
     slices = metrics.get("brdf_slices", [])
+    train = model_config.get("train", {})
+    config = TrainConfig(**{name: value for name, value in train.items() if name in TrainConfig.__dataclass_fields__})
     record: dict[str, Any] = {
         "run": label,
         "folder": str(run),
-        "command": train_command(model_config.get("train", {}), model_config.get("volume")),
-        "grid_bytes": history.get("grid_bytes", 0),
+        "command": train_command(train, model_config.get("volume")),
+        "stopped_after_epoch": len(epochs) if stopped else None,
+        "epochs_planned": config.epochs,
+        "grid_bytes": history.get("grid_bytes", _grid_bytes(config)),
         "volume_bytes": history.get("volume_bytes"),
         "parameters": history.get("parameters"),
         "train_seconds": history.get("train_seconds"),
@@ -108,8 +140,8 @@ def collect_run(run: Path, label: str) -> dict[str, Any]:
 
 def markdown_table(runs: list[dict[str, Any]]) -> str:
     """One row per run: grid bytes and share, loss, training time, FLIP per view, their mean and the worst
-    other view against (0°, 0°), and PSNR at (0°, 0°). Views are those of the first run, in its order."""
-    views = list(runs[0]["flip"])
+    other view against (0°, 0°), and PSNR at (0°, 0°). Views in the order the runs first name them."""
+    views = list(dict.fromkeys(view for run in runs for view in run["flip"]))
     head = ["run", "grid (share of the volume)", "final loss", "training", *views, "mean", "worst other / (0°, 0°)",
             "PSNR (0°, 0°)"]
     lines = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
@@ -120,8 +152,11 @@ def markdown_table(runs: list[dict[str, Any]]) -> str:
         others = [value for view, value in run["flip"].items() if view != HEADLINE]
         share = (f"{run['grid_bytes'] / 1e6:.2f} MB ({100 * run['grid_bytes'] / run['volume_bytes']:.1f} %)"
                  if run.get("volume_bytes") else f"{run['grid_bytes'] / 1e6:.2f} MB")
+        name = run["run"]
+        if run.get("stopped_after_epoch") is not None:
+            name += f" (stopped after epoch {run['stopped_after_epoch']} of {run['epochs_planned']})"
         cells = [
-            run["run"], share,
+            name, share,
             f"{run['final_loss']:.3g}" if run.get("final_loss") is not None else "—",
             f"{run['train_seconds']:,.0f} s" if run.get("train_seconds") is not None else "—",
             *(f"{value:.4f}" if value is not None else "—" for value in flips),

@@ -96,3 +96,23 @@ def test_the_figure_is_written_for_runs_with_and_without_per_epoch_flip(tmp_path
     without["epoch_slice_flip_128"] = [None, None]
     plot_runs([with_flip, without], tmp_path / "curves.png")
     assert (tmp_path / "curves.png").stat().st_size > 1000
+
+
+def test_a_run_stopped_before_its_end_is_read_from_its_checkpoint(tmp_path):
+    import torch
+
+    run = tmp_path / "stopped"
+    run.mkdir()
+    config = TrainConfig(architecture="grid", grid_levels=1, grid_resolution=5, grid_t_resolution=3,
+                         grid_features=2, epochs=10)
+    torch.save({"config": config_to_dict(config),
+                "history": {"epochs": [{"epoch": 1, "train_loss": 3e-6, "slice_flip": 0.1}], "train_seconds": 9.0}},
+               run / "checkpoint.pt")
+    record = collect_run(run, "stopped")
+    assert record["stopped_after_epoch"] == 1 and record["epochs_planned"] == 10
+    assert record["grid_bytes"] == 3 * 5 * 5 * 2 * 2 and record["flip"] == {}
+    assert record["epoch_slice_flip_128"] == [0.1] and "--epochs 10" in record["command"]
+    finished = collect_run(_fake_run(tmp_path / "a"), "a")
+    table = markdown_table([record, finished])
+    assert "| stopped (stopped after epoch 1 of 10) | 0.00 MB | 3e-06 | 9 s | — | — |" in table
+    assert HEADLINE in table.splitlines()[0]
