@@ -172,7 +172,7 @@ def test_adam_epsilon_reaches_every_parameter_group_and_sets_the_step_of_tiny_gr
     def first_step(epsilon: float) -> list[float]:
         torch.manual_seed(0)
         config = TrainConfig(architecture=architecture, preset="tiny", grid_levels=1, grid_resolution=5,
-                             grid_t_resolution=2, device="cpu", adam_epsilon=epsilon)
+                             grid_t_resolution=2, device="cpu", adam_epsilon=epsilon, grid_adam_epsilon=epsilon)
         model = build_model(config, EncodingSpec())
         optimizer = make_optimizer(model, config)
         assert all(group["eps"] == epsilon for group in optimizer.param_groups)
@@ -189,7 +189,19 @@ def test_adam_epsilon_reaches_every_parameter_group_and_sets_the_step_of_tiny_gr
     np.testing.assert_allclose(first_step(1e-8), 1e-10 / (1e-10 + 1e-8), rtol=1e-3)
 
 
+def test_the_grids_and_the_mlp_take_their_own_adam_epsilon():
+    from trainer.train import build_model, make_optimizer
+
+    config = TrainConfig(architecture="grid", preset="tiny", grid_levels=1, grid_resolution=5, grid_t_resolution=2,
+                         device="cpu", adam_epsilon=1e-8, grid_adam_epsilon=1e-15)
+    model = build_model(config, EncodingSpec())
+    mlp, grids = make_optimizer(model, config).param_groups
+    assert (mlp["eps"], grids["eps"]) == (1e-8, 1e-15)
+    assert {id(p) for p in grids["params"]} == {id(p) for p in model.grids.parameters()}
+
+
 @pytest.mark.parametrize("epsilon", [0.0, -1e-8, float("nan")])
-def test_adam_epsilon_must_be_positive(epsilon):
-    with pytest.raises(GratNetError, match="--adam-epsilon"):
-        TrainConfig(adam_epsilon=epsilon)
+@pytest.mark.parametrize("field", ["adam_epsilon", "grid_adam_epsilon"])
+def test_adam_epsilon_must_be_positive(field, epsilon):
+    with pytest.raises(GratNetError, match="--" + field.replace("_", "-")):
+        TrainConfig(**{field: epsilon})

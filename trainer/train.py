@@ -138,7 +138,8 @@ def build_model(config: TrainConfig, encoding: EncodingSpec) -> FunnelMLP | Grid
 def make_optimizer(model: FunnelMLP | GridNetwork, config: TrainConfig) -> torch.optim.Optimizer:
     if isinstance(model, GridNetwork):  # the grids learn at their own rate
         return torch.optim.Adam([{"params": model.mlp.parameters(), "lr": config.learning_rate},
-                                 {"params": model.grids.parameters(), "lr": config.grid_learning_rate}],
+                                 {"params": model.grids.parameters(), "lr": config.grid_learning_rate,
+                                  "eps": config.grid_adam_epsilon}],
                                 eps=config.adam_epsilon)
     return torch.optim.Adam(model.parameters(), lr=config.learning_rate, eps=config.adam_epsilon)
 

@@ -72,9 +72,13 @@ class TrainConfig:
     learning_rate: float = config_field(3e-3, "Adam's initial learning rate")
     final_learning_rate_ratio: float = config_field(0.02, "cosine schedule ends at learning_rate × this")
     adam_epsilon: float = config_field(
-        1e-8, "Adam's ε (torch's default 1e-8). The LogCosh loss of range-transformed targets is ~1e-6, so the "
-        "grids' sqrt(v) ends near 1e-10 and ε, not sqrt(v), sets their step (docs/results.md, 'Adam's ε'); 1e-15 "
-        "as in instant-NGP lets Adam normalise them"
+        1e-8, "Adam's ε of the MLP (torch's default 1e-8). The LogCosh loss of range-transformed targets is ~1e-6, "
+        "so many weights' sqrt(v) sits below 1e-8 and ε, not sqrt(v), sets their step: it keeps the encoding's "
+        "near-Nyquist weights, which the samples hardly constrain, from growing (docs/results.md, 'Adam's ε')"
+    )
+    grid_adam_epsilon: float = config_field(
+        1e-8, "grid: Adam's ε of the grids (their sqrt(v) ends near 1e-10, so at 1e-8 ε sets their step; "
+        "instant-NGP uses 1e-15)"
     )
     seed: int = config_field(0, "seed of initialisation, shuffling and the random split")
     device: str = config_field("auto", "torch device: auto (CUDA when present), cpu, cuda")
@@ -92,8 +96,9 @@ class TrainConfig:
             raise GratNetError(f"--epochs and --batch-size must be ≥ 1, got {self.epochs}, {self.batch_size}")
         if not self.learning_rate > 0:
             raise GratNetError(f"--learning-rate must be positive, got {self.learning_rate}")
-        if not (math.isfinite(self.adam_epsilon) and self.adam_epsilon > 0):
-            raise GratNetError(f"--adam-epsilon must be a positive number, got {self.adam_epsilon}")
+        for flag, epsilon in (("--adam-epsilon", self.adam_epsilon), ("--grid-adam-epsilon", self.grid_adam_epsilon)):
+            if not (math.isfinite(epsilon) and epsilon > 0):
+                raise GratNetError(f"{flag} must be a positive number, got {epsilon}")
         if not 0 <= self.epoch_flip_size <= 1024:
             raise GratNetError(f"--epoch-flip-size must be from 0 (off) to 1024 pixels, got {self.epoch_flip_size}")
         if self.architecture not in ("mlp", "grid"):
