@@ -1,0 +1,84 @@
+"""Where Adam's ε sets the step: sqrt(v) of every parameter tensor of a training checkpoint, against ε.
+
+    python benchmarks/adam_state.py RUN/checkpoint.pt [--json OUT.json]
+
+Adam moves a parameter by lr · m̂ / (sqrt(v̂) + ε). Where sqrt(v̂) ≪ ε the step is lr · m̂ / ε: plain momentum
+SGD at rate lr/ε, proportional to the gradient, not normalised by it. The LogCosh loss of range-transformed
+targets is ~1e-6 late in training, so its gradients are small: this prints, per parameter tensor (MLP layers,
+then the feature grids), the 10th/50th/90th percentiles of sqrt(v̂) (bias-corrected with the checkpoint's step
+count) and the share of entries whose sqrt(v̂) is below the group's ε. Entries that never had a gradient
+(sqrt(v) = 0: grid nodes no sample reaches) are left out of both.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from gratnet.atomic import atomic_path
+
+
+def adam_table(state: dict[str, Any]) -> list[dict[str, Any]]:
+    """One row per parameter tensor of ``state`` (a trainer checkpoint): group, shape, sqrt(v̂) percentiles,
+    share below ε, and entries with no gradient yet."""
+    optimizer = state["optimizer"]
+    rows = []
+    for number, group in enumerate(optimizer["param_groups"]):
+        name = ("mlp", "grids")[number] if len(optimizer["param_groups"]) == 2 else "all"
+        for index in group["params"]:
+            entry = optimizer["state"].get(index)
+            if entry is None:
+                continue
+            step = float(entry["step"])
+            beta2 = group["betas"][1]
+            root = np.sqrt(entry["exp_avg_sq"].double().numpy().ravel() / (1.0 - beta2**step))
+            touched = root > 0
+            rows.append({
+                "group": name,
+                "shape": list(entry["exp_avg_sq"].shape),
+                "eps": group["eps"],
+                "sqrt_v_percentiles_10_50_90": np.percentile(root[touched], [10, 50, 90]).tolist()
+                if touched.any() else None,
+                "below_eps": float(np.mean(root[touched] < group["eps"])) if touched.any() else None,
+                "never_touched": float(np.mean(~touched)),
+            })
+    return rows
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("checkpoint", type=Path, help="a `gratnet train` checkpoint.pt")
+    parser.add_argument("--json", type=Path, help="write the table here as JSON")
+    args = parser.parse_args()
+    if not args.checkpoint.is_file():
+        sys.exit(f"adam_state: no such file: {args.checkpoint}")
+    import torch
+
+    try:
+        state = torch.load(args.checkpoint, map_location="cpu", weights_only=False)
+        rows = adam_table(state)
+    except (OSError, RuntimeError, KeyError, EOFError) as error:
+        sys.exit(f"adam_state: {args.checkpoint} is not a training checkpoint with Adam's state: {error}")
+    epochs = len(state.get("history", {}).get("epochs", []))
+    print(f"{args.checkpoint}: after epoch {epochs}, step {int(state.get('steps', 0))}")
+    print("| group | shape | ε | sqrt(v̂): 10th / 50th / 90th percentile | share below ε | no gradient yet |")
+    print("|---|---|---|---|---|---|")
+    for row in rows:
+        percentiles = (" / ".join(f"{value:.2g}" for value in row["sqrt_v_percentiles_10_50_90"])
+                       if row["sqrt_v_percentiles_10_50_90"] else "—")
+        below = f"{100 * row['below_eps']:.0f} %" if row["below_eps"] is not None else "—"
+        print(f"| {row['group']} | {'×'.join(map(str, row['shape']))} | {row['eps']:.0e} | {percentiles} | {below} "
+              f"| {100 * row['never_touched']:.1f} % |")
+    if args.json:
+        with atomic_path(args.json) as temporary:
+            temporary.write_text(json.dumps({"checkpoint": str(args.checkpoint), "epochs": epochs,
+                                             "tensors": rows}, indent=1) + "\n")
+
+
+if __name__ == "__main__":
+    main()
