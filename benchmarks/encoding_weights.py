@@ -1,0 +1,66 @@
+"""How much each encoding frequency weighs in a network: the first layer's column norms per frequency.
+
+    python benchmarks/encoding_weights.py MODEL.npz … [--json OUT.json]
+
+The first layer of the funnel MLP reads [grid features (feature-grid models), (u*, v*, t), eq. 6's sines and
+cosines]. The spatial part holds 4 groups (u*, v*, u*+v*, u*−v*) × (sin, cos) × L frequencies, the t part
+(sin, cos) × L_t (gratnet.encoding.encode). Per frequency this prints the Frobenius norm of the first layer's
+columns of that frequency (all groups, sine and cosine), and the mean column norm of the grid features. The top
+frequency of each part sits at the volume's Nyquist rate: between samples the samples do not constrain it, so a
+large weight there shows as oscillation between the samples (docs/results.md, "Adam's ε").
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from gratnet.atomic import atomic_path
+from gratnet.errors import GratNetError
+from gratnet.modelfile import ModelFile, load_model
+
+
+def frequency_norms(model: ModelFile) -> dict[str, Any]:
+    """{"spatial": [L norms], "t": [L_t norms], "grid_features": mean column norm (0 without grids)}."""
+    weights = np.asarray(model.weights[0], dtype=np.float64)  # (outputs, inputs)
+    grid = model.grid_feature_count
+    frequencies, t_frequencies = model.encoding.frequencies, model.encoding.t_frequencies
+    start = grid + 3  # grid features, then the raw coordinates (u*, v*, t)
+    spatial = weights[:, start:start + 8 * frequencies].reshape(weights.shape[0], 4, 2, frequencies)
+    t_part = weights[:, start + 8 * frequencies:start + 8 * frequencies + 2 * t_frequencies]
+    t_part = t_part.reshape(weights.shape[0], 2, t_frequencies)
+    return {
+        "spatial": np.sqrt((spatial**2).sum(axis=(0, 1, 2))).tolist(),
+        "t": np.sqrt((t_part**2).sum(axis=(0, 1))).tolist(),
+        "grid_features": float(np.sqrt((weights[:, :grid] ** 2).sum(axis=0)).mean()) if grid else 0.0,
+    }
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("models", nargs="+", type=Path, help="model files (.npz)")
+    parser.add_argument("--json", type=Path, help="write the norms here as JSON")
+    args = parser.parse_args()
+    try:
+        for path in args.models:
+            if not path.is_file():
+                raise GratNetError(f"no such file: {path}")
+        norms = {str(path): frequency_norms(load_model(path)) for path in args.models}
+    except GratNetError as error:
+        sys.exit(f"encoding_weights: {error}")
+    for path, entry in norms.items():
+        print(f"{path}: grid-feature columns (mean norm) {entry['grid_features']:.3g}")
+        print("  spatial, lowest to top frequency: " + " ".join(f"{value:.3g}" for value in entry["spatial"]))
+        print("  t, lowest to top frequency:       " + " ".join(f"{value:.3g}" for value in entry["t"]))
+    if args.json:
+        with atomic_path(args.json) as temporary:
+            temporary.write_text(json.dumps(norms, indent=1) + "\n")
+
+
+if __name__ == "__main__":
+    main()
