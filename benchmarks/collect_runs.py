@@ -191,9 +191,10 @@ def plot_runs(runs: list[dict[str, Any]], target: Path) -> None:
         loss_axis.set_xlabel("epoch")
         loss_axis.set_ylabel("training loss (LogCosh of range-transformed XYZ)")
         loss_axis.legend(fontsize=7)
+        flip_axis.set_yscale("log")
         flip_axis.set_xlabel("epoch")
         flip_axis.set_ylabel(f"mean FLIP, {HEADLINE} at 128²")
-        flip_axis.grid(alpha=0.3)
+        flip_axis.grid(alpha=0.3, which="both")
         save_figure(figure, target)
     finally:
         plt.close(figure)

@@ -7,7 +7,8 @@ cosines]. The spatial part holds 4 groups (u*, v*, u*+v*, u*−v*) × (sin, cos)
 (sin, cos) × L_t (gratnet.encoding.encode). Per frequency this prints the Frobenius norm of the first layer's
 columns of that frequency (all groups, sine and cosine), and the mean column norm of the grid features. The top
 frequency of each part sits at the volume's Nyquist rate: between samples the samples do not constrain it, so a
-large weight there shows as oscillation between the samples (docs/results.md, "Adam's ε").
+large weight there shows as oscillation between the samples (docs/results.md, "Adam's ε"). At the samples that
+frequency's sine is zero (up to rounding), so its columns are printed apart from the cosine's.
 """
 
 from __future__ import annotations
@@ -26,7 +27,8 @@ from gratnet.modelfile import ModelFile, load_model
 
 
 def frequency_norms(model: ModelFile) -> dict[str, Any]:
-    """{"spatial": [L norms], "t": [L_t norms], "grid_features": mean column norm (0 without grids)}."""
+    """{"spatial": [L norms], "t": [L_t norms], the same of the sine and cosine columns alone ("spatial_sin",
+    "spatial_cos", "t_sin", "t_cos"), "grid_features": mean column norm (0 without grids)}."""
     weights = np.asarray(model.weights[0], dtype=np.float64)  # (outputs, inputs)
     grid = model.grid_feature_count
     frequencies, t_frequencies = model.encoding.frequencies, model.encoding.t_frequencies
@@ -36,7 +38,11 @@ def frequency_norms(model: ModelFile) -> dict[str, Any]:
     t_part = t_part.reshape(weights.shape[0], 2, t_frequencies)
     return {
         "spatial": np.sqrt((spatial**2).sum(axis=(0, 1, 2))).tolist(),
+        "spatial_sin": np.sqrt((spatial[:, :, 0] ** 2).sum(axis=(0, 1))).tolist(),
+        "spatial_cos": np.sqrt((spatial[:, :, 1] ** 2).sum(axis=(0, 1))).tolist(),
         "t": np.sqrt((t_part**2).sum(axis=(0, 1))).tolist(),
+        "t_sin": np.sqrt((t_part[:, 0] ** 2).sum(axis=0)).tolist(),
+        "t_cos": np.sqrt((t_part[:, 1] ** 2).sum(axis=0)).tolist(),
         "grid_features": float(np.sqrt((weights[:, :grid] ** 2).sum(axis=0)).mean()) if grid else 0.0,
     }
 
@@ -57,6 +63,8 @@ def main() -> None:
         print(f"{path}: grid-feature columns (mean norm) {entry['grid_features']:.3g}")
         print("  spatial, lowest to top frequency: " + " ".join(f"{value:.3g}" for value in entry["spatial"]))
         print("  t, lowest to top frequency:       " + " ".join(f"{value:.3g}" for value in entry["t"]))
+        print(f"  top frequency, sine / cosine columns: spatial {entry['spatial_sin'][-1]:.3g} / "
+              f"{entry['spatial_cos'][-1]:.3g}, t {entry['t_sin'][-1]:.3g} / {entry['t_cos'][-1]:.3g}")
     if args.json:
         with atomic_path(args.json) as temporary:
             temporary.write_text(json.dumps(norms, indent=1) + "\n")

@@ -31,6 +31,9 @@ def test_a_single_column_shows_at_its_own_frequency(asset):
     expected[5] = 3.0 * np.sqrt(first.shape[0])
     np.testing.assert_allclose(norms["spatial"], expected)
     np.testing.assert_allclose(norms["t"], [0.0, 2.0] + [0.0] * (model.encoding.t_frequencies - 2))
+    np.testing.assert_allclose(norms["spatial_cos"], expected)
+    np.testing.assert_allclose(norms["spatial_sin"], 0.0)
+    np.testing.assert_allclose(norms["t_cos"], norms["t"])
     assert norms["grid_features"] == pytest.approx(4.0 / grid if grid else 0.0)
 
 
