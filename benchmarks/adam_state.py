@@ -21,6 +21,7 @@ from typing import Any
 import numpy as np
 
 from gratnet.atomic import atomic_path
+from gratnet.errors import GratNetError
 
 
 def adam_table(state: dict[str, Any]) -> list[dict[str, Any]]:
@@ -57,12 +58,12 @@ def main() -> None:
     args = parser.parse_args()
     if not args.checkpoint.is_file():
         sys.exit(f"adam_state: no such file: {args.checkpoint}")
-    import torch
+    from trainer.train import read_checkpoint
 
     try:
-        state = torch.load(args.checkpoint, map_location="cpu", weights_only=False)
+        state = read_checkpoint(args.checkpoint)
         rows = adam_table(state)
-    except (OSError, RuntimeError, KeyError, EOFError) as error:
+    except (GratNetError, KeyError) as error:
         sys.exit(f"adam_state: {args.checkpoint} is not a training checkpoint with Adam's state: {error}")
     epochs = len(state.get("history", {}).get("epochs", []))
     print(f"{args.checkpoint}: after epoch {epochs}, step {int(state.get('steps', 0))}")

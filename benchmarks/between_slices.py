@@ -37,6 +37,7 @@ from trainer.evaluate import (
     ground_truth_brdf_slice,
     model_ground_truth_inputs,
     network_brdf_slice,
+    slice_label,
 )
 from trainer.metrics import flip
 
@@ -113,7 +114,7 @@ def main() -> None:
         if oracle is not None:
             row["oracle"] = binned(reference, oracle.brdf_slice(config), distance, inside, edges)
         results.append(row)
-        print(f"({theta:g}°, {phi:g}°) {exposure:g} RU, d from {slices} uniform t nodes:")
+        print(f"{slice_label(theta, phi, exposure)}, d from {slices} uniform t nodes:")
         print("  d (slice spacings)   pixels   FLIP network   FLIP oracle   med|ln Y ratio| network   oracle")
         for index, bin_row in enumerate(row["network"]):
             oracle_row = row["oracle"][index] if oracle is not None else {}

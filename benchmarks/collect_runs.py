@@ -27,13 +27,16 @@ import sys
 from pathlib import Path
 from typing import Any
 
+import numpy as np
+
 from gratnet.atomic import atomic_path
 from gratnet.config import changed_flags
 from gratnet.errors import GratNetError
+from trainer.evaluate import STANDARD_SLICES, slice_label
 from trainer.train_config import TrainConfig
 
 #: The view every ratio is taken against: the paper's headline BRDF slice.
-HEADLINE = "(0°, 0°) 2000 RU"
+HEADLINE = slice_label(*STANDARD_SLICES[0])
 
 
 def _read_json(path: Path) -> Any:
@@ -66,27 +69,26 @@ def check_run(run: Path) -> None:
 
 def _stopped_run(run: Path) -> tuple[dict[str, Any], dict[str, Any]]:
     """(model config, history) of a run stopped before its end, from its checkpoint.pt."""
-    import torch
+    from trainer.train import read_checkpoint
 
-    try:
-        state = torch.load(run / "checkpoint.pt", map_location="cpu", weights_only=False)
-    except (OSError, RuntimeError, EOFError) as error:
-        raise GratNetError(f"cannot read {run / 'checkpoint.pt'}: {error}") from error
+    state = read_checkpoint(run / "checkpoint.pt")
     return {"train": state["config"], "volume": None}, state["history"]
 
 
-def train_command(train: dict[str, Any], volume: str | None) -> str:
+def train_config(train: dict[str, Any]) -> TrainConfig:
+    """The run's TrainConfig from its saved dict (fields added since take their defaults; unknown ones are dropped)."""
+    return TrainConfig(**{name: value for name, value in train.items() if name in TrainConfig.__dataclass_fields__})
+
+
+def train_command(config: TrainConfig, volume: str | None) -> str:
     """`gratnet train VOLUME --out RUN FLAGS…` with only the flags that differ from the defaults."""
-    known = {name: value for name, value in train.items() if name in TrainConfig.__dataclass_fields__}
-    config = TrainConfig(**known)
     return shlex.join(["gratnet", "train", Path(volume).name if volume else "VOLUME", "--out", "RUN",
                        *changed_flags(config)])
 
 
 def _grid_bytes(config: TrainConfig) -> int:
     """Bytes of the run's grids as the model file stores them (``--grid-dtype``)."""
-    size = 2 if config.grid_dtype == "float16" else 4
-    return sum(t * rv * ru * c for t, rv, ru, c in config.grid_shapes()) * size
+    return sum(t * rv * ru * c for t, rv, ru, c in config.grid_shapes()) * np.dtype(config.grid_dtype).itemsize
 
 
 def collect_run(run: Path, label: str) -> dict[str, Any]:
@@ -102,12 +104,11 @@ def collect_run(run: Path, label: str) -> dict[str, Any]:
         metrics = _read_json(metrics_path(run))
     epochs = history.get("epochs", [])
     slices = metrics.get("brdf_slices", [])
-    train = model_config.get("train", {})
-    config = TrainConfig(**{name: value for name, value in train.items() if name in TrainConfig.__dataclass_fields__})
+    config = train_config(model_config.get("train", {}))
     record: dict[str, Any] = {
         "run": label,
         "folder": str(run),
-        "command": train_command(train, model_config.get("volume")),
+        "command": train_command(config, model_config.get("volume")),
         "stopped_after_epoch": len(epochs) if stopped else None,
         "epochs_planned": config.epochs,
         "grid_bytes": history.get("grid_bytes", _grid_bytes(config)),

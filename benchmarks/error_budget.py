@@ -42,7 +42,13 @@ from gratnet.modelfile import ModelFile, load_model, mlp_forward, network_inputs
 from gratnet.volume import Volume, read_volume, volume_axes
 from trainer.brdfslice import SliceConfig, expose_slice, slice_geometry
 from trainer.diagnostics import VolumeOracle
-from trainer.evaluate import EvaluateConfig, ground_truth_brdf_slice, model_ground_truth_inputs, network_brdf_slice
+from trainer.evaluate import (
+    EvaluateConfig,
+    ground_truth_brdf_slice,
+    model_ground_truth_inputs,
+    network_brdf_slice,
+    slice_label,
+)
 from trainer.metrics import image_metrics
 from trainer.sampling import grid_to_key, physical_mask
 from trainer.train import volume_samples
@@ -227,7 +233,7 @@ def main() -> None:
         started = time.perf_counter()
         config = SliceConfig(theta, phi, size=args.size, exposure=exposure, ior=1.5)
         reference = ground_truth_brdf_slice(field, optics, config, args.cache_dir)
-        row = {"label": f"({theta:g}°, {phi:g}°) {exposure:g} RU", "view": [theta, phi, exposure],
+        row = {"label": slice_label(theta, phi, exposure), "view": [theta, phi, exposure],
                **view_rows(model, config, reference, sigmas)}
         if args.target is not None:
             row["white_sigma_at_target"] = crossing(sigmas, [item["flip"] for item in row["white"]], args.target)

@@ -17,7 +17,13 @@ from pathlib import Path
 from gratnet.errors import GratNetError
 from gratnet.modelfile import load_model
 from trainer.brdfslice import SliceConfig
-from trainer.evaluate import EvaluateConfig, ground_truth_brdf_slice, model_ground_truth_inputs, network_brdf_slice
+from trainer.evaluate import (
+    EvaluateConfig,
+    ground_truth_brdf_slice,
+    model_ground_truth_inputs,
+    network_brdf_slice,
+    slice_label,
+)
 from trainer.metrics import flip
 
 
@@ -62,7 +68,7 @@ def main() -> None:
         ax.set_title(f"{label}\nFLIP {mean:.4f}", fontsize=9)
         ax.axis("off")
     fig.colorbar(image, ax=list(axes[0]), shrink=0.8, label="FLIP error")
-    fig.suptitle(f"FLIP error maps, ({theta:g}°, {phi:g}°) {exposure:g} RU", fontsize=10)
+    fig.suptitle(f"FLIP error maps, {slice_label(theta, phi, exposure)}", fontsize=10)
     save_figure(fig, args.out)
     plt.close(fig)
     print(f"wrote {args.out}")

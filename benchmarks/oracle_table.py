@@ -33,7 +33,7 @@ from gratnet.atomic import atomic_path, write_text_atomic
 from gratnet.volume import Volume, read_volume
 from trainer.brdfslice import SliceConfig, slice_view_directions
 from trainer.diagnostics import REGIONS, VolumeOracle, region_errors, region_labels
-from trainer.evaluate import STANDARD_SLICES, _slice_label, ground_truth_brdf_slice
+from trainer.evaluate import STANDARD_SLICES, ground_truth_brdf_slice, slice_label
 from trainer.fourier import OpticsConfig
 from trainer.loaders import LoadOptions, load_heightfield
 from trainer.metrics import image_metrics
@@ -69,7 +69,7 @@ def oracle_rows(volume_path: Path, size: int, cache_dir: str, progress: bool,
         reference = ground_truth_brdf_slice(field, optics, config, cache_dir, progress, device)
         predicted = oracle.brdf_slice(config)
         labels = region_labels(reference, config, optics.sigma_s_um)
-        label = _slice_label(theta, phi, exposure)
+        label = slice_label(theta, phi, exposure)
         slices.append({"slice": label, **image_metrics(reference, predicted, mask=inside),
                        "regions": region_errors(reference, predicted, labels)})
         figure.append((f"{volume_path.stem} {volume.resolution}² {label}", reference, predicted))

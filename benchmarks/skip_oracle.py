@@ -26,7 +26,7 @@ from gratnet.brdf import slice_view_directions
 from gratnet.display import xyz_to_display_srgb8
 from gratnet.modelfile import load_model
 from trainer.brdfslice import SliceConfig
-from trainer.evaluate import STANDARD_SLICES, ground_truth_brdf_slice, network_brdf_slice
+from trainer.evaluate import STANDARD_SLICES, ground_truth_brdf_slice, network_brdf_slice, slice_label
 from trainer.fourier import OpticsConfig
 from trainer.loaders import load_heightfield
 
@@ -55,7 +55,7 @@ def main() -> None:
             config = SliceConfig(theta, phi, size=arguments.size, exposure=exposure, ior=1.5)
             truth = ground_truth_brdf_slice(field, optics, config, arguments.cache_dir, progress=False)
             network = network_brdf_slice(model, config)
-            row = {"material": model_path.parent.name, "slice": f"({theta:g}°, {phi:g}°) {exposure:g} RU",
+            row = {"material": model_path.parent.name, "slice": slice_label(theta, phi, exposure),
                    "lit_ground_truth": lit_fraction(truth, inside), "lit_network": lit_fraction(network, inside)}
             row["best_reduction_ground_truth"] = 1.0 / max(row["lit_ground_truth"], 1.0 / inside.sum())
             row["best_reduction_network"] = 1.0 / max(row["lit_network"], 1.0 / inside.sum())

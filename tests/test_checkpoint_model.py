@@ -29,6 +29,7 @@ def test_the_last_checkpoint_gives_the_trained_model(tiny_volume, tmp_path):
                     trained.weights + trained.biases + list(trained.grids), strict=True):
         np.testing.assert_array_equal(a, b)
     assert rebuilt.encoding == trained.encoding and rebuilt.layer_sizes == trained.layer_sizes
+    assert rebuilt.metadata["volume"] == trained.metadata["volume"]  # what `gratnet evaluate` reads
 
 
 def test_a_missing_checkpoint_is_one_message(tmp_path):

@@ -115,7 +115,8 @@ def model_ground_truth_inputs(model: ModelFile, heightfield: str) -> tuple[Heigh
     return load_heightfield(heightfield, LoadOptions()), OpticsConfig.from_volume_metadata(model.metadata["volume"])
 
 
-def _slice_label(theta: float, phi: float, exposure: float) -> str:
+def slice_label(theta: float, phi: float, exposure: float) -> str:
+    """A BRDF slice's name in metrics.json and the reports: '(θ°, φ°) E RU', E the exposure."""
     return f"({theta:g}°, {phi:g}°) {exposure:g} RU"
 
 
@@ -141,9 +142,9 @@ def evaluate_brdf_slices(
         _, inside = slice_view_directions(config.size)
         metrics = image_metrics(reference, predicted, mask=inside)
         labels = region_labels(reference, slice_config, optics.sigma_s_um)
-        region_maps.append((_slice_label(theta, phi, exposure), labels))
+        region_maps.append((slice_label(theta, phi, exposure), labels))
         row: dict[str, Any] = {
-            "slice": _slice_label(theta, phi, exposure), "theta": theta, "phi": phi, "exposure": exposure, **metrics,
+            "slice": slice_label(theta, phi, exposure), "theta": theta, "phi": phi, "exposure": exposure, **metrics,
             "regions": region_errors(reference, predicted, labels),
         }
         if index >= len(STANDARD_SLICES):
@@ -154,7 +155,7 @@ def evaluate_brdf_slices(
                              "regions": region_errors(reference, oracle, labels)}
             row["oracle_flip"] = row["oracle"]["flip"]
         rows.append(row)
-        figure_rows.append((_slice_label(theta, phi, exposure), reference, predicted))
+        figure_rows.append((slice_label(theta, phi, exposure), reference, predicted))
     comparison_figure(out_dir / "brdf_slices.png", figure_rows, title="BRDF slices: ground truth | network | FLIP")
     region_figure(out_dir / "brdf_regions.png", region_maps)
     return rows

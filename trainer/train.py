@@ -225,6 +225,42 @@ def held_out_loss(
     return total / max(count, 1)
 
 
+#: The volume's metadata a model file carries (what `gratnet evaluate` and the renderers read of it).
+VOLUME_METADATA_KEYS = ("source", "sigma_s_um", "window_extent_um", "dx_um", "patch_size_um", "resolution", "slices",
+                        "scheme", "wavelengths_nm", "illuminant", "observer", "repeat")
+
+
+def trained_model_file(model: FunnelMLP | GridNetwork, config: TrainConfig, volume: Volume,
+                       history: dict[str, Any]) -> ModelFile:
+    """The model file of ``model`` (moved to the CPU), trained with ``config`` on ``volume``: weights, encoding,
+    range, the volume's metadata, the training's configuration and ``history``, and the display defaults."""
+    from gratnet.showcase import with_display
+
+    model_file = model.cpu().to_model_file(
+        encoding=config.encoding_for(volume),
+        range=config.range_spec(),
+        scheme=volume.metadata["scheme"],
+        metadata={
+            "volume": {key: volume.metadata.get(key) for key in VOLUME_METADATA_KEYS},
+            "training": {
+                "config": config_to_dict(config),
+                **{k: v for k, v in history.items() if k != "epochs"},
+                "final": history["epochs"][-1] if history.get("epochs") else None,
+            },
+        },
+    )
+    # Where the diffraction lands and the exposure that shows it, for the renderers' defaults (docs/formats.md).
+    return with_display(model_file)
+
+
+def read_checkpoint(path: str | os.PathLike[str], device: str | torch.device = "cpu") -> dict[str, Any]:
+    """A `gratnet train` checkpoint.pt (model and optimiser state, config, history), its tensors on ``device``."""
+    try:
+        return torch.load(path, map_location=device, weights_only=False)
+    except (OSError, RuntimeError, EOFError, ValueError) as error:
+        raise GratNetError(f"cannot read the checkpoint {path}: {error}") from error
+
+
 def train(
     volume: Volume,
     config: TrainConfig,
@@ -258,7 +294,7 @@ def train(
     start_epoch = done = 0
     checkpoint_path = out_dir / "checkpoint.pt"
     if resume and checkpoint_path.exists():
-        state = torch.load(checkpoint_path, map_location=device, weights_only=False)
+        state = read_checkpoint(checkpoint_path, device)
         # Neither the per-epoch diagnostic nor graph replay changes the training: they may differ on resume.
         free = ("epoch_flip_size", "cuda_graph")
         # Options added since a checkpoint was written take their defaults, which is how it was trained.
@@ -378,40 +414,9 @@ def train(
     if isinstance(model, GridNetwork):
         history.update({"grid_shapes": [list(shape) for shape in config.grid_shapes()],
                         "grid_bytes": model.grid_bytes, "volume_bytes": int(volume.xyz.size * 4)})
-    model_file = model.cpu().to_model_file(
-        encoding=encoding,
-        range=range_spec,
-        scheme=volume.metadata["scheme"],
-        metadata={
-            "volume": {
-                key: volume.metadata.get(key)
-                for key in (
-                    "source",
-                    "sigma_s_um",
-                    "window_extent_um",
-                    "dx_um",
-                    "patch_size_um",
-                    "resolution",
-                    "slices",
-                    "scheme",
-                    "wavelengths_nm",
-                    "illuminant",
-                    "observer",
-                    "repeat",
-                )
-            },
-            "training": {
-                "config": config_to_dict(config),
-                **{k: v for k, v in history.items() if k != "epochs"},
-                "final": history["epochs"][-1] if history["epochs"] else None,
-            },
-        },
-    )
     from gratnet.modelfile import save_model
-    from gratnet.showcase import with_display
 
-    # Where the diffraction lands and the exposure that shows it, for the renderers' defaults (docs/formats.md).
-    model_file = with_display(model_file)
+    model_file = trained_model_file(model, config, volume, history)
     save_model(out_dir / "model.npz", model_file)
     write_text_atomic(out_dir / "history.json", json.dumps(history, indent=2) + "\n")
     return model, model_file, history
