@@ -8,6 +8,11 @@ targets is ~1e-6 late in training, so its gradients are small: this prints, per 
 then the feature grids), the 10th/50th/90th percentiles of sqrt(v̂) (bias-corrected with the checkpoint's step
 count) and the share of entries whose sqrt(v̂) is below the group's ε. Entries that never had a gradient
 (sqrt(v) = 0: grid nodes no sample reaches) are left out of both.
+
+It also prints the median sqrt(v̂) of the first layer's weight columns per encoding frequency (eq. 6's layout,
+sine and cosine apart; benchmarks/encoding_weights.py): the columns of the top frequency's sine, which is zero at
+every training sample up to float32 rounding, get only rounding-noise gradients, and this shows how far below
+the other columns' their sqrt(v̂) lies, i.e. which ε keeps them still while normalising the rest.
 """
 
 from __future__ import annotations
@@ -22,6 +27,11 @@ import numpy as np
 
 from gratnet.atomic import atomic_path
 from gratnet.errors import GratNetError
+
+try:  # run as a script: benchmarks/ is sys.path[0]
+    from encoding_weights import split_first_layer
+except ModuleNotFoundError:  # imported as benchmarks.adam_state (the tests)
+    from benchmarks.encoding_weights import split_first_layer
 
 
 def adam_table(state: dict[str, Any]) -> list[dict[str, Any]]:
@@ -51,6 +61,28 @@ def adam_table(state: dict[str, Any]) -> list[dict[str, Any]]:
     return rows
 
 
+def first_layer_sqrt_v(state: dict[str, Any]) -> dict[str, Any]:
+    """Median sqrt(v̂) (bias-corrected) of the first layer's weight columns of ``state`` (a trainer checkpoint):
+    grid-feature columns, raw (u*, v*, t) columns, and per encoding frequency (lowest to top) the spatial and
+    t sine and cosine columns. The first layer's weight is the first parameter of the first group in both
+    architectures (trainer.train's optimiser)."""
+    optimizer, config = state["optimizer"], state["config"]
+    group = optimizer["param_groups"][0]
+    entry = optimizer["state"][group["params"][0]]
+    root = np.sqrt(entry["exp_avg_sq"].double().numpy() / (1.0 - group["betas"][1] ** float(entry["step"])))
+    grid = sum(int(tensor.shape[0]) for name, tensor in state["model"].items() if name.startswith("grids."))
+    grid_columns, spatial, t_part = split_first_layer(root, grid, config["frequencies"], config["t_frequencies"])
+    return {
+        "eps": group["eps"],
+        "grid_features": float(np.median(grid_columns)) if grid else None,
+        "coordinates": float(np.median(root[:, grid:grid + 3])),
+        "spatial_sin": np.median(spatial[:, :, 0], axis=(0, 1)).tolist(),
+        "spatial_cos": np.median(spatial[:, :, 1], axis=(0, 1)).tolist(),
+        "t_sin": np.median(t_part[:, 0], axis=0).tolist(),
+        "t_cos": np.median(t_part[:, 1], axis=0).tolist(),
+    }
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("checkpoint", type=Path, help="a `gratnet train` checkpoint.pt")
@@ -63,6 +95,7 @@ def main() -> None:
     try:
         state = read_checkpoint(args.checkpoint)
         rows = adam_table(state)
+        columns = first_layer_sqrt_v(state)
     except (GratNetError, KeyError) as error:
         sys.exit(f"adam_state: {args.checkpoint} is not a training checkpoint with Adam's state: {error}")
     epochs = len(state.get("history", {}).get("epochs", []))
@@ -75,10 +108,17 @@ def main() -> None:
         below = f"{100 * row['below_eps']:.0f} %" if row["below_eps"] is not None else "—"
         print(f"| {row['group']} | {'×'.join(map(str, row['shape']))} | {row['eps']:.0e} | {percentiles} | {below} "
               f"| {100 * row['never_touched']:.1f} % |")
+    print(f"first layer, median sqrt(v̂) of its weight columns (ε {columns['eps']:.0e}):")
+    if columns["grid_features"] is not None:
+        print(f"  grid features {columns['grid_features']:.2g}, (u*, v*, t) {columns['coordinates']:.2g}")
+    for part in ("spatial", "t"):
+        for kind in ("sin", "cos"):
+            values = " ".join(f"{value:.1e}" for value in columns[f"{part}_{kind}"])
+            print(f"  {part} {kind}, lowest to top frequency: {values}")
     if args.json:
         with atomic_path(args.json) as temporary:
             temporary.write_text(json.dumps({"checkpoint": str(args.checkpoint), "epochs": epochs,
-                                             "tensors": rows}, indent=1) + "\n")
+                                             "tensors": rows, "first_layer_columns": columns}, indent=1) + "\n")
 
 
 if __name__ == "__main__":

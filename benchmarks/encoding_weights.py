@@ -26,16 +26,23 @@ from gratnet.errors import GratNetError
 from gratnet.modelfile import ModelFile, load_model
 
 
+def split_first_layer(columns: np.ndarray, grid: int, frequencies: int,
+                      t_frequencies: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The first layer's columns (any array of shape (outputs, inputs)) by eq. 6's layout: the grid features
+    (outputs, grid), the spatial part (outputs, 4 groups, sin/cos, L) and the t part (outputs, sin/cos, L_t)."""
+    start = grid + 3  # grid features, then the raw coordinates (u*, v*, t)
+    spatial = columns[:, start:start + 8 * frequencies].reshape(columns.shape[0], 4, 2, frequencies)
+    t_part = columns[:, start + 8 * frequencies:start + 8 * frequencies + 2 * t_frequencies]
+    return columns[:, :grid], spatial, t_part.reshape(columns.shape[0], 2, t_frequencies)
+
+
 def frequency_norms(model: ModelFile) -> dict[str, Any]:
     """{"spatial": [L norms], "t": [L_t norms], the same of the sine and cosine columns alone ("spatial_sin",
     "spatial_cos", "t_sin", "t_cos"), "grid_features": mean column norm (0 without grids)}."""
     weights = np.asarray(model.weights[0], dtype=np.float64)  # (outputs, inputs)
     grid = model.grid_feature_count
-    frequencies, t_frequencies = model.encoding.frequencies, model.encoding.t_frequencies
-    start = grid + 3  # grid features, then the raw coordinates (u*, v*, t)
-    spatial = weights[:, start:start + 8 * frequencies].reshape(weights.shape[0], 4, 2, frequencies)
-    t_part = weights[:, start + 8 * frequencies:start + 8 * frequencies + 2 * t_frequencies]
-    t_part = t_part.reshape(weights.shape[0], 2, t_frequencies)
+    grid_columns, spatial, t_part = split_first_layer(weights, grid, model.encoding.frequencies,
+                                                      model.encoding.t_frequencies)
     return {
         "spatial": np.sqrt((spatial**2).sum(axis=(0, 1, 2))).tolist(),
         "spatial_sin": np.sqrt((spatial[:, :, 0] ** 2).sum(axis=(0, 1))).tolist(),
@@ -43,7 +50,7 @@ def frequency_norms(model: ModelFile) -> dict[str, Any]:
         "t": np.sqrt((t_part**2).sum(axis=(0, 1))).tolist(),
         "t_sin": np.sqrt((t_part[:, 0] ** 2).sum(axis=0)).tolist(),
         "t_cos": np.sqrt((t_part[:, 1] ** 2).sum(axis=0)).tolist(),
-        "grid_features": float(np.sqrt((weights[:, :grid] ** 2).sum(axis=0)).mean()) if grid else 0.0,
+        "grid_features": float(np.sqrt((grid_columns**2).sum(axis=0)).mean()) if grid else 0.0,
     }
 
 
