@@ -34,6 +34,11 @@ except ModuleNotFoundError:  # imported as benchmarks.adam_state (the tests)
     from benchmarks.encoding_weights import split_first_layer
 
 
+def _sqrt_v_hat(entry: dict[str, Any], group: dict[str, Any]) -> np.ndarray:
+    """sqrt(v̂) of one parameter's Adam state, bias-corrected with its step count (float64, the tensor's shape)."""
+    return np.sqrt(entry["exp_avg_sq"].double().numpy() / (1.0 - group["betas"][1] ** float(entry["step"])))
+
+
 def adam_table(state: dict[str, Any]) -> list[dict[str, Any]]:
     """One row per parameter tensor of ``state`` (a trainer checkpoint): group, shape, sqrt(v̂) percentiles,
     share below ε, and entries with no gradient yet."""
@@ -45,9 +50,7 @@ def adam_table(state: dict[str, Any]) -> list[dict[str, Any]]:
             entry = optimizer["state"].get(index)
             if entry is None:
                 continue
-            step = float(entry["step"])
-            beta2 = group["betas"][1]
-            root = np.sqrt(entry["exp_avg_sq"].double().numpy().ravel() / (1.0 - beta2**step))
+            root = _sqrt_v_hat(entry, group).ravel()
             touched = root > 0
             rows.append({
                 "group": name,
@@ -68,8 +71,7 @@ def first_layer_sqrt_v(state: dict[str, Any]) -> dict[str, Any]:
     architectures (trainer.train's optimiser)."""
     optimizer, config = state["optimizer"], state["config"]
     group = optimizer["param_groups"][0]
-    entry = optimizer["state"][group["params"][0]]
-    root = np.sqrt(entry["exp_avg_sq"].double().numpy() / (1.0 - group["betas"][1] ** float(entry["step"])))
+    root = _sqrt_v_hat(optimizer["state"][group["params"][0]], group)
     grid = sum(int(tensor.shape[0]) for name, tensor in state["model"].items() if name.startswith("grids."))
     grid_columns, spatial, t_part = split_first_layer(root, grid, config["frequencies"], config["t_frequencies"])
     return {
