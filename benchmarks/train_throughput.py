@@ -2,6 +2,7 @@
 
     python benchmarks/train_throughput.py [--threads 2] [--steps 30] [--device cpu] [--samples 4000000]
                                           [--cuda-graph] [--hidden W,W,...] [--allocator trainer|glibc-default]
+                                          [--adam trainer|foreach] [--slices S]
 
 Builds each network of NETWORKS exactly as `gratnet train` does (TrainConfig → build_model, the same
 optimiser and schedule), puts a synthetic data set of ``--samples`` random network coordinates and
@@ -44,6 +45,15 @@ NETWORKS: tuple[tuple[str, dict[str, object]], ...] = (
         "architecture": "grid", "hidden": "160,96,48,24", "grid_features": 4, "grid_level_t": "11,11,21"}),
     ("grid 3×251² T11 C2, 64-32-16, L=8 L_t=2", {"architecture": "grid", "hidden": "64,32,16", "grid_features": 2,
                                                   "frequencies": 8, "t_frequencies": 2}),
+    ("grid 3×251² T21 C3, 160-96-48-24 (paper-scratches shipped)", {
+        "architecture": "grid", "hidden": "160,96,48,24", "grid_features": 3, "grid_t_resolution": 21,
+        "grid_adam_epsilon": 1e-15}),
+    ("grid 3×251² T21 C4, 160-96-48-24 (scratches, 41 slices)", {
+        "architecture": "grid", "hidden": "160,96,48,24", "grid_features": 4, "grid_t_resolution": 21,
+        "grid_adam_epsilon": 1e-15}),
+    ("grid 3×251² T41 C3, 160-96-48-24 (scratches, 41 slices)", {
+        "architecture": "grid", "hidden": "160,96,48,24", "grid_features": 3, "grid_t_resolution": 41,
+        "grid_adam_epsilon": 1e-15}),
 )
 
 
@@ -62,6 +72,12 @@ def main() -> None:
     parser.add_argument("--allocator", choices=("trainer", "glibc-default"), default="trainer",
                         help="trainer: keep freed memory as `gratnet train` does on a CPU (trainer/allocator.py); "
                         "glibc-default: leave malloc's thresholds as they are (to measure what that costs)")
+    parser.add_argument("--adam", choices=("trainer", "foreach"), default="trainer",
+                        help="trainer: the optimiser `gratnet train` builds (fused on a CPU: "
+                        "trainer.train.fused_adam); foreach: torch's default Adam with the same groups and rates "
+                        "(to measure what fusing gains)")
+    parser.add_argument("--slices", type=int, default=11,
+                        help="w-slices of the volume the encoding is scaled for (its top t frequency)")
     arguments = parser.parse_args()
     if arguments.cuda_graph and arguments.warmup <= WARMUP_STEPS:
         parser.error(f"--cuda-graph needs --warmup > {WARMUP_STEPS} (the eager warm-up steps, then the capture)")
@@ -78,10 +94,13 @@ def main() -> None:
         if arguments.hidden:
             overrides = {**overrides, "hidden": arguments.hidden}
         config = TrainConfig(batch_size=arguments.batch_size, **overrides)  # type: ignore[arg-type]
-        encoding = EncodingSpec.for_grid(1001, 11, config.frequencies, config.t_frequencies)  # the paper's grid
+        encoding = EncodingSpec.for_grid(1001, arguments.slices, config.frequencies, config.t_frequencies)
         torch.manual_seed(0)
         model = build_model(config, encoding).to(device)
         optimizer = make_optimizer(model, config)
+        if arguments.adam == "foreach":
+            optimizer = torch.optim.Adam([{"params": group["params"], "lr": group["lr"], "eps": group["eps"]}
+                                          for group in optimizer.param_groups])
         scheduler = make_scheduler(optimizer, config, arguments.steps + arguments.warmup,
                                    isinstance(model, GridNetwork))
         order = torch.randperm(arguments.samples, generator=generator).to(device)
@@ -115,6 +134,7 @@ def main() -> None:
             "grid_bytes": model.grid_bytes if isinstance(model, GridNetwork) else 0, "macs": macs,
             "threads": arguments.threads, "device": str(device), "batch_size": config.batch_size,
             "cuda_graph": arguments.cuda_graph, "allocator": arguments.allocator,
+            "adam": "fused" if all(group["fused"] for group in optimizer.param_groups) else "default",
             "page_faults_per_step": round(faults / arguments.steps),
             "steps": arguments.steps, "samples_per_second": round(arguments.steps * config.batch_size / seconds),
         }, ensure_ascii=False), flush=True)

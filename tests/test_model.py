@@ -205,3 +205,69 @@ def test_the_grids_and_the_mlp_take_their_own_adam_epsilon():
 def test_adam_epsilon_must_be_positive(field, epsilon):
     with pytest.raises(GratNetError, match="--" + field.replace("_", "-")):
         TrainConfig(**{field: epsilon})
+
+
+def test_cpu_adam_is_fused_and_takes_the_same_steps_as_the_default():
+    """On the CPU the optimiser is torch's fused Adam (the default foreach Adam took half a grid network's step);
+    ten steps on real gradients land where the default's do, up to float rounding, with both groups' ε."""
+    from trainer.train import batch_loss, build_model, make_optimizer
+
+    config = TrainConfig(architecture="grid", preset="tiny", grid_levels=2, grid_resolution=9, grid_t_resolution=3,
+                         device="cpu", adam_epsilon=1e-8, grid_adam_epsilon=1e-15)
+    encoding = EncodingSpec()
+    generator = torch.Generator().manual_seed(1)
+    coordinates = torch.rand(256, 3, generator=generator) * 2 - 1
+    targets = torch.rand(256, 3, generator=generator) * 1e-2
+    models = []
+    for fused in (True, False):
+        torch.manual_seed(0)
+        model = build_model(config, encoding)
+        start = [parameter.detach().clone() for parameter in model.parameters()]
+        optimizer = make_optimizer(model, config)
+        assert all(group["fused"] for group in optimizer.param_groups)
+        if not fused:  # the reference: the same groups and rates, torch's default implementation
+            optimizer = torch.optim.Adam([{"params": group["params"], "lr": group["lr"], "eps": group["eps"]}
+                                          for group in optimizer.param_groups])
+            assert not any(group["fused"] for group in optimizer.param_groups)
+        for _ in range(10):
+            optimizer.zero_grad(set_to_none=True)
+            batch_loss(model, coordinates, targets, encoding).backward()
+            optimizer.step()
+        models.append([(parameter.detach() - before).numpy() for parameter, before in
+                       zip(model.parameters(), start, strict=True)])
+    # Each tensor's moves agree to 1e-3 of its largest move (a grid node whose gradient is rounding noise takes
+    # a noise-sized step at ε 1e-15 in either implementation, hence no per-element relative bound).
+    for mine, theirs in zip(*models, strict=True):
+        assert np.abs(theirs).max() > 0.0
+        np.testing.assert_allclose(mine, theirs, rtol=0, atol=1e-3 * float(np.abs(theirs).max()))
+
+
+def test_a_checkpoint_of_the_default_adam_resumes_fused(tiny_volume, tmp_path):
+    """Checkpoints written before the CPU's Adam was fused carry ``fused: None`` in their groups: a resume takes
+    the current device's choice (its next checkpoint says so) and ends where the resume of a fused checkpoint does."""
+    import shutil
+
+    volume, _ = tiny_volume
+    config = TrainConfig(preset="tiny", epochs=2, batch_size=512, test_slices="2", device="cpu")
+    calls = []
+
+    def stop_in_epoch_two(_model_file):
+        calls.append(1)
+        if len(calls) == 2:
+            raise KeyboardInterrupt  # before epoch 2's checkpoint: epoch 1's stays
+        return {}
+
+    with pytest.raises(KeyboardInterrupt):
+        train(volume, config, tmp_path / "fused", progress=False, per_epoch=stop_in_epoch_two)
+    shutil.copytree(tmp_path / "fused", tmp_path / "older")
+    checkpoint = tmp_path / "older" / "checkpoint.pt"
+    state = torch.load(checkpoint, weights_only=False)
+    assert all(group["fused"] for group in state["optimizer"]["param_groups"])
+    for group in state["optimizer"]["param_groups"]:
+        group["fused"] = None  # as the trainer wrote it before
+    torch.save(state, checkpoint)
+    models = [train(volume, config, tmp_path / name, resume=True, progress=False)[1] for name in ("older", "fused")]
+    resaved = torch.load(checkpoint, weights_only=False)
+    assert resaved["epoch"] == 2 and all(group["fused"] for group in resaved["optimizer"]["param_groups"])
+    for mine, theirs in zip(*(model.weights for model in models), strict=True):
+        np.testing.assert_allclose(mine, theirs, rtol=1e-5, atol=1e-7)
