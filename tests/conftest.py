@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from pathlib import Path
 
 import pytest
@@ -55,3 +55,18 @@ def tiny_volume(tmp_path_factory: pytest.TempPathFactory) -> tuple[object, Path]
     path = tmp_path_factory.mktemp("volume") / "blazed.exr"
     write_volume(path, volume)
     return volume, path
+
+
+@pytest.fixture
+def stop_in_epoch_two() -> Callable[[object], dict]:
+    """A ``train(per_epoch=…)`` hook that interrupts the run after epoch 1's checkpoint and before epoch 2's, so
+    that ``--resume`` starts from epoch 1 (its first call returns nothing to record; its second raises)."""
+    calls: list[int] = []
+
+    def hook(_model_file: object) -> dict:
+        calls.append(1)
+        if len(calls) == 2:
+            raise KeyboardInterrupt
+        return {}
+
+    return hook

@@ -120,20 +120,12 @@ def test_graphed_training_matches_eager_training_on_cuda(tiny_volume, tmp_path, 
 
 
 @cuda
-def test_an_eager_checkpoint_resumes_graphed_on_cuda(tiny_volume, tmp_path):
+def test_an_eager_checkpoint_resumes_graphed_on_cuda(tiny_volume, tmp_path, stop_in_epoch_two):
     """An eager run stopped after epoch 1 of 2, resumed with the graph and without: the same model."""
     import shutil
 
     volume, _ = tiny_volume
     base = dict(preset="tiny", epochs=2, batch_size=100, test_slices="2", device="cuda")
-    calls = []
-
-    def stop_in_epoch_two(_model_file):
-        calls.append(1)
-        if len(calls) == 2:
-            raise KeyboardInterrupt  # before epoch 2's checkpoint: epoch 1's stays
-        return {}
-
     with pytest.raises(KeyboardInterrupt):
         train(volume, TrainConfig(**base, cuda_graph="off"), tmp_path / "off", progress=False,
               per_epoch=stop_in_epoch_two)

@@ -242,21 +242,13 @@ def test_cpu_adam_is_fused_and_takes_the_same_steps_as_the_default():
         np.testing.assert_allclose(mine, theirs, rtol=0, atol=1e-3 * float(np.abs(theirs).max()))
 
 
-def test_a_checkpoint_of_the_default_adam_resumes_fused(tiny_volume, tmp_path):
+def test_a_checkpoint_of_the_default_adam_resumes_fused(tiny_volume, tmp_path, stop_in_epoch_two):
     """Checkpoints written before the CPU's Adam was fused carry ``fused: None`` in their groups: a resume takes
     the current device's choice (its next checkpoint says so) and ends where the resume of a fused checkpoint does."""
     import shutil
 
     volume, _ = tiny_volume
     config = TrainConfig(preset="tiny", epochs=2, batch_size=512, test_slices="2", device="cpu")
-    calls = []
-
-    def stop_in_epoch_two(_model_file):
-        calls.append(1)
-        if len(calls) == 2:
-            raise KeyboardInterrupt  # before epoch 2's checkpoint: epoch 1's stays
-        return {}
-
     with pytest.raises(KeyboardInterrupt):
         train(volume, config, tmp_path / "fused", progress=False, per_epoch=stop_in_epoch_two)
     shutil.copytree(tmp_path / "fused", tmp_path / "older")
