@@ -158,6 +158,21 @@ def test_file_contents_follow_the_documented_layout(saved):
     np.testing.assert_array_equal(weight_1, model.weights[1])
 
 
+def test_members_are_deflated_and_uncompressed_files_still_load(saved, tmp_path):
+    """Model files are written deflated (np.savez_compressed); files written before, with np.savez, load the same."""
+    import zipfile
+
+    with zipfile.ZipFile(saved) as archive:
+        assert {member.compress_type for member in archive.infolist()} == {zipfile.ZIP_DEFLATED}
+    with np.load(saved, allow_pickle=False) as archive:
+        arrays = {name: archive[name] for name in archive.files}
+    stored = tmp_path / "stored.npz"
+    np.savez(stored, **arrays)
+    with zipfile.ZipFile(stored) as archive:
+        assert {member.compress_type for member in archive.infolist()} == {zipfile.ZIP_STORED}
+    assert load_model(stored) == load_model(saved) == random_model()
+
+
 def test_save_casts_to_float32_and_leaves_the_input_alone(tmp_path):
     model = random_model()
     model.weights = [w.astype(np.float64) for w in model.weights]
@@ -471,14 +486,33 @@ def test_truncated_file(tmp_path, saved):
     assert "truncated or corrupt" in load_error(cut)
 
 
-def test_flipped_bytes_are_detected(tmp_path, saved):
+@pytest.mark.parametrize("offset", [17, 200, 600])
+def test_flipped_bytes_are_detected(tmp_path, saved, offset):
+    """A flipped bit inside a member's deflated data (zlib's error or the member's CRC), and inside the stored
+    weights of an uncompressed file written before compression (the CRC), are both reported as corrupt."""
+    import zipfile
+
+    with zipfile.ZipFile(saved) as archive:
+        member = archive.getinfo("weight_0.npy")
     data = bytearray(saved.read_bytes())
-    position = bytes(data).find(random_model().weights[0].tobytes()[:64])
-    assert position > 0
-    data[position + 17] ^= 0x40
+    start = member.header_offset + 30 + int.from_bytes(data[member.header_offset + 26:member.header_offset + 28],
+                                                       "little") + int.from_bytes(
+        data[member.header_offset + 28:member.header_offset + 30], "little")
+    assert offset < member.compress_size
+    data[start + offset] ^= 0x40
     bad = tmp_path / "bad.npz"
     bad.write_bytes(bytes(data))
     assert "corrupt" in load_error(bad)
+
+    stored = tmp_path / "stored.npz"
+    with np.load(saved, allow_pickle=False) as archive:
+        np.savez(stored, **{name: archive[name] for name in archive.files})
+    data = bytearray(stored.read_bytes())
+    position = bytes(data).find(random_model().weights[0].tobytes()[:64])
+    assert position > 0
+    data[position + offset % 64] ^= 0x40
+    stored.write_bytes(bytes(data))
+    assert "corrupt" in load_error(stored)
 
 
 def test_not_a_zip(tmp_path):
