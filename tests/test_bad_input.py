@@ -107,6 +107,21 @@ def _flip(data: bytes, fraction: float) -> bytes:
     return data[:index] + bytes([data[index] ^ 0xFF]) + data[index + 1:]
 
 
+def _flip_member(path: Path, name: str) -> bytes:
+    """The archive at ``path`` with one byte flipped in the middle of member ``name``'s (deflated) data, not in a
+    zip header, whose spare fields (times, extras) no reader checks."""
+    import zipfile
+
+    data = path.read_bytes()
+    with zipfile.ZipFile(path) as archive:
+        member = archive.getinfo(name)
+    offset = member.header_offset
+    start = offset + 30 + int.from_bytes(data[offset + 26:offset + 28], "little") + int.from_bytes(
+        data[offset + 28:offset + 30], "little")
+    index = start + member.compress_size // 2
+    return data[:index] + bytes([data[index] ^ 0xFF]) + data[index + 1:]
+
+
 HEIGHT_FIELDS: dict[str, tuple[str, Callable[[Path], bytes], str]] = {
     "npy empty": (".npy", lambda _: b"", "empty"),
     "npy header only": (".npy", lambda _: _npy_bytes(np.zeros((8, 8)))[:80], "npy"),
@@ -228,7 +243,7 @@ MODELS: dict[str, tuple[Callable[[Path], bytes], str]] = {
     "text": (lambda path: b"weights = 1, 2, 3", "not an .npz"),
     "truncated": (lambda path: path.read_bytes()[: len(path.read_bytes()) // 2], "truncated or corrupt"),
     "last byte missing": (lambda path: path.read_bytes()[:-1], "truncated or corrupt"),
-    "corrupted": (lambda path: _flip(path.read_bytes(), 0.5), "model"),
+    "corrupted": (lambda path: _flip_member(path, "weight_0.npy"), "model"),
     "format version 3": (lambda path: _rewrite(path, lambda a: _set_header(a, format_version=3)), "version 3"),
     "version 2 without grids": (lambda path: _rewrite(path, lambda a: _set_header(a, format_version=2)), "grid"),
     "format version 0.9": (lambda path: _rewrite(path, lambda a: _set_header(a, format_version=0.9)), "version"),
