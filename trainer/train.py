@@ -138,7 +138,7 @@ def build_model(config: TrainConfig, encoding: EncodingSpec) -> FunnelMLP | Grid
 def fused_adam(device: torch.device) -> bool:
     """Whether Adam runs as one fused kernel on ``device``: on the CPU, where torch's default (foreach) Adam makes
     about eight passes over every parameter per step and took half of a grid network's step (docs/benchmarks.md,
-    "Training throughput"). The same arithmetic per element, up to float rounding. CUDA keeps its default: the
+    "Fused Adam on the CPU"). The same arithmetic per element, up to float rounding. CUDA keeps its default: the
     graphed step (trainer/cudagraph.py) was measured with it."""
     return device.type == "cpu"
 
