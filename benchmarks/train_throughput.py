@@ -97,10 +97,7 @@ def main() -> None:
         encoding = EncodingSpec.for_grid(1001, arguments.slices, config.frequencies, config.t_frequencies)
         torch.manual_seed(0)
         model = build_model(config, encoding).to(device)
-        optimizer = make_optimizer(model, config)
-        if arguments.adam == "foreach":
-            optimizer = torch.optim.Adam([{"params": group["params"], "lr": group["lr"], "eps": group["eps"]}
-                                          for group in optimizer.param_groups])
+        optimizer = make_optimizer(model, config, fused=False if arguments.adam == "foreach" else None)
         scheduler = make_scheduler(optimizer, config, arguments.steps + arguments.warmup,
                                    isinstance(model, GridNetwork))
         order = torch.randperm(arguments.samples, generator=generator).to(device)

@@ -24,6 +24,7 @@ from gratnet.cli import main
 from gratnet.encoding import EncodingSpec, RangeSpec
 from gratnet.modelfile import ModelFile, save_model
 from gratnet.volume import Volume, write_volume
+from tests.test_modelfile import flip_in_member
 
 # Imported here, unpatched: these modules bind viewer.render_cli.resolve_material by name when first imported,
 # and a first import inside a test that patches it (bench, view) would keep the patch for the whole worker.
@@ -104,21 +105,6 @@ def _gsf_bytes(columns: int = 4, rows: int = 4, data: bytes | None = None, extra
 
 def _flip(data: bytes, fraction: float) -> bytes:
     index = int(len(data) * fraction)
-    return data[:index] + bytes([data[index] ^ 0xFF]) + data[index + 1:]
-
-
-def _flip_member(path: Path, name: str) -> bytes:
-    """The archive at ``path`` with one byte flipped in the middle of member ``name``'s (deflated) data, not in a
-    zip header, whose spare fields (times, extras) no reader checks."""
-    import zipfile
-
-    data = path.read_bytes()
-    with zipfile.ZipFile(path) as archive:
-        member = archive.getinfo(name)
-    offset = member.header_offset
-    start = offset + 30 + int.from_bytes(data[offset + 26:offset + 28], "little") + int.from_bytes(
-        data[offset + 28:offset + 30], "little")
-    index = start + member.compress_size // 2
     return data[:index] + bytes([data[index] ^ 0xFF]) + data[index + 1:]
 
 
@@ -243,7 +229,8 @@ MODELS: dict[str, tuple[Callable[[Path], bytes], str]] = {
     "text": (lambda path: b"weights = 1, 2, 3", "not an .npz"),
     "truncated": (lambda path: path.read_bytes()[: len(path.read_bytes()) // 2], "truncated or corrupt"),
     "last byte missing": (lambda path: path.read_bytes()[:-1], "truncated or corrupt"),
-    "corrupted": (lambda path: _flip_member(path, "weight_0.npy"), "model"),
+    # In the member's data: the file's middle byte may fall in a zip header's spare field, which no reader checks.
+    "corrupted": (lambda path: flip_in_member(path, "weight_0.npy", mask=0xFF), "model"),
     "format version 3": (lambda path: _rewrite(path, lambda a: _set_header(a, format_version=3)), "version 3"),
     "version 2 without grids": (lambda path: _rewrite(path, lambda a: _set_header(a, format_version=2)), "grid"),
     "format version 0.9": (lambda path: _rewrite(path, lambda a: _set_header(a, format_version=0.9)), "version"),

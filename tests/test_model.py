@@ -223,12 +223,10 @@ def test_cpu_adam_is_fused_and_takes_the_same_steps_as_the_default():
         torch.manual_seed(0)
         model = build_model(config, encoding)
         start = [parameter.detach().clone() for parameter in model.parameters()]
-        optimizer = make_optimizer(model, config)
-        assert all(group["fused"] for group in optimizer.param_groups)
-        if not fused:  # the reference: the same groups and rates, torch's default implementation
-            optimizer = torch.optim.Adam([{"params": group["params"], "lr": group["lr"], "eps": group["eps"]}
-                                          for group in optimizer.param_groups])
-            assert not any(group["fused"] for group in optimizer.param_groups)
+        # The CPU's own choice (fused), and the reference: torch's default implementation, same groups and rates.
+        optimizer = make_optimizer(model, config, fused=None if fused else False)
+        assert all(bool(group["fused"]) == fused for group in optimizer.param_groups)
+        assert [group["eps"] for group in optimizer.param_groups] == [1e-8, 1e-15]
         for _ in range(10):
             optimizer.zero_grad(set_to_none=True)
             batch_loss(model, coordinates, targets, encoding).backward()

@@ -469,6 +469,24 @@ def load_error(path: Path) -> str:
     return message
 
 
+def flip_in_member(path: Path, name: str, offset: int | None = None, mask: int = 0x40) -> bytes:
+    """The bytes of the archive at ``path`` with one byte of member ``name``'s stored (deflated or not) data XORed
+    with ``mask``: ``offset`` bytes into that data (its middle by default), never in a zip header, whose spare
+    fields (times, extras) no reader checks."""
+    import zipfile
+
+    data = bytearray(path.read_bytes())
+    with zipfile.ZipFile(path) as archive:
+        member = archive.getinfo(name)
+    header = member.header_offset  # local header: 30 bytes, then the name and the extra field (lengths at 26, 28)
+    start = header + 30 + int.from_bytes(data[header + 26:header + 28], "little") + int.from_bytes(
+        data[header + 28:header + 30], "little")
+    offset = member.compress_size // 2 if offset is None else offset
+    assert 0 <= offset < member.compress_size
+    data[start + offset] ^= mask
+    return bytes(data)
+
+
 def test_missing_file(tmp_path):
     assert "does not exist" in load_error(tmp_path / "nope.npz")
     assert "not a regular file" in load_error(tmp_path)
@@ -490,18 +508,8 @@ def test_truncated_file(tmp_path, saved):
 def test_flipped_bytes_are_detected(tmp_path, saved, offset):
     """A flipped bit inside a member's deflated data (zlib's error or the member's CRC), and inside the stored
     weights of an uncompressed file written before compression (the CRC), are both reported as corrupt."""
-    import zipfile
-
-    with zipfile.ZipFile(saved) as archive:
-        member = archive.getinfo("weight_0.npy")
-    data = bytearray(saved.read_bytes())
-    start = member.header_offset + 30 + int.from_bytes(data[member.header_offset + 26:member.header_offset + 28],
-                                                       "little") + int.from_bytes(
-        data[member.header_offset + 28:member.header_offset + 30], "little")
-    assert offset < member.compress_size
-    data[start + offset] ^= 0x40
     bad = tmp_path / "bad.npz"
-    bad.write_bytes(bytes(data))
+    bad.write_bytes(flip_in_member(saved, "weight_0.npy", offset))
     assert "corrupt" in load_error(bad)
 
     stored = tmp_path / "stored.npz"
