@@ -1,12 +1,21 @@
-"""A model file from a training checkpoint: to look at a run stopped before its end.
+"""A model file from a training checkpoint, or from the average of several: to look at a run stopped before its
+end, or at the mean of its late epochs' weights.
 
     python benchmarks/checkpoint_model.py RUN/checkpoint.pt VOLUME.exr --out MODEL.npz
+    python benchmarks/checkpoint_model.py RUN/checkpoint-e8.pt RUN/checkpoint-e9.pt RUN/checkpoint.pt VOLUME.exr \
+        --out MODEL.npz
 
 `gratnet train` writes RUN/checkpoint.pt after every epoch and the model file only at its end. This builds the
 network of the checkpoint's configuration, loads its weights, and writes the model file the trainer's own way
 (trainer.train.trained_model_file: encoding, scheme and metadata from the volume it was trained on), so that
 `gratnet evaluate`, benchmarks/flip_maps.py and benchmarks/encoding_weights.py can read a stopped run at its
 last finished epoch.
+
+Given several checkpoints of one run (copies of checkpoint.pt taken after different epochs; one configuration),
+it writes their weights' uniform mean (stochastic weight averaging over epochs, Izmailov et al. 2018, with
+torch.optim.swa_utils.AveragedModel): an average of the late epochs' weights cancels part of the step-to-step
+jitter that Adam leaves in them. The history is the last checkpoint's; the model's training metadata lists the
+averaged epochs (``averaged_epochs``).
 """
 
 from __future__ import annotations
@@ -20,29 +29,46 @@ from gratnet.errors import GratNetError
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("checkpoint", type=Path, help="a `gratnet train` checkpoint.pt")
+    parser.add_argument("checkpoints", type=Path, nargs="+",
+                        help="one `gratnet train` checkpoint.pt, or several of one run to average")
     parser.add_argument("volume", type=Path, help="the ground-truth volume the run was trained on (.exr)")
     parser.add_argument("--out", type=Path, required=True, help="model file to write (.npz)")
     args = parser.parse_args()
-    for path in (args.checkpoint, args.volume):
+    for path in (*args.checkpoints, args.volume):
         if not path.is_file():
             sys.exit(f"checkpoint_model: no such file: {path}")
+    from torch.optim.swa_utils import AveragedModel
+
     from gratnet.modelfile import save_model
     from gratnet.volume import read_volume
     from trainer.train import build_model, read_checkpoint, trained_model_file
     from trainer.train_config import TrainConfig
 
     try:
-        state = read_checkpoint(args.checkpoint)
-        config = TrainConfig(**state["config"])
+        states = [read_checkpoint(path) for path in args.checkpoints]
+        configs = [state["config"] for state in states]
+        if any(config != configs[0] for config in configs[1:]):
+            sys.exit("checkpoint_model: the checkpoints were trained with different configurations; only one run's "
+                     "checkpoints can be averaged")
+        config = TrainConfig(**configs[-1])
         volume = read_volume(args.volume)
         model = build_model(config, config.encoding_for(volume))
-        model.load_state_dict(state["model"])
+        average = AveragedModel(model)
+        for state in states:
+            model.load_state_dict(state["model"])
+            average.update_parameters(model)  # the running uniform mean (the first call copies)
+        model = average.module
     except (GratNetError, OSError, RuntimeError, KeyError, TypeError) as error:
-        sys.exit(f"checkpoint_model: cannot rebuild the network of {args.checkpoint} on {args.volume}: {error}")
-    save_model(args.out, trained_model_file(model, config, volume, state.get("history", {})))
-    epochs = len(state.get("history", {}).get("epochs", []))
-    print(f"wrote {args.out} (after epoch {epochs})")
+        sys.exit(f"checkpoint_model: cannot rebuild the network of {args.checkpoints[-1]} on {args.volume}: {error}")
+    history = dict(states[-1].get("history", {}))
+    epochs = [int(state.get("epoch", 0)) for state in states]
+    if len(states) > 1:
+        if len(set(epochs)) != len(epochs):
+            sys.exit(f"checkpoint_model: the checkpoints repeat an epoch ({epochs}); each must come from another epoch")
+        history["averaged_epochs"] = epochs
+    save_model(args.out, trained_model_file(model, config, volume, history))
+    what = f"mean of epochs {', '.join(map(str, epochs))}" if len(states) > 1 else f"after epoch {epochs[0]}"
+    print(f"wrote {args.out} ({what})")
 
 
 if __name__ == "__main__":
