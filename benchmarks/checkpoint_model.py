@@ -13,9 +13,10 @@ last finished epoch.
 
 Given several checkpoints of one run (copies of checkpoint.pt taken after different epochs; one configuration),
 it writes their weights' uniform mean (stochastic weight averaging over epochs, Izmailov et al. 2018, with
-torch.optim.swa_utils.AveragedModel): an average of the late epochs' weights cancels part of the step-to-step
-jitter that Adam leaves in them. The history is the last checkpoint's; the model's training metadata lists the
-averaged epochs (``averaged_epochs``).
+torch.optim.swa_utils.AveragedModel): to measure whether the step-to-step jitter Adam leaves in the late epochs'
+weights costs fidelity (on paper-scratches it did not: docs/results.md, "Scratches: eight features per node").
+The history is the last checkpoint's; the model's training metadata lists the averaged epochs
+(``averaged_epochs``).
 """
 
 from __future__ import annotations
@@ -50,6 +51,9 @@ def main() -> None:
         if any(config != configs[0] for config in configs[1:]):
             sys.exit("checkpoint_model: the checkpoints were trained with different configurations; only one run's "
                      "checkpoints can be averaged")
+        epochs = [int(state.get("epoch", 0)) for state in states]
+        if len(set(epochs)) != len(epochs):
+            sys.exit(f"checkpoint_model: the checkpoints repeat an epoch ({epochs}); each must come from another epoch")
         config = TrainConfig(**configs[-1])
         volume = read_volume(args.volume)
         model = build_model(config, config.encoding_for(volume))
@@ -61,10 +65,7 @@ def main() -> None:
     except (GratNetError, OSError, RuntimeError, KeyError, TypeError) as error:
         sys.exit(f"checkpoint_model: cannot rebuild the network of {args.checkpoints[-1]} on {args.volume}: {error}")
     history = dict(states[-1].get("history", {}))
-    epochs = [int(state.get("epoch", 0)) for state in states]
     if len(states) > 1:
-        if len(set(epochs)) != len(epochs):
-            sys.exit(f"checkpoint_model: the checkpoints repeat an epoch ({epochs}); each must come from another epoch")
         history["averaged_epochs"] = epochs
     save_model(args.out, trained_model_file(model, config, volume, history))
     what = f"mean of epochs {', '.join(map(str, epochs))}" if len(states) > 1 else f"after epoch {epochs[0]}"

@@ -70,7 +70,7 @@ def test_two_epochs_checkpoints_average_to_their_weights_mean(tiny_volume, tmp_p
     assert mean.metadata["training"]["averaged_epochs"] == [1, 2]
 
 
-def test_checkpoints_of_different_runs_are_refused(tiny_volume, tmp_path):
+def test_checkpoints_of_different_runs_or_one_epoch_twice_are_refused(tiny_volume, tmp_path):
     volume, volume_path = tiny_volume
     for seed in (0, 1):
         config = TrainConfig(architecture="grid", preset="tiny", grid_levels=2, grid_resolution=9,
@@ -79,4 +79,8 @@ def test_checkpoints_of_different_runs_are_refused(tiny_volume, tmp_path):
     result = run_script(tmp_path / "seed0" / "checkpoint.pt", tmp_path / "seed1" / "checkpoint.pt", volume_path,
                         "--out", tmp_path / "m.npz")
     assert result.returncode != 0 and "different configurations" in result.stderr
+    assert "Traceback" not in result.stderr and not (tmp_path / "m.npz").exists()
+    checkpoint = tmp_path / "seed0" / "checkpoint.pt"
+    result = run_script(checkpoint, checkpoint, volume_path, "--out", tmp_path / "m.npz")
+    assert result.returncode != 0 and "repeat an epoch" in result.stderr
     assert "Traceback" not in result.stderr and not (tmp_path / "m.npz").exists()
