@@ -17,14 +17,22 @@ from trainer.train_config import TrainConfig
 ROOT = Path(__file__).resolve().parents[1]
 
 
+def run_script(*arguments: object) -> subprocess.CompletedProcess:
+    return subprocess.run([sys.executable, "benchmarks/checkpoint_model.py", *map(str, arguments)], cwd=ROOT,
+                          capture_output=True, text=True)
+
+
+def tiny_grid(**overrides: object) -> TrainConfig:
+    """A small grid network that trains in seconds on the tiny volume."""
+    return TrainConfig(architecture="grid", preset="tiny", grid_levels=2, grid_resolution=9, grid_t_resolution=5,
+                       batch_size=512, split="all", device="cpu", **overrides)  # type: ignore[arg-type]
+
+
 def test_the_last_checkpoint_gives_the_trained_model(tiny_volume, tmp_path):
     volume, volume_path = tiny_volume
-    config = TrainConfig(architecture="grid", preset="tiny", grid_levels=2, grid_resolution=9, grid_t_resolution=5,
-                         epochs=1, batch_size=512, split="all", device="cpu")
-    train(volume, config, tmp_path / "run", progress=False)
+    train(volume, tiny_grid(epochs=1), tmp_path / "run", progress=False)
     out = tmp_path / "from_checkpoint.npz"
-    result = subprocess.run([sys.executable, "benchmarks/checkpoint_model.py", str(tmp_path / "run" / "checkpoint.pt"),
-                             str(volume_path), "--out", str(out)], cwd=ROOT, capture_output=True, text=True)
+    result = run_script(tmp_path / "run" / "checkpoint.pt", volume_path, "--out", out)
     assert result.returncode == 0, result.stderr
     rebuilt, trained = load_model(out), load_model(tmp_path / "run" / "model.npz")
     for a, b in zip(rebuilt.weights + rebuilt.biases + list(rebuilt.grids),
@@ -35,21 +43,13 @@ def test_the_last_checkpoint_gives_the_trained_model(tiny_volume, tmp_path):
 
 
 def test_a_missing_checkpoint_is_one_message(tmp_path):
-    result = subprocess.run([sys.executable, "benchmarks/checkpoint_model.py", str(tmp_path / "none.pt"),
-                             str(tmp_path / "v.exr"), "--out", str(tmp_path / "m.npz")], cwd=ROOT,
-                            capture_output=True, text=True)
+    result = run_script(tmp_path / "none.pt", tmp_path / "v.exr", "--out", tmp_path / "m.npz")
     assert result.returncode != 0 and "no such file" in result.stderr and "Traceback" not in result.stderr
-
-
-def run_script(*arguments: object) -> subprocess.CompletedProcess:
-    return subprocess.run([sys.executable, "benchmarks/checkpoint_model.py", *map(str, arguments)], cwd=ROOT,
-                          capture_output=True, text=True)
 
 
 def test_two_epochs_checkpoints_average_to_their_weights_mean(tiny_volume, tmp_path, stop_in_epoch_two):
     volume, volume_path = tiny_volume
-    config = TrainConfig(architecture="grid", preset="tiny", grid_levels=2, grid_resolution=9, grid_t_resolution=5,
-                         epochs=2, batch_size=512, split="all", device="cpu")
+    config = tiny_grid(epochs=2)
     run = tmp_path / "run"
     try:
         train(volume, config, run, progress=False, per_epoch=stop_in_epoch_two)
@@ -73,9 +73,7 @@ def test_two_epochs_checkpoints_average_to_their_weights_mean(tiny_volume, tmp_p
 def test_checkpoints_of_different_runs_or_one_epoch_twice_are_refused(tiny_volume, tmp_path):
     volume, volume_path = tiny_volume
     for seed in (0, 1):
-        config = TrainConfig(architecture="grid", preset="tiny", grid_levels=2, grid_resolution=9,
-                             grid_t_resolution=5, epochs=1, batch_size=512, split="all", device="cpu", seed=seed)
-        train(volume, config, tmp_path / f"seed{seed}", progress=False)
+        train(volume, tiny_grid(epochs=1, seed=seed), tmp_path / f"seed{seed}", progress=False)
     result = run_script(tmp_path / "seed0" / "checkpoint.pt", tmp_path / "seed1" / "checkpoint.pt", volume_path,
                         "--out", tmp_path / "m.npz")
     assert result.returncode != 0 and "different configurations" in result.stderr
