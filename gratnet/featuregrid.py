@@ -23,8 +23,10 @@ import array_api_compat
 from gratnet.errors import GratNetError
 
 #: Most features per level: the shader packs a level's C features into ceil(C/4) RGBA textures ("chunks"),
-#: so 8 costs a level two textures (shaders/featuregrid.glsl).
-MAX_FEATURES = 8
+#: so 16 costs a level four textures (shaders/featuregrid.glsl). Whether levels × chunks textures fit a given
+#: OpenGL context is checked when a renderer loads the model (viewer.renderer.check_grid_texture_units): three
+#: levels of 16 features need 12 grid samplers beside 4 others, GL 4.3's minimum of 16 per shader stage.
+MAX_FEATURES = 16
 #: Features per texture (RGBA) in the shader: chunk k of a level holds features 4k … 4k + 3.
 CHUNK_FEATURES = 4
 #: How features are interpolated between nodes: ``linear`` (trilinear, C⁰: its kinks at the cell faces show

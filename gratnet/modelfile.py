@@ -20,7 +20,7 @@ File layout (a contract; also documented in ``docs/formats.md``, section "Model 
 
 A *feature-grid* model (docs/physics.md "Feature-grid network") has, in addition, ``grid_0``, ``grid_1``, …
 (coarse to fine; ``float16`` or ``float32``, all of one dtype; ``(T_l, R_l, R_l, C)``: axes c_t, c_v, c_u,
-feature, ``1 ≤ C ≤ 8`` the same for every level, every axis ≥ 2 nodes) and the JSON key ``grid``
+feature, ``1 ≤ C ≤ 16`` the same for every level, every axis ≥ 2 nodes) and the JSON key ``grid``
 (``{"levels": [[T_l, R_l, R_l, C], …], "dtype": "float16"|"float32"}``, and ``"interpolation":
 "smoothstep"`` when the grids are interpolated so; absent means ``linear``); such files have ``format_version``
 2 (a GratNet that reads only version 1 then says so), and ``layer_sizes[0]`` is ``L·C`` grid features plus

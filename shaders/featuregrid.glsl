@@ -1,6 +1,6 @@
 // Learned feature grids (docs/physics.md "Feature-grid network", eq. 6g); mirrors gratnet/featuregrid.py.
 //
-// Compiled in only with #define GRID_LEVELS (levels), GRID_FEATURES (C, 1..8) and GRID_CHUNKS (ceil(C/4)), set
+// Compiled in only with #define GRID_LEVELS (levels), GRID_FEATURES (C, 1..16) and GRID_CHUNKS (ceil(C/4)), set
 // from the model file: GRID_CHUNKS 3D textures per level ("chunks"; u_grid[level * GRID_CHUNKS + k] holds
 // features 4k..4k+3 of the level), each (R_u, R_v, T) texels of up to 4 channels (R16F.. RGBA16F or 32F; the
 // last chunk has only the channels it needs, C - 4k), node i of an axis of N nodes at c = -1 + 2i/(N-1), i.e.

@@ -194,8 +194,8 @@ def test_bad_grids_are_refused_with_a_clear_message(tmp_path):
         load_model(tmp_path / "corrupt.npz")
 
 
-def test_up_to_8_features_per_level_and_9_refused(tmp_path):
-    """C = 8 (two RGBA textures per level in the shader) saves and loads; C = 9 is refused with the limit named,
+def test_up_to_16_features_per_level_and_17_refused(tmp_path):
+    """C = 16 (four RGBA textures per level in the shader) saves and loads; C = 17 is refused with the limit named,
     by the model-file writer and loader and by the trainer's --grid-features."""
     rng = np.random.default_rng(7)
     encoding = EncodingSpec.for_grid(21, 5, 2, 1)
@@ -206,25 +206,25 @@ def test_up_to_8_features_per_level_and_9_refused(tmp_path):
                          "relu", "clamp", encoding, RangeSpec(), "simple-max",
                          grids=[rng.normal(size=(2, n, n, features)).astype(np.float16) for n in (3, 5)])
 
-    save_model(tmp_path / "eight.npz", model_with(8))
-    assert [grid.shape for grid in load_model(tmp_path / "eight.npz").grids] == [(2, 3, 3, 8), (2, 5, 5, 8)]
-    message = r"1 ≤ C ≤ 8 features \(the shader reads a level as ceil\(C/4\) RGBA textures\)"
+    save_model(tmp_path / "sixteen.npz", model_with(16))
+    assert [grid.shape for grid in load_model(tmp_path / "sixteen.npz").grids] == [(2, 3, 3, 16), (2, 5, 5, 16)]
+    message = r"1 ≤ C ≤ 16 features \(the shader reads a level as ceil\(C/4\) RGBA textures\)"
     with pytest.raises(GratNetError, match=message):
-        save_model(tmp_path / "nine.npz", model_with(9))
-    # A file with 9 features per level (written past the writer's check): the loader refuses it alike.
-    with np.load(tmp_path / "eight.npz") as archive:
+        save_model(tmp_path / "seventeen.npz", model_with(17))
+    # A file with 17 features per level (written past the writer's check): the loader refuses it alike.
+    with np.load(tmp_path / "sixteen.npz") as archive:
         arrays = {name: archive[name] for name in archive.files}
     header = json.loads(str(arrays["metadata_json"]))
     for level, nodes in enumerate((3, 5)):
-        arrays[f"grid_{level}"] = np.zeros((2, nodes, nodes, 9), np.float16)
-        header["grid"]["levels"][level] = [2, nodes, nodes, 9]
+        arrays[f"grid_{level}"] = np.zeros((2, nodes, nodes, 17), np.float16)
+        header["grid"]["levels"][level] = [2, nodes, nodes, 17]
     arrays["metadata_json"] = np.array(json.dumps(header))
-    np.savez(tmp_path / "nine.npz", **arrays)
+    np.savez(tmp_path / "seventeen.npz", **arrays)
     with pytest.raises(GratNetError, match=message):
-        load_model(tmp_path / "nine.npz")
-    assert TrainConfig(architecture="grid", grid_features=8).grid_shapes()[0][3] == 8
-    for bad in (0, 9):
-        with pytest.raises(GratNetError, match=f"--grid-features must be from 1 to 8, got {bad}"):
+        load_model(tmp_path / "seventeen.npz")
+    assert TrainConfig(architecture="grid", grid_features=16).grid_shapes()[0][3] == 16
+    for bad in (0, 17):
+        with pytest.raises(GratNetError, match=f"--grid-features must be from 1 to 16, got {bad}"):
             TrainConfig(architecture="grid", grid_features=bad)
 
 
@@ -310,7 +310,11 @@ def test_gpu_grid_model_matches_numpy(ctx, features, levels, dtype, interpolatio
 
 @pytest.mark.parametrize(("features", "picked"), [(4, (4, 5, 0)),
                                                  # level 1 features 5, 0 and level 0 feature 4: second textures
-                                                 (6, (11, 6, 4))])
+                                                 (6, (11, 6, 4)),
+                                                 # level 1 features 15 (fourth texture), 8 (third), level 0 feature 13
+                                                 (16, (31, 24, 13)),
+                                                 # 12 features: level 1 feature 11 and 4, level 0 feature 9 (third)
+                                                 (12, (23, 16, 9))])
 def test_gpu_grid_features_alone_match_numpy(ctx, features, picked):
     """A network that outputs three grid features: the interpolation itself, without the MLP's mixing."""
     from gratnet.modelfile import mlp_forward, network_inputs

@@ -44,7 +44,7 @@ class TrainConfig:
                                      "--grid-t-resolution; e.g. 11,11,2 for a fine level that varies little in t)")
     grid_level_step: int = config_field(2, "grid: ratio of u*/v* node intervals between neighbouring levels (2: "
                                         "each coarser level has half the intervals of the next)")
-    grid_features: int = config_field(2, "grid: features per level, C (1 to 8: the shader reads a level as "
+    grid_features: int = config_field(2, "grid: features per level, C (1 to 16: the shader reads a level as "
                                       "ceil(C/4) RGBA textures, features 4k..4k+3 in the k-th; 2 keeps the default "
                                       "grid at 3.65 MB as float16)")
     grid_init: float = config_field(1e-4, "grid: initial features uniform in ±this")
