@@ -185,6 +185,7 @@ def torch_throughput(model: ModelFile, keys: np.ndarray, device: str, repeats: i
     import torch
 
     from gratnet.encoding import encode, network_coordinates, range_inverse
+    from gratnet.featuregrid import grid_features
     from trainer.model import FunnelMLP
 
     if threads:
@@ -196,6 +197,8 @@ def torch_throughput(model: ModelFile, keys: np.ndarray, device: str, repeats: i
             layer.weight.copy_(torch.from_numpy(weight))
             layer.bias.copy_(torch.from_numpy(bias))
     network = network.to(device).eval()
+    # a feature-grid model's grids, widened to float32 as the shader's textures are read (eq. 6g)
+    grids = [torch.from_numpy(np.asarray(grid, np.float32)).to(device) for grid in model.grids]
     key_tensor = torch.from_numpy(keys).to(device)
     batch = 1 << 17  # bounds the encoded batch at ~85 MB (163 float32 features)
 
@@ -204,7 +207,12 @@ def torch_throughput(model: ModelFile, keys: np.ndarray, device: str, repeats: i
             torch.cuda.synchronize()
 
     def encoded(chunk: torch.Tensor) -> torch.Tensor:
-        return encode(network_coordinates(chunk[:, 0], chunk[:, 1], chunk[:, 2], model.scheme), model.encoding)
+        """The network's input (gratnet.modelfile.network_inputs): grid features first, then the encoding."""
+        coordinates = network_coordinates(chunk[:, 0], chunk[:, 1], chunk[:, 2], model.scheme)
+        encoding = encode(coordinates, model.encoding)
+        if not grids:
+            return encoding
+        return torch.cat([grid_features(grids, coordinates, model.grid_interpolation), encoding], dim=-1)
 
     def end_to_end() -> None:
         for start in range(0, key_tensor.shape[0], batch):

@@ -157,3 +157,21 @@ def test_a_render_path_this_build_lacks_is_refused_before_work(monkeypatch):
     with pytest.raises(GratNetError, match="offers forward; not deferred"):
         BenchConfig(render_paths="forward,deferred").render_path_list()
     assert BenchConfig(render_paths="all").render_path_list() == ["forward"]
+
+
+def test_torch_reference_feeds_a_feature_grid_model_its_grid_features():
+    """The torch timing of a feature-grid model evaluates the same inputs as the runtime (grid features, then the
+    encoding): it once fed the MLP the encoding alone, which a grid model's first layer cannot take."""
+    pytest.importorskip("torch")
+    from bench.slices import torch_throughput
+
+    rng = np.random.default_rng(3)
+    spec = EncodingSpec.for_grid(21, 5, 2, 1)
+    grids = [rng.uniform(-1, 1, (3, nodes, nodes, 6)).astype(np.float16) for nodes in (5, 9)]
+    sizes = [2 * 6 + spec.features, 8, 3]
+    weights = [rng.normal(size=(b, a)).astype(np.float32) for a, b in zip(sizes[:-1], sizes[1:], strict=True)]
+    model = ModelFile(sizes, weights, [np.zeros(b, np.float32) for b in sizes[1:]], "relu", "clamp", spec,
+                      RangeSpec(), "simple-max", grids=grids)
+    keys = np.stack([rng.uniform(-1, 1, 100), rng.uniform(-1, 1, 100), rng.uniform(-2, -1, 100)], axis=1)
+    result = torch_throughput(model, keys.astype(np.float32), "cpu", repeats=1, max_seconds=1.0)
+    assert result["seconds"] > 0 and result["mlp_seconds"] > 0
