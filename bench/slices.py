@@ -43,7 +43,10 @@ from viewer.renderer import BAKED_MAX_MACS
 
 __all__ = ["BenchConfig", "ModelEntry", "pareto_front", "run_bench", "shader_frame_times", "torch_throughput"]
 
-_EVALUATION_SLICE_COUNT = 5  # trainer.evaluate.STANDARD_SLICES
+#: The paper's five evaluation slices (θ°, φ°, exposure), as trainer.evaluate.STANDARD_SLICES lists them (not
+#: imported: that module pulls in torch). metrics.json lists them first, then any further --views.
+_EVALUATION_VIEWS = ((0.0, 0.0, 2000.0), (30.0, 135.0, 5000.0), (30.0, 0.0, 5000.0), (72.0, 30.0, 5000.0),
+                     (72.0, 270.0, 5000.0))
 
 
 @dataclasses.dataclass
@@ -160,12 +163,13 @@ class ModelEntry:
         flip_mean = flip_normal = psnr_mean = None
         metrics_path = path.with_name("metrics.json")
         if metrics_path.is_file():
-            slices = json.loads(metrics_path.read_text()).get("brdf_slices", [])
-            if len(slices) == _EVALUATION_SLICE_COUNT:
+            by_view = {(float(entry["theta"]), float(entry["phi"]), float(entry["exposure"])): entry
+                       for entry in json.loads(metrics_path.read_text()).get("brdf_slices", [])}
+            if all(view in by_view for view in _EVALUATION_VIEWS):  # further views beside them are not counted
+                slices = [by_view[view] for view in _EVALUATION_VIEWS]
                 flip_mean = statistics.fmean(float(entry["flip"]) for entry in slices)
                 psnr_mean = statistics.fmean(float(entry["psnr_xyz"]) for entry in slices)
-                normal = [entry for entry in slices if entry["theta"] == 0.0 and entry["phi"] == 0.0]
-                flip_normal = float(normal[0]["flip"]) if normal else None
+                flip_normal = float(slices[0]["flip"])
         return cls(label or path.parent.name, path, model, material, flip_mean, flip_normal, psnr_mean)
 
 
