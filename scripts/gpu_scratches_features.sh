@@ -10,9 +10,9 @@
 # On a lent device machine: the device tool's run, command
 #     DEVICE=cuda EPOCHS=8 DEADLINE=480 THREADS=4 bash scripts/gpu_scratches_features.sh
 # carry [".whl"] (the wheels of scripts/gpu_bench.sh --prepare, less the GL ones). The tracked tree (62.5 MiB)
-# and those wheels (11.8 MB) exceed what a call carries (64 MiB), so for the call take three paper models out
-# of the index and ignore them (`git rm -r -q --cached assets/paper-{corner-cubes,snake,pits}` and their paths
-# in .git/info/exclude), and put them back after (`git reset -q -- assets/paper-{corner-cubes,snake,pits}`).
+# and those wheels (11.8 MB) exceed what a call carries (64 MiB), so for the call leave three paper models
+# behind (`scripts/device_tree.sh shed assets/paper-corner-cubes assets/paper-snake assets/paper-pits`) and
+# put them back after (`scripts/device_tree.sh restore`).
 # A local dry run: NOWHL=1 PYTHON=python RES=41 SLICES=3 EPOCHS=2 DEVICE=cpu THREADS=1 MAXS=20000 bash THIS.
 set -uo pipefail
 cd "$(dirname "$0")/.."
