@@ -54,7 +54,7 @@ NETWORKS: tuple[tuple[str, dict[str, object]], ...] = (
     ("grid 3×251² T41 C3, 160-96-48-24 (scratches, 41 slices)", {
         "architecture": "grid", "hidden": "160,96,48,24", "grid_features": 3, "grid_t_resolution": 41,
         "grid_adam_epsilon": 1e-15}),
-    ("grid 3×251² T11 C8, 160-96-48-24 (paper-scratches shipped, 41 slices)", {
+    ("grid 3×251² T11 C8, 160-96-48-24 (paper-scratches of session 28, 41 slices)", {
         "architecture": "grid", "hidden": "160,96,48,24", "grid_features": 8, "grid_t_resolution": 11,
         "grid_adam_epsilon": 1e-15}),
 )
