@@ -35,18 +35,14 @@ from typing import Any
 import numpy as np
 
 from gratnet.atomic import write_text_atomic
+from gratnet.brdf import STANDARD_SLICES
 from gratnet.config import config_field
 from gratnet.errors import GratNetError
 from gratnet.figures import save_figure
-from gratnet.modelfile import ModelFile, load_model
+from gratnet.modelfile import ModelFile, load_model, network_inputs
 from viewer.renderer import BAKED_MAX_MACS
 
 __all__ = ["BenchConfig", "ModelEntry", "pareto_front", "run_bench", "shader_frame_times", "torch_throughput"]
-
-#: The paper's five evaluation slices (θ°, φ°, exposure), as trainer.evaluate.STANDARD_SLICES lists them (not
-#: imported: that module pulls in torch). metrics.json lists them first, then any further --views.
-_EVALUATION_VIEWS = ((0.0, 0.0, 2000.0), (30.0, 135.0, 5000.0), (30.0, 0.0, 5000.0), (72.0, 30.0, 5000.0),
-                     (72.0, 270.0, 5000.0))
 
 
 @dataclasses.dataclass
@@ -165,8 +161,8 @@ class ModelEntry:
         if metrics_path.is_file():
             by_view = {(float(entry["theta"]), float(entry["phi"]), float(entry["exposure"])): entry
                        for entry in json.loads(metrics_path.read_text()).get("brdf_slices", [])}
-            if all(view in by_view for view in _EVALUATION_VIEWS):  # further views beside them are not counted
-                slices = [by_view[view] for view in _EVALUATION_VIEWS]
+            if all(view in by_view for view in STANDARD_SLICES):  # further views beside them are not counted
+                slices = [by_view[view] for view in STANDARD_SLICES]
                 flip_mean = statistics.fmean(float(entry["flip"]) for entry in slices)
                 psnr_mean = statistics.fmean(float(entry["psnr_xyz"]) for entry in slices)
                 flip_normal = float(slices[0]["flip"])
@@ -188,8 +184,7 @@ def torch_throughput(model: ModelFile, keys: np.ndarray, device: str, repeats: i
     transform, the work the shader does per pixel) and the MLP alone on pre-encoded inputs."""
     import torch
 
-    from gratnet.encoding import encode, network_coordinates, range_inverse
-    from gratnet.featuregrid import grid_features
+    from gratnet.encoding import network_coordinates, range_inverse
     from trainer.model import FunnelMLP
 
     if threads:
@@ -211,12 +206,8 @@ def torch_throughput(model: ModelFile, keys: np.ndarray, device: str, repeats: i
             torch.cuda.synchronize()
 
     def encoded(chunk: torch.Tensor) -> torch.Tensor:
-        """The network's input (gratnet.modelfile.network_inputs): grid features first, then the encoding."""
-        coordinates = network_coordinates(chunk[:, 0], chunk[:, 1], chunk[:, 2], model.scheme)
-        encoding = encode(coordinates, model.encoding)
-        if not grids:
-            return encoding
-        return torch.cat([grid_features(grids, coordinates, model.grid_interpolation), encoding], dim=-1)
+        return network_inputs(model, network_coordinates(chunk[:, 0], chunk[:, 1], chunk[:, 2], model.scheme),
+                              grids)
 
     def end_to_end() -> None:
         for start in range(0, key_tensor.shape[0], batch):

@@ -20,6 +20,16 @@ import math
 
 import numpy as np
 
+#: The paper's evaluation slices: (θi, φi) in degrees and exposure ("RU"). `gratnet evaluate` scores these
+#: first, then any further --views, and metrics.json lists them in this order.
+STANDARD_SLICES: tuple[tuple[float, float, float], ...] = (
+    (0.0, 0.0, 2000.0),
+    (30.0, 135.0, 5000.0),
+    (30.0, 0.0, 5000.0),
+    (72.0, 30.0, 5000.0),
+    (72.0, 270.0, 5000.0),
+)
+
 W_EPSILON = 1e-6  # |w| below this: A = 0 (grazing: the 1/w² factor is meaningless there)
 #: Cap on A: above the largest value it takes within the |w| cut-off for IOR ≥ 1 + 1e-6 or off (retro-
 #: reflection at |w| = 1e-6 gives 1/cos⁴θ = 1.6e25); reached only for IOR within 1e-6 of 1 at grazing

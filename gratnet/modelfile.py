@@ -46,10 +46,12 @@ import math
 import os
 import zipfile
 import zlib
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+import array_api_compat
 import numpy as np
 
 from gratnet.atomic import atomic_path
@@ -589,13 +591,18 @@ def texture_forward(
     return x[:, :outputs].reshape(*batch_shape, outputs)
 
 
-def network_inputs(model: ModelFile, coordinates: np.ndarray) -> np.ndarray:
+def network_inputs(model: ModelFile, coordinates: Any, grids: Sequence[Any] | None = None) -> Any:
     """The network's input at network coordinates ``(…, 3)``: the grid features (feature-grid models;
-    :func:`gratnet.featuregrid.grid_features`) followed by the encoding (:func:`gratnet.encoding.encode`)."""
+    :func:`gratnet.featuregrid.grid_features`) followed by the encoding (:func:`gratnet.encoding.encode`).
+
+    numpy arrays or torch tensors alike (array-api-compat); ``grids``: the model's grids as arrays of the
+    coordinates' kind and device (default: ``model.grids``, numpy), e.g. torch tensors for a torch evaluation."""
     encoded = encode(coordinates, model.encoding)
-    if not model.grids:
+    grids = model.grids if grids is None else grids
+    if not grids:
         return encoded
-    return np.concatenate([grid_features(model.grids, coordinates, model.grid_interpolation), encoded], axis=-1)
+    xp = array_api_compat.array_namespace(coordinates)
+    return xp.concat([grid_features(grids, coordinates, model.grid_interpolation), encoded], axis=-1)
 
 
 def evaluate_keys(model: ModelFile, u: np.ndarray, v: np.ndarray, w: np.ndarray) -> np.ndarray:

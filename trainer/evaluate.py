@@ -20,7 +20,7 @@ from typing import Any
 import numpy as np
 
 from gratnet.atomic import atomic_path, make_folder
-from gratnet.brdf import slice_view_directions
+from gratnet.brdf import STANDARD_SLICES, slice_view_directions
 from gratnet.config import config_field, config_to_dict
 from gratnet.encoding import range_forward
 from gratnet.errors import GratNetError
@@ -32,15 +32,6 @@ from trainer.heightfield import HeightField
 from trainer.metrics import image_metrics
 from trainer.report import comparison_figure, write_report
 from trainer.sampling import grid_to_key, slice_w
-
-# The paper's evaluation slices: (θi, φi) in degrees and exposure ("RU").
-STANDARD_SLICES: tuple[tuple[float, float, float], ...] = (
-    (0.0, 0.0, 2000.0),
-    (30.0, 135.0, 5000.0),
-    (30.0, 0.0, 5000.0),
-    (72.0, 30.0, 5000.0),
-    (72.0, 270.0, 5000.0),
-)
 
 
 @dataclasses.dataclass(frozen=True)
