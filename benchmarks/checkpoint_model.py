@@ -14,7 +14,7 @@ last finished epoch.
 Given several checkpoints of one run (copies of checkpoint.pt taken after different epochs; one configuration),
 it writes their weights' uniform mean (stochastic weight averaging over epochs, Izmailov et al. 2018, with
 torch.optim.swa_utils.AveragedModel): to measure whether the step-to-step jitter Adam leaves in the late epochs'
-weights costs fidelity (on paper-scratches it did not: docs/results.md, "Scratches: eight features per node").
+weights costs fidelity (on paper-scratches it did not: docs/experiments/2026-11-26-scratches-eight-features.md).
 The history is the last checkpoint's; the model's training metadata lists the averaged epochs
 (``averaged_epochs``).
 """

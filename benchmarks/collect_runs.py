@@ -1,4 +1,4 @@
-"""Gather finished training runs into one JSON record and a Markdown table (docs/results.md's run tables).
+"""Gather finished training runs into one JSON record and a Markdown table (the run tables of docs/experiments/).
 
     python benchmarks/collect_runs.py RUN[=LABEL] … [--json docs/data/NAME.json] [--meta KEY=VALUE …]
         [--figure docs/images/NAME.png]

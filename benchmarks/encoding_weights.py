@@ -7,8 +7,8 @@ cosines]. The spatial part holds 4 groups (u*, v*, u*+v*, u*−v*) × (sin, cos)
 (sin, cos) × L_t (gratnet.encoding.encode). Per frequency this prints the Frobenius norm of the first layer's
 columns of that frequency (all groups, sine and cosine), and the mean column norm of the grid features. The top
 frequency of each part sits at the volume's Nyquist rate: between samples the samples do not constrain it, so a
-large weight there shows as oscillation between the samples (docs/results.md, "Adam's ε"). At the samples that
-frequency's sine is zero (up to rounding), so its columns are printed apart from the cosine's.
+large weight there shows as oscillation between the samples (docs/experiments/2026-11-25-scratches-adam-epsilon.md).
+At the samples that frequency's sine is zero (up to rounding), so its columns are printed apart from the cosine's.
 """
 
 from __future__ import annotations

@@ -1,9 +1,9 @@
 """Plot the CPU trainings on paper-scratches that each change one thing in the shipped recipe (feature-grid size,
 off-lattice points, display-weighted loss, a full-resolution grid level): mean FLIP over eight views per run,
 with the recipe's seed-to-seed range and the volume's interpolation oracle
-(docs/data/cpu_runs_scratches_levers.json; docs/results.md, "Levers on scratches").
+(docs/data/cpu_runs_scratches_levers.json; docs/experiments/2026-11-23-scratches-levers.md).
 
-python benchmarks/scratches_levers_figure.py [--data docs/data/cpu_runs_scratches_levers.json]
+python docs/experiments/probes/scratches_levers_figure.py [--data docs/data/cpu_runs_scratches_levers.json]
                                              [--out docs/images/scratches_levers.png]
 """
 

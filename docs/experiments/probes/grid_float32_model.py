@@ -1,9 +1,10 @@
 """Write RUN/model-fp32.npz: RUN/model.npz (float16 grids) with the float32 grids of RUN/checkpoint.pt.
 
-    python benchmarks/grid_float32_model.py RUN
+    python docs/experiments/probes/grid_float32_model.py RUN
     gratnet evaluate RUN/model-fp32.npz --volume VOLUME.exr --out RUN/eval-fp32
 
-measures what storing a feature-grid model's grids as float16 costs (docs/results.md, "Learned feature grid").
+measures what storing a feature-grid model's grids as float16 costs
+(docs/experiments/2026-11-23-learned-feature-grid.md).
 """
 
 from __future__ import annotations

@@ -1,6 +1,6 @@
 """Candidate designs for compiling the viewer's baked shader without blocking the window's thread.
 
-    python benchmarks/compile_off_thread.py assets/blazed/model.npz
+    python docs/experiments/probes/compile_off_thread.py assets/blazed/model.npz
 
 Each part uses its own empty Mesa shader cache (``MESA_SHADER_CACHE_DIR`` in a temporary folder) and
 prints one JSON line:
@@ -23,7 +23,7 @@ import threading
 import time
 from pathlib import Path
 
-REPOSITORY = Path(__file__).resolve().parents[1]
+REPOSITORY = Path(__file__).resolve().parents[3]
 _FRESH = """
 import sys, time, json
 from gratnet.modelfile import load_model

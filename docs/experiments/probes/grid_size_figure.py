@@ -1,9 +1,9 @@
 """Plot the CPU runs on paper-scratches' 11-slice volume that vary the feature grid (finest u*/v* nodes,
 features per node): training loss by epoch, and the five BRDF slices' FLIP against the volume's interpolation
 oracle (docs/data/cpu_runs_scratches_grid.json, written from the runs' history.json and evaluation;
-docs/results.md, "A finer feature grid on scratches").
+docs/experiments/2026-11-23-scratches-finer-grid.md).
 
-python benchmarks/grid_size_figure.py [--data docs/data/cpu_runs_scratches_grid.json]
+python docs/experiments/probes/grid_size_figure.py [--data docs/data/cpu_runs_scratches_grid.json]
                                       [--out docs/images/grid_size_scratches.png]
 """
 
@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import sys
 from pathlib import Path
 
 import matplotlib
@@ -27,7 +28,8 @@ def main() -> None:
     parser.add_argument("--data", default="docs/data/cpu_runs_scratches_grid.json")
     parser.add_argument("--out", default="docs/images/grid_size_scratches.png")
     arguments = parser.parse_args()
-    from results_table import PAPER_FLIP_PAPER_DATASETS, SLICE_ORDER  # the sibling script (benchmarks/ is sys.path[0])
+    sys.path.insert(0, str(Path(__file__).resolve().parents[3]))  # the repository root, for benchmarks/
+    from benchmarks.results_table import PAPER_FLIP_PAPER_DATASETS, SLICE_ORDER
 
     data = json.loads(Path(arguments.data).read_text())
     runs, oracle = data["runs"], data["oracle_flip"]

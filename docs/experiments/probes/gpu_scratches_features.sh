@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# Session 29's one device call (docs/results.md "Scratches: sixteen features per node"): the 41-slice
+# Session 29's one device call (docs/experiments/2026-11-26-scratches-sixteen-features.md): the 41-slice
 # paper-scratches ground truth on the GPU, then four trainings at once on it (the control is the shipped recipe,
 # 8 features at t 11; the others move the grid's bytes to 12 or 16 features per node at fewer t nodes, or widen
 # the MLP), stopped at DEADLINE seconds from the start; a run stopped before its last epoch is written out from
@@ -8,14 +8,14 @@
 # 128²), job.log and logs.tgz (commands, histories, log tails).
 #
 # On a lent device machine: the device tool's run, command
-#     DEVICE=cuda EPOCHS=8 DEADLINE=480 THREADS=4 bash scripts/gpu_scratches_features.sh
+#     DEVICE=cuda EPOCHS=8 DEADLINE=480 THREADS=4 bash docs/experiments/probes/gpu_scratches_features.sh
 # carry [".whl"] (the wheels of scripts/gpu_bench.sh --prepare, less the GL ones). The tracked tree (62.5 MiB)
 # and those wheels (11.8 MB) exceed what a call carries (64 MiB), so for the call leave three paper models
 # behind (`scripts/device_tree.sh shed assets/paper-corner-cubes assets/paper-snake assets/paper-pits`) and
 # put them back after (`scripts/device_tree.sh restore`).
 # A local dry run: NOWHL=1 PYTHON=python RES=41 SLICES=3 EPOCHS=2 DEVICE=cpu THREADS=1 MAXS=20000 bash THIS.
 set -uo pipefail
-cd "$(dirname "$0")/.."
+cd "$(dirname "$0")/../../.."
 T0=$(date +%s)
 OUT=${OUT:-/tmp/gpujob-out}; mkdir -p "$OUT"
 RES=${RES:-1001}; SLICES=${SLICES:-41}; EPOCHS=${EPOCHS:-10}; DEADLINE=${DEADLINE:-470}; DEVICE=${DEVICE:-cuda}

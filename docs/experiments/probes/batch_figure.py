@@ -1,14 +1,16 @@
 """Plot the H100 batch-size runs on the paper's CD: (0°, 0°) FLIP against optimiser steps and against samples
-seen (docs/data/gpu_runs_batch.json, written from the runs' history.json and evaluation; docs/results.md,
-"Smaller batches and the display-weighted loss").
+seen (docs/data/gpu_runs_batch.json, written from the runs' history.json and evaluation;
+docs/experiments/2026-11-23-smaller-batches-h100.md).
 
-python benchmarks/batch_figure.py [--data docs/data/gpu_runs_batch.json] [--out docs/images/batch_size_cd.png]
+python docs/experiments/probes/batch_figure.py [--data docs/data/gpu_runs_batch.json]
+    [--out docs/images/batch_size_cd.png]
 """
 
 from __future__ import annotations
 
 import argparse
 import json
+import sys
 from pathlib import Path
 
 import matplotlib
@@ -27,7 +29,8 @@ def main() -> None:
     parser.add_argument("--data", default="docs/data/gpu_runs_batch.json")
     parser.add_argument("--out", default="docs/images/batch_size_cd.png")
     arguments = parser.parse_args()
-    from results_table import PAPER_FLIP_PAPER_DATASETS, SLICE_ORDER  # the sibling script (benchmarks/ is sys.path[0])
+    sys.path.insert(0, str(Path(__file__).resolve().parents[3]))  # the repository root, for benchmarks/
+    from benchmarks.results_table import PAPER_FLIP_PAPER_DATASETS, SLICE_ORDER
 
     normal = SLICE_ORDER[0]  # (0°, 0°) 2000 RU
     paper = PAPER_FLIP_PAPER_DATASETS["paper-cd"]

@@ -1,6 +1,6 @@
 """Choose the hidden and output activations by measurement (issue: "choose by measurement and document").
 
-    python benchmarks/activation_study.py out/volumes/blazed.exr [--samples 1000000] [--epochs 3]
+    python docs/experiments/probes/activation_study.py out/volumes/blazed.exr [--samples 1000000] [--epochs 3]
 
 Trains the 'small' preset with each variant on the same subsample, seed and schedule, and prints the
 held-out LogCosh loss (slices 4, 7, 10) and training time as JSON lines.
