@@ -341,7 +341,9 @@ def run_bench(ctx: Any, entries: list[ModelEntry], config: BenchConfig, progress
     return results
 
 
-def _format(value: object, digits: int = 3) -> str:
+def format_cell(value: object, digits: int = 3) -> str:
+    """A markdown table cell: — for None, ``digits`` significant digits for a float (exponent form outside
+    [1e-3, 1e5)), anything else as str (``gratnet bench``'s and ``gratnet sweep``'s tables)."""
     if value is None:
         return "—"
     if isinstance(value, float):
@@ -358,7 +360,7 @@ def markdown_table(results: list[dict[str, Any]]) -> str:
               "| mean FLIP (5 slices) | FLIP (0°,0°) | mean PSNR (dB) |")
     lines = [header, "|" + "---|" * (header.count("|") - 1)]
     for row in results:
-        lines.append("| " + " | ".join(_format(value) for value in (
+        lines.append("| " + " | ".join(format_cell(value) for value in (
             row["model"], row["material"], row["parameters"], row["macs_per_pixel"], f"{row['size']}²",
             row["weights_path"], row["seconds"] * 1e3, row["shader_gmac_per_s"], row.get("torch_cpu_gmac_per_s"),
             row.get("shader_over_torch_cpu"), row.get("torch_cpu_mlp_gmac_per_s"), row.get("shader_over_torch_cpu_mlp"),

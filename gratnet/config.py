@@ -106,12 +106,14 @@ def _flag_of(field: dataclasses.Field, prefix: str) -> str:
     return field.metadata.get("flag") or "--" + prefix + field.name.replace("_", "-")
 
 
-def add_arguments(parser: argparse.ArgumentParser, config_class: type, prefix: str = "") -> None:
-    """Add one flag per field of ``config_class`` (a dataclass) to ``parser``."""
+def add_arguments(parser: argparse.ArgumentParser, config_class: type, prefix: str = "") -> dict[str, argparse.Action]:
+    """Add one flag per field of ``config_class`` (a dataclass) to ``parser``; returns the added actions by
+    destination (for a command that words one flag's help its own way)."""
     hints = typing.get_type_hints(config_class)
     # The group's title is the class docstring's first line (users read --help: no class names there).
     title = (config_class.__doc__ or config_class.__name__).strip().splitlines()[0].replace("``", "").rstrip(".")
     group = parser.add_argument_group(title[:1].lower() + title[1:])
+    actions: dict[str, argparse.Action] = {}
     for field in dataclasses.fields(config_class):
         if not field.init or field.metadata.get("cli") is False:
             continue
@@ -122,7 +124,7 @@ def add_arguments(parser: argparse.ArgumentParser, config_class: type, prefix: s
         destination = prefix.replace("-", "_") + field.name
         flags = (flag, *field.metadata.get("aliases", ()))
         if kind is bool:
-            group.add_argument(
+            actions[destination] = group.add_argument(
                 *flags, dest=destination, action=argparse.BooleanOptionalAction, default=default,
                 help=f"{help_text} (default: {default})",
             )
@@ -135,10 +137,11 @@ def add_arguments(parser: argparse.ArgumentParser, config_class: type, prefix: s
             non_none = [arg for arg in get_args(kind) if arg is not type(None)]
             kind = non_none[0]
         parse = {float: parse_float, int: parse_int}.get(kind, kind)
-        group.add_argument(
+        actions[destination] = group.add_argument(
             *flags, dest=destination, type=parse, choices=choices, default=default,
             help=f"{help_text} (default: {default})",
         )
+    return actions
 
 
 def from_arguments(config_class: type[ConfigT], arguments: argparse.Namespace, prefix: str = "") -> ConfigT:

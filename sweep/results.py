@@ -26,9 +26,9 @@ _HEADERS = {"macs_per_pixel": "MACs/pixel", "train_seconds": "train (s)", "held_
 
 
 def _format(value: object) -> str:
-    from bench.slices import _format as bench_format
+    from bench.slices import format_cell  # here: bench.slices brings the GL renderer, which a table never needs
 
-    return bench_format(value, 4)
+    return format_cell(value, 4)
 
 
 def markdown_table(rows: list[dict[str, Any]]) -> str:

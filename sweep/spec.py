@@ -90,7 +90,7 @@ class DatasetSpec:
     generator: str | None  # a built-in generator name, or None for a file
     params: dict[str, Any]  # generator parameter overrides
     file: str | None  # a height-field file (absolute path) when not a generator
-    load: Any  # trainer.loaders.LoadOptions
+    load: Any  # trainer.heightfile.LoadOptions
     volume: Any  # trainer.groundtruth.VolumeConfig
     optics: Any  # trainer.fourier.OpticsConfig
     parts: int  # wavelength blocks (tasks) the volume is split into
@@ -243,7 +243,7 @@ def _dataset(entry: Any, index: int, shared: dict[str, Any], base: Path) -> Data
     from trainer.fourier import OpticsConfig
     from trainer.generators import GENERATORS, parameters_for
     from trainer.groundtruth import VolumeConfig, wavelength_blocks
-    from trainer.loaders import LoadOptions
+    from trainer.heightfile import LoadOptions
 
     where = f"datasets[{index}]"
     if not isinstance(entry, dict):

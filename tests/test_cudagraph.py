@@ -14,7 +14,8 @@ import pytest
 import torch
 
 from gratnet.errors import GratNetError
-from trainer.train import build_model, cosine_factor, make_optimizer, make_scheduler, split_samples, train, train_step
+from trainer.objective import cosine_factor
+from trainer.train import build_model, make_optimizer, make_scheduler, split_samples, train, train_step
 from trainer.train_config import TrainConfig
 
 cuda = pytest.mark.skipif(not torch.cuda.is_available(), reason="needs a CUDA device")

@@ -157,10 +157,10 @@ def test_groundtruth_of_the_smallest_preset_uses_its_window(tmp_path):
 def test_evaluation_rebuilds_a_scan_preset_from_a_volumes_source(fields):
     """A volume of paper-snake records dataset:paper-snake; evaluation finds its height field from that."""
     from gratnet.cli import build_parser
-    from trainer.train_cli import _ground_truth_inputs
+    from trainer.train_cli import ground_truth_inputs
 
     arguments = build_parser(only="evaluate").parse_args(["evaluate", "model.npz", "--out", "report"])
-    field, optics = _ground_truth_inputs(arguments, {"source": "dataset:paper-snake", "sigma_s_um": 16.25})
+    field, optics = ground_truth_inputs(arguments, {"source": "dataset:paper-snake", "sigma_s_um": 16.25})
     np.testing.assert_array_equal(field.heights_um, fields["paper-snake"].heights_um)
     assert optics.sigma_s_um == 16.25
 

@@ -15,7 +15,8 @@ from PIL import Image
 from gratnet.cli import main
 from gratnet.errors import GratNetError
 from trainer import generators
-from trainer.loaders import LoadOptions, load_heightfield, preview_png, save_heightfield, write_gsf
+from trainer.heightfile import LoadOptions, preview_png, save_heightfield, write_gsf
+from trainer.loaders import load_heightfield
 
 AFM_PNG = Path(__file__).resolve().parents[1] / "../shared/data/elaphe_guttata_afm_100x100.png"
 SMALL = 6.0  # µm: patch width for quick generator tests

@@ -15,6 +15,7 @@ from trainer.metrics import (
     flip,
     image_metrics,
     psnr_xyz,
+    show_pair,
     ssim_srgb,
     ssim_ycbcr,
     to_display_srgb,
@@ -161,6 +162,18 @@ def test_small_images_still_work() -> None:
     assert ssim_srgb(image, image) == pytest.approx(1.0)
     with pytest.raises(GratNetError):
         ssim_srgb(np.zeros((2, 8, 3)), np.zeros((2, 8, 3)))
+
+
+def test_show_pair_agrees_with_flip_and_psnr() -> None:
+    """The comparison figure's numbers (show_pair) are flip's and psnr_xyz's, computed once."""
+    reference, test = textured(24), noisy(textured(24), 0.05)
+    shown = show_pair(reference, test)
+    mean_flip, flip_map = flip(reference, test)
+    assert shown.mean_flip == mean_flip and np.array_equal(shown.flip_map, flip_map)
+    assert shown.psnr_db == psnr_xyz(reference, test)
+    assert np.array_equal(shown.reference_srgb, to_display_srgb(reference))
+    with pytest.raises(GratNetError, match="shapes differ"):
+        show_pair(reference, test[:-1])
 
 
 def test_comparison_figure_writes_png(tmp_path) -> None:

@@ -93,7 +93,7 @@ def test_weighted_log_cosh_is_the_weighted_mean_of_the_per_sample_losses():
 
 def test_visible_weight_marks_exactly_the_samples_whose_y_is_in_the_band():
     from gratnet.encoding import range_forward
-    from trainer.train import visible_weight
+    from trainer.objective import visible_weight
 
     config = TrainConfig(loss_visible_y="1e-7,1e-3", loss_visible_weight=4.0, range_power=4.0)
     weighting = visible_weight(config)
@@ -128,7 +128,8 @@ def test_display_weighted_training_trains_on_the_weighted_loss(tiny_volume, tmp_
     """The weighting reaches the optimiser: one train_step's loss is the weighted mean of the per-sample losses
     (an empty band gives the plain mean), and training with it ends at other weights than without."""
     from gratnet.encoding import encode
-    from trainer.train import build_model, make_optimizer, make_scheduler, train_step, visible_weight
+    from trainer.objective import visible_weight
+    from trainer.train import build_model, make_optimizer, make_scheduler, train_step
 
     volume, _ = tiny_volume
     base = dict(preset="tiny", epochs=1, batch_size=256, test_slices="2", seed=3, device="cpu")
@@ -210,7 +211,8 @@ def test_adam_epsilon_must_be_positive(field, epsilon):
 def test_cpu_adam_is_fused_and_takes_the_same_steps_as_the_default():
     """On the CPU the optimiser is torch's fused Adam (the default foreach Adam took half a grid network's step);
     ten steps on real gradients land where the default's do, up to float rounding, with both groups' ε."""
-    from trainer.train import batch_loss, build_model, make_optimizer
+    from trainer.objective import batch_loss
+    from trainer.train import build_model, make_optimizer
 
     config = TrainConfig(architecture="grid", preset="tiny", grid_levels=2, grid_resolution=9, grid_t_resolution=3,
                          device="cpu", adam_epsilon=1e-8, grid_adam_epsilon=1e-15)

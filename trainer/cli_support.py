@@ -10,7 +10,8 @@ from gratnet.config import add_arguments, add_quiet_flag, from_arguments
 from gratnet.errors import GratNetError
 from trainer.fourier import OpticsConfig
 from trainer.heightfield import HeightField
-from trainer.loaders import LoadOptions, load_heightfield
+from trainer.heightfile import LoadOptions
+from trainer.loaders import load_heightfield
 
 
 def add_heightfield_input(parser: argparse.ArgumentParser) -> None:
@@ -19,13 +20,11 @@ def add_heightfield_input(parser: argparse.ArgumentParser) -> None:
                         help="height-field file (.npz .gsf .npy .png .exr), built-in generator name (such as "
                         "blazed) or paper dataset (such as paper-cd, with its own σs); list: gratnet heightfield list")
     add_quiet_flag(parser)
-    add_arguments(parser, OpticsConfig)
+    optics_flags = add_arguments(parser, OpticsConfig)
     add_arguments(parser, LoadOptions)
     # A paper dataset preset brings its own σs: None here means "the preset's, else OpticsConfig's default".
-    for action in parser._actions:
-        if action.dest == "sigma_s_um":
-            action.help = (f"std σs of the Gaussian coherence window (µm) (default: a paper dataset's own, else "
-                           f"{OpticsConfig.sigma_s_um:g}, i.e. 4σs = 65 µm)")
+    optics_flags["sigma_s_um"].help = (f"std σs of the Gaussian coherence window (µm) (default: a paper dataset's "
+                                       f"own, else {OpticsConfig.sigma_s_um:g}, i.e. 4σs = 65 µm)")
     parser.set_defaults(sigma_s_um=None)
 
 

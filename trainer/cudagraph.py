@@ -8,7 +8,7 @@ device, so that the graph can hold it:
 
 - the batch is gathered from the resident data set by the index buffer;
 - the learning rate is the same cosine schedule as :func:`trainer.train.make_scheduler`
-  (:func:`trainer.train.cosine_factor`), computed from a step counter on the device into Adam's
+  (:func:`trainer.objective.cosine_factor`), computed from a step counter on the device into Adam's
   ``capturable`` tensor rates;
 - the running loss (the progress bar's) is updated in the graph.
 
@@ -23,7 +23,7 @@ import torch
 
 from gratnet.encoding import EncodingSpec
 from trainer.model import FunnelMLP, GridNetwork
-from trainer.train import VisibleWeight, batch_loss, cosine_factor
+from trainer.objective import VisibleWeight, batch_loss, cosine_factor
 
 #: Eager steps before the capture (on a side stream, as torch's documentation asks): they let autograd,
 #: cuBLAS and Adam make their state. They are ordinary training steps, counted as such.

@@ -25,6 +25,7 @@ from gratnet.errors import GratNetError
 from trainer.fourier import OpticsConfig
 from trainer.groundtruth import VolumeConfig
 from trainer.heightfield import HeightField
+from trainer.heightfile import LoadOptions, read_heightfield_file
 
 #: The real corn-snake AFM crop (credit and scale: assets/data/README.md).
 SNAKE_SCAN = Path(__file__).resolve().parents[1] / "assets" / "data" / "elaphe_guttata_afm_100x100.png"
@@ -71,9 +72,8 @@ class DatasetPreset:
             from trainer import generators
 
             return generators.generate(self.generator, **self.parameters)
-        from trainer.loaders import LoadOptions, load_heightfield
-
-        scan = load_heightfield(SNAKE_SCAN, LoadOptions(dx_um=SNAKE_SCAN_DX_UM, height_scale_um=SNAKE_SCAN_WHITE_UM))
+        options = LoadOptions(dx_um=SNAKE_SCAN_DX_UM, height_scale_um=SNAKE_SCAN_WHITE_UM)
+        scan = read_heightfield_file(SNAKE_SCAN, options)
         return HeightField(scan.heights_um, scan.dx_um, SOURCE_PREFIX + self.name)
 
 

@@ -101,7 +101,8 @@ def model_ground_truth_inputs(model: ModelFile, heightfield: str) -> tuple[Heigh
     """The height field ``heightfield`` (a file, a generator or a paper dataset; default load options) and the
     optics ``model``'s volume was computed with: what `gratnet evaluate MODEL --heightfield …` computes its
     ground-truth slices from (and so shares their cache)."""
-    from trainer.loaders import LoadOptions, load_heightfield
+    from trainer.heightfile import LoadOptions
+    from trainer.loaders import load_heightfield
 
     return load_heightfield(heightfield, LoadOptions()), OpticsConfig.from_volume_metadata(model.metadata["volume"])
 

@@ -22,7 +22,8 @@ from gratnet.config import add_arguments, config_path_for, config_text, from_arg
 from gratnet.errors import GratNetError
 from trainer import generators
 from trainer.heightfield import HeightField
-from trainer.loaders import LoadOptions, load_heightfield, preview_png, save_heightfield
+from trainer.heightfile import LoadOptions, preview_png, save_heightfield
+from trainer.loaders import load_heightfield
 
 FIELD_SUFFIXES = (".npz", ".gsf")
 

@@ -14,6 +14,7 @@ and the A-term, so values may exceed 1 at specular peaks. The display pipeline i
 
 from __future__ import annotations
 
+import dataclasses
 import math
 
 import numpy as np
@@ -166,6 +167,27 @@ def flip(reference_xyz: np.ndarray, test_xyz: np.ndarray, ppd: float | None = No
     """
     reference, test = _check_pair(reference_xyz, test_xyz)
     return _flip(_display_srgb(reference), _display_srgb(test), ppd)
+
+
+@dataclasses.dataclass(frozen=True)
+class ShownPair:
+    """One image pair as a comparison figure shows it (trainer/report.py): both images in display sRGB, float64
+    (H, W, 3) in [0, 1]; the LDR-FLIP error map (H, W) in [0, 1] and its mean; PSNR (dB) of the whole image."""
+
+    reference_srgb: np.ndarray
+    test_srgb: np.ndarray
+    flip_map: np.ndarray
+    mean_flip: float
+    psnr_db: float
+
+
+def show_pair(reference_xyz: np.ndarray, test_xyz: np.ndarray) -> ShownPair:
+    """The display images, FLIP map and PSNR of one exposed XYZ pair, each computed once: the same numbers as
+    :func:`flip` and :func:`psnr_xyz` (no mask), which would each convert both images again."""
+    reference, test = _check_pair(reference_xyz, test_xyz)
+    reference_srgb, test_srgb = _display_srgb(reference), _display_srgb(test)
+    mean_flip, flip_map = _flip(reference_srgb, test_srgb, None)
+    return ShownPair(reference_srgb, test_srgb, flip_map, mean_flip, _psnr(reference, test, None))
 
 
 def image_metrics(reference_xyz: np.ndarray, test_xyz: np.ndarray, mask: np.ndarray | None = None) -> dict[str, float]:

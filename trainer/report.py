@@ -15,7 +15,7 @@ import numpy as np
 from gratnet.atomic import write_text_atomic
 from gratnet.errors import GratNetError
 from gratnet.figures import save_figure
-from trainer.metrics import _check_pair, _display_srgb, _flip, _psnr
+from trainer.metrics import show_pair
 
 #: Width of one image panel in the comparison figure, inches.
 _PANEL_INCHES = 3.0
@@ -38,12 +38,10 @@ def comparison_figure(
     prepared = []
     aspect = 0.0
     for label, reference_xyz, test_xyz in rows:
-        reference, test = _check_pair(reference_xyz, test_xyz)
-        reference_srgb, test_srgb = _display_srgb(reference), _display_srgb(test)
-        mean_flip, error_map = _flip(reference_srgb, test_srgb, None)
-        psnr = _psnr(reference, test, None)
-        prepared.append((str(label), reference_srgb, test_srgb, error_map, mean_flip, psnr))
-        aspect = max(aspect, reference.shape[0] / reference.shape[1])
+        shown = show_pair(reference_xyz, test_xyz)
+        prepared.append((str(label), shown.reference_srgb, shown.test_srgb, shown.flip_map, shown.mean_flip,
+                         shown.psnr_db))
+        aspect = max(aspect, shown.reference_srgb.shape[0] / shown.reference_srgb.shape[1])
 
     import matplotlib
 

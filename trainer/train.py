@@ -27,7 +27,9 @@ from gratnet.errors import GratNetError
 from gratnet.modelfile import ModelFile
 from gratnet.volume import Volume, volume_axes
 from trainer.allocator import keep_freed_memory
+from trainer.cudagraph import GraphedSteps
 from trainer.model import FunnelMLP, GridNetwork, log_cosh_loss, parse_hidden
+from trainer.objective import VisibleWeight, batch_loss, cosine_factor, visible_weight
 from trainer.sampling import grid_to_key, slice_w
 from trainer.train_config import TrainConfig
 
@@ -121,11 +123,6 @@ def uses_cuda_graph(config: TrainConfig, device: torch.device) -> bool:
     return config.cuda_graph == "on" or (config.cuda_graph == "auto" and device.type == "cuda")
 
 
-def _raw_outputs(model: FunnelMLP | GridNetwork, coordinates: torch.Tensor, encoding: EncodingSpec) -> torch.Tensor:
-    """The network's raw outputs at network coordinates: a grid network takes them as they are, the MLP encoded."""
-    return model(coordinates) if isinstance(model, GridNetwork) else model(encode(coordinates, encoding))
-
-
 def build_model(config: TrainConfig, encoding: EncodingSpec) -> FunnelMLP | GridNetwork:
     """The network of ``config.architecture`` (torch's global seed must be set before)."""
     hidden = parse_hidden(config.preset, config.hidden)
@@ -158,12 +155,6 @@ def make_optimizer(model: FunnelMLP | GridNetwork, config: TrainConfig,
                             fused=fused or None)
 
 
-def cosine_factor(step: int, steps: int, ratio: float) -> float:
-    """The schedule's factor on each group's initial rate at ``step``: cosine from 1 down to ``ratio`` over
-    ``steps``, then ``ratio`` (trainer/cudagraph.py computes the same on the device)."""
-    return ratio + (1.0 - ratio) * 0.5 * (1.0 + math.cos(math.pi * min(step, steps) / steps))
-
-
 def make_scheduler(optimizer: torch.optim.Optimizer, config: TrainConfig, steps: int,
                grid: bool) -> torch.optim.lr_scheduler.LRScheduler:
     """Cosine from each group's rate down to ``final_learning_rate_ratio`` of it over ``steps``."""
@@ -173,36 +164,6 @@ def make_scheduler(optimizer: torch.optim.Optimizer, config: TrainConfig, steps:
     return torch.optim.lr_scheduler.CosineAnnealingLR(
         optimizer, T_max=steps, eta_min=config.learning_rate * config.final_learning_rate_ratio
     )
-
-
-class VisibleWeight:
-    """The display-weighted loss's per-sample weight: ``weight`` where the target's range-transformed CIE Y
-    lies in ``band`` (TrainConfig.visible_band), else 1: two comparisons on the device."""
-
-    def __init__(self, band: tuple[float, float], weight: float) -> None:
-        self.low, self.high = band
-        self.weight = weight
-
-    def __call__(self, targets: torch.Tensor) -> torch.Tensor:
-        y = targets[:, 1]  # the range-transformed CIE Y
-        inside = (y >= self.low) & (y <= self.high)
-        return torch.where(inside, self.weight, 1.0).to(targets.dtype)
-
-
-def visible_weight(config: TrainConfig) -> VisibleWeight | None:
-    """The config's display weighting, or None when it is off (no band, or weight 1)."""
-    band = config.visible_band()
-    if band is None or config.loss_visible_weight == 1.0:
-        return None
-    return VisibleWeight(band, config.loss_visible_weight)
-
-
-def batch_loss(model: FunnelMLP | GridNetwork, coordinates: torch.Tensor, targets: torch.Tensor,
-               encoding: EncodingSpec, weighting: VisibleWeight | None = None) -> torch.Tensor:
-    """The training loss of a batch (LogCosh, display-weighted when ``weighting`` is given), with its graph: the
-    eager step and the CUDA-graph step (trainer/cudagraph.py) both differentiate this."""
-    weight = None if weighting is None else weighting(targets)
-    return log_cosh_loss(_raw_outputs(model, coordinates, encoding), targets, weight)
 
 
 def train_step(model: FunnelMLP | GridNetwork, optimizer: torch.optim.Optimizer,
@@ -346,8 +307,6 @@ def train(
         coordinates_all, targets_all = torch.empty_like(coordinates_all), torch.empty_like(targets_all)
     graph = None
     if graphed:
-        from trainer.cudagraph import GraphedSteps
-
         graph = GraphedSteps(model, optimizer, base_rates, schedule_steps, config.final_learning_rate_ratio, done,
                              encoding, weighting, coordinates_all, targets_all, config.batch_size)
 

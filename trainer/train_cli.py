@@ -14,7 +14,7 @@ from gratnet.errors import GratNetError
 
 def _add_evaluation_inputs(parser: argparse.ArgumentParser) -> None:
     from trainer.evaluate import EvaluateConfig
-    from trainer.loaders import LoadOptions
+    from trainer.heightfile import LoadOptions
 
     parser.add_argument(
         "--heightfield",
@@ -62,10 +62,11 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     evaluate.set_defaults(handler=run_evaluate)
 
 
-def _ground_truth_inputs(arguments: argparse.Namespace, volume_metadata: dict[str, Any]) -> tuple[Any, Any]:
+def ground_truth_inputs(arguments: argparse.Namespace, volume_metadata: dict[str, Any]) -> tuple[Any, Any]:
     """Height field and optics for ground-truth BRDF slices, or (None, None) with a message."""
     from trainer.fourier import OpticsConfig
-    from trainer.loaders import LoadOptions, load_heightfield
+    from trainer.heightfile import LoadOptions
+    from trainer.loaders import load_heightfield
 
     spec = arguments.heightfield or volume_metadata.get("source", "")
     if not spec or not (arguments.heightfield or str(spec).startswith(("generator:", "dataset:"))):
@@ -118,7 +119,7 @@ def _epoch_flip(arguments: argparse.Namespace, config: Any, volume_metadata: dic
     from trainer.evaluate import ground_truth_brdf_slice, network_brdf_slice
     from trainer.metrics import flip
 
-    field, optics = _ground_truth_inputs(arguments, volume_metadata)
+    field, optics = ground_truth_inputs(arguments, volume_metadata)
     if field is None:
         return None
     theta, phi, exposure = EPOCH_FLIP_SLICE
@@ -157,7 +158,7 @@ def run_train(arguments: argparse.Namespace) -> int:
     if not arguments.no_evaluate:
         evaluate_config = dataclasses.replace(from_arguments(EvaluateConfig, arguments), progress=not arguments.quiet)
         field, optics = (
-            _ground_truth_inputs(arguments, volume.metadata) if evaluate_config.brdf_slices else (None, None)
+            ground_truth_inputs(arguments, volume.metadata) if evaluate_config.brdf_slices else (None, None)
         )
         evaluate_model(
             model_file,
@@ -210,7 +211,7 @@ def run_evaluate(arguments: argparse.Namespace) -> int:
         slices = held_out_slices(model.metadata)
     volume = read_volume(arguments.volume) if arguments.volume else None
     metadata = volume.metadata if volume is not None else model.metadata.get("volume", {})
-    field, optics = _ground_truth_inputs(arguments, metadata) if evaluate_config.brdf_slices else (None, None)
+    field, optics = ground_truth_inputs(arguments, metadata) if evaluate_config.brdf_slices else (None, None)
     history_path = Path(arguments.model).with_name("history.json")  # the training's, beside a trained model
     history = _read_history(history_path)
     evaluate_model(
