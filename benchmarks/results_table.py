@@ -1,12 +1,16 @@
-"""Build docs/results.md from the shipped materials' assets/*/metrics.json (no hand-typed figures).
+"""Build docs/results.md from data alone: assets/*/ (metrics, histories, model files), docs/data/*.json and the
+presets of trainer/datasets.py, with fixed template text here (no hand-typed figures, no hand-written section).
 
 python benchmarks/results_table.py [--out docs/results.md]
+
+The experiment logs behind the shipped models are docs/experiments/*.md; the page links them.
 """
 
 from __future__ import annotations
 
 import argparse
 import json
+import re
 from pathlib import Path
 
 from gratnet.atomic import write_text_atomic
@@ -101,7 +105,8 @@ def _presets_section() -> list[str]:
         "The paper's own datasets (its Fig. 2 caption and §4) are named presets: a height field and its",
         "coherence window. `gratnet heightfield list` lists them; each preset name works wherever a height field",
         "does, and the ground-truth commands take the preset's σs unless `--sigma-s` is given (the paper's",
-        "1001² × 11 grid, the default, takes hours per dataset on 2 CPU cores):",
+        "1001² × 11 grid is the default; timings on 2 CPU cores and on a GPU: docs/benchmarks.md, \"Ground-truth",
+        "volume\"):",
         "",
         "    gratnet groundtruth paper-cd --sampling simple-max --out out/volumes/paper-cd.exr",
         "    gratnet heightfield preview paper-cd --out paper-cd.png",
@@ -120,8 +125,8 @@ def _presets_section() -> list[str]:
         )
     lines += [
         "",
-        "Each preset is shipped as `assets/paper-NAME` (the first table); how their recipe was chosen: \"GPU",
-        "runs\" below.",
+        "Each preset is shipped as `assets/paper-NAME` (the first table); how their recipe was chosen: the",
+        "studies listed below (\"What the studies established\").",
         "",
         "Diagnostics (trainer/diagnostics.py), written by `gratnet train` and `gratnet evaluate` into",
         "metrics.json and report.md:",
@@ -146,8 +151,9 @@ def _presets_section() -> list[str]:
         "    gratnet train out/volumes/paper-cd.exr --split all --epochs 100 --epoch-flip-size 128 \\",
         "        --out out/runs/paper-cd",
         "",
-        "The oracle needs the material's 1001² × 11 volume (out/volumes/NAME.exr, 3–50 min each on 2 cores);",
-        "the shipped materials' volumes are not kept, so the shipped models' region lines below have no oracle.",
+        "The oracle needs the material's 1001² × 11 volume (out/volumes/NAME.exr; docs/benchmarks.md has the",
+        "timings); the shipped materials' volumes are not kept, so the shipped models' region lines below have no",
+        "oracle.",
         "",
     ]
     lines += _oracle_section()
@@ -265,7 +271,8 @@ def _oracle_section(path: Path = ORACLE_JSON) -> list[str]:
             f"{name} oracle {row['brdf_slices'][0]['flip']:.4f} vs paper {PAPER_FLIP_PAPER_DATASETS[name]:g}"
             for row in rows if (name := str(row["volume"]).removesuffix(".exr")) in PAPER_FLIP_PAPER_DATASETS
         ) + ". Where the oracle is below the paper, the 1001² × 11 training grid holds what is needed and a gap",
-        "to the paper is in the network (the feature-grid experiment below). Where it is above (here: "
+        "to the paper is in the network (docs/experiments/2026-11-23-learned-feature-grid.md). Where it is above",
+        "(here: "
         + (", ".join(above) or "none") + "), even an exact interpolation of the grid misses the paper's figure on",
         "our version of the dataset: a network can only beat it by being better than the grid between its samples",
         "(or the grid must be denser); these datasets are this project's builds, not the paper's scans (table above).",
@@ -296,19 +303,127 @@ def _region_summary(assets: Path = Path("assets")) -> list[str]:
     return lines
 
 
-def _kept_sections(path: Path) -> list[str]:
-    """The existing page's hand-written experiment sections (a ``## `` heading ending in "(experiment)", up to
-    the next ``## ``), kept as they are: their figures come from runs outside assets/ (each with its command)."""
-    if not path.exists():
-        return []
-    kept: list[str] = []
-    keeping = False
-    for line in path.read_text(encoding="utf-8").splitlines():
-        if line.startswith("## "):
-            keeping = line.rstrip().endswith("(experiment)")
-        if keeping:
-            kept.append(line)
-    return kept + ([""] if kept and kept[-1] else [])
+#: The experiment logs (docs/experiments/NAME.md), linked from this page (which lives in docs/).
+def _log(name: str) -> str:
+    return f"[{name}](experiments/{name}.md)"
+
+
+def _batch_fact(path: Path = Path("docs/data/gpu_runs_batch.json")) -> str:
+    """The paper-cd plain-recipe runs' best (0°, 0°) FLIP per batch size (the H100 batch study)."""
+    best: dict[int, float] = {}
+    for row in json.loads(path.read_text()) if path.exists() else []:
+        if row["dataset"] == "paper-cd" and re.fullmatch(r"base|b\d+k(-rep|-b)?", row["run"]):
+            flip = row["flip"][SLICE_ORDER[0]]
+            best[row["batch_size"]] = min(best.get(row["batch_size"], flip), flip)
+    return "; ".join(f"batch {batch:,}: {best[batch]:.4f}" for batch in sorted(best, reverse=True))
+
+
+def _slices_fact(name: str) -> str:
+    """The oracle's (0°, 0°) FLIP of a preset's volumes by w-slice count (docs/data/oracle_NAME_slices.json)."""
+    path = Path(SLICES_JSON.format(name=name))
+    rows = sorted(json.loads(path.read_text()), key=lambda row: row["slices"]) if path.exists() else []
+    return ", ".join(f"{row['slices']} slices {row['brdf_slices'][0]['flip']:.4f}" for row in rows)
+
+
+#: The 41-slice paper-scratches runs that move the grid's bytes between features per node and t nodes.
+FEATURE_RUNS = ("docs/data/cpu_runs_scratches_s28.json", "docs/data/cpu_runs_scratches_s29.json")
+
+
+def _features_fact() -> str:
+    """(0°, 0°) FLIP and the eight-view mean of each features × t-nodes layout (first record of each)."""
+    seen: dict[tuple[int, int], dict] = {}
+    for name in FEATURE_RUNS:
+        path = Path(name)
+        for run in json.loads(path.read_text())["runs"] if path.exists() else []:
+            match = re.search(r"(\d+) features, t (\d+)", run["run"])
+            if match and "final-learning-rate" not in run["command"]:
+                seen.setdefault((int(match[1]), int(match[2])), run)
+    parts = []
+    for (features, nodes), run in sorted(seen.items()):
+        flips = list(run["flip"].values())
+        parts.append(f"{features} features at t {nodes} ({run['grid_bytes'] / 1e6:.2f} MB): "
+                     f"{run['flip'][SLICE_ORDER[0]]:.4f}, mean of {len(flips)} views {sum(flips) / len(flips):.4f}")
+    return "; ".join(parts)
+
+
+def _studies_section() -> list[str]:
+    """The lasting findings of the experiment logs, one line each, with the log; figures only from docs/data."""
+    return [
+        "## What the studies established",
+        "",
+        "Each study is logged in docs/experiments/ (one file per study, dated, with its data and commands; the",
+        "index: [docs/experiments/README.md](experiments/README.md)). What they established, as it stands today:",
+        "",
+        "**Feature grids.**",
+        "",
+        "- A learned feature grid over (u*, v*, t) in front of the funnel MLP beats the pure MLP at equal parameters",
+        f"  on the paper's CD, and its lead grows with training: {_log('2026-11-23-learned-feature-grid')}.",
+        "  Float16 grids cost nothing measurable against float32 (same log).",
+        "- Smoothstep (C¹) interpolation of the grid helps every dataset tried but the blazed grating; a finer",
+        "  grid, a wider MLP, more t nodes and a 24-bit range transform did not help the CD:",
+        f"  {_log('2026-11-23-gpu-runs-paper-datasets')}.",
+        "- Smaller batches train feature grids better: the step count, not the sample count, bounds how far the",
+        f"  grid moves. Paper-cd's best (0°, 0°) FLIP per batch on the H100 ({_batch_fact()}):",
+        f"  {_log('2026-11-23-smaller-batches-h100')}. The display-weighted loss helps blazed and not CD (same log).",
+        "",
+        "  ![paper-cd: (0°, 0°) FLIP against optimiser steps and samples, by batch size](images/batch_size_cd.png)",
+        "",
+        "- On the 41-slice scratches volume, grid bytes spent on features per node buy more than bytes spent on",
+        f"  t nodes ((0°, 0°) FLIP: {_features_fact()}):",
+        f"  {_log('2026-11-26-scratches-eight-features')}, {_log('2026-11-26-scratches-sixteen-features')}.",
+        "  Every level needs t nodes on one lattice: mixed t lattices put rings into the views",
+        f"  ({_log('2026-11-25-scratches-coarse-t-nodes')}); a level with a node at every sample makes FLIP worse",
+        f"  ({_log('2026-11-23-scratches-levers')}).",
+        "",
+        "**Training.**",
+        "",
+        "- Adam's ε sets the step of the grids: ε = 1e-15 on the grids helps every view; on the MLP ε = 1e-8 must",
+        "  stay, since a smaller one lets the encoding's Nyquist-rate sine columns grow into stripes between the",
+        f"  samples: {_log('2026-11-25-scratches-adam-epsilon')}, {_log('2026-11-25-scratches-mlp-epsilon-epochs')}.",
+        "- The end of the cosine schedule does not limit scratches: a lower final rate or the mean of the last",
+        f"  epochs' weights changes no view measurably ({_log('2026-11-26-scratches-eight-features')}).",
+        "- For the pure MLP the milder range transform (n = 4) beats the default n = 8 and a plain log at 3 epochs",
+        f"  on the CD: {_log('2026-11-23-range-transform-mlp')}.",
+        "- The CUDA-graph step makes small batches affordable on a GPU (docs/benchmarks.md, \"CUDA-graph replay\");",
+        f"  its first use, on scratches: {_log('2026-11-23-scratches-graph-replay-h100')}.",
+        "",
+        "**Where the error is.**",
+        "",
+        "- More w-slices are the lever for tall surfaces: the interpolation oracle at (0°, 0°) falls with the",
+        f"  slice count (pits: {_slices_fact('pits')}; scratches: {_slices_fact('scratches')}; snake:",
+        f"  {_slices_fact('snake')}; docs/data/oracle_NAME_slices.json): {_log('2026-11-23-gpu-runs-paper-datasets')}.",
+        "- The 1.5× rule between slices fails in the training grid itself for snake and corner cubes: their oracle's",
+        "  grazing slices stay far harder than (0°, 0°) on every lattice and slice count measured",
+        f"  (docs/data/oracle_uv_stride.json): {_log('2026-11-23-oracle-lattice-spacing')}.",
+        "- The 1001² samples fix what lies between them (bilinear interpolation follows a 2001² truth), so a finer",
+        "  u*/v* lattice is not the lever for scratches; points between samples do not move FLIP:",
+        f"  {_log('2026-11-23-scratches-finer-grid')}, {_log('2026-11-23-scratches-truth-between-samples')},",
+        f"  {_log('2026-11-23-scratches-levers')}.",
+        "- FLIP sees the size of a network's errors more than their pattern, and grows steadily with their scale;",
+        "  the error lies at the samples, not between the w-slices:",
+        f"  {_log('2026-11-25-scratches-error-budget')}. Grid bytes placed by measurement:",
+        f"  {_log('2026-11-23-scratches-grid-bytes')}, {_log('2026-11-25-scratches-41-slices')}.",
+        "",
+        "Other logs (run time, the viewer, the trainer's speed) are listed in the index and summarised in",
+        "docs/benchmarks.md.",
+        "",
+    ]
+
+
+def _reproduce_section() -> list[str]:
+    """The commands that rebuild what this page shows."""
+    return [
+        "## How to reproduce",
+        "",
+        "    bash scripts/reproduce_paper_models.sh [NAME …]   # the paper-* models from their train_command.json",
+        "    bash scripts/ship_materials.sh                    # the 20 µm tiles",
+        "    bash scripts/reevaluate_materials.sh NAME         # today's evaluation of a shipped model",
+        "    python benchmarks/oracle_table.py VOLUMES --json docs/data/oracle_paper.json",
+        "    python benchmarks/results_table.py                # this page",
+        "",
+        "Each experiment log in docs/experiments/ gives its own commands and data.",
+        "",
+    ]
 
 
 def main() -> None:
@@ -320,21 +435,24 @@ def main() -> None:
     lines = [
         "# Results: shipped materials",
         "",
-        "Generated by `python benchmarks/results_table.py` from `assets/*/metrics.json` (every figure measured;",
-        "the paper's column is its reported mean FLIP at the BRDF slice (0°, 0°), 2000 RU).",
+        "Generated by `python benchmarks/results_table.py` from data alone: `assets/*/` (metrics.json, history.json,",
+        "the model files), `docs/data/*.json` and the presets of trainer/datasets.py. Every figure is measured;",
+        "the paper's column is its reported mean FLIP at the BRDF slice (0°, 0°), 2000 RU. The studies that chose",
+        "these models are logged one per file in [docs/experiments/](experiments/README.md); their lasting findings",
+        "are summarised in \"What the studies established\" below.",
         "",
         "## The paper's datasets against the paper (like for like)",
         "",
         "The paper's seven datasets (presets below), each shipped as `assets/paper-NAME`: ground truth on an H100",
-        "(`gratnet groundtruth paper-NAME --sampling simple-max --device cuda [--slices S]`, 9–48 s per volume), a",
+        "(`gratnet groundtruth paper-NAME --sampling simple-max --device cuda [--slices S]`), a",
         "feature-grid network trained there (`train_command.json` beside each model: its epochs, batch and flags),",
         "evaluated here on the CPU (`gratnet evaluate MODEL --heightfield paper-NAME --views",
         "'45,60,5000;15,200,3000;60,315,5000' [--volume VOLUME]`): the paper's five BRDF slices at 256² and three",
         "further views chosen before any result was seen and never trained or tuned on. \"oracle\": the",
         "interpolation oracle of the volume the model was trained on (paper-pits' 41-slice volume was scored on",
         "the GPU machine: docs/data/oracle_pits_slices.json; paper-corner-cubes' 21-slice and paper-scratches'",
-        "41-slice volumes were computed here on the CPU, 1,093 s and 1,959 s; some models were trained here too,",
-        "as the device column says). Targets (issue 15): beat the paper at (0°, 0°) with ≤ 60k parameters (≤ 130k",
+        "41-slice volumes were computed here on the CPU; some models were trained here too, as the device column",
+        "says). Targets (issue 15): beat the paper at (0°, 0°) with ≤ 60k parameters (≤ 130k",
         "for corner cubes and pits), a grid ≤ 1/20 of the volume, every other slice within 1.5×.",
         "`bash scripts/reproduce_paper_models.sh [NAME …]` rebuilds them from those recorded commands.",
         "",
@@ -386,23 +504,22 @@ def main() -> None:
         "    slices 4, 7 and 10 and ran 6–8 epochs);",
         "  - Adam at 3·10⁻³ with cosine decay to 6·10⁻⁵;",
         "  - the 2-core CPU of this machine kind, shared with other jobs: the training times include epochs",
-        "    slowed by contention, and for scratches a 10-minute pause (uncontended, 20 epochs take 10–14 min).",
+        "    slowed by contention (docs/experiments/2026-11-21-twenty-micron-tiles.md).",
         "- **BRDF slices** are 256² ground truth evaluated at exact key vectors, not volume lookups. They are",
         "  compared with the network at the same key vectors, both × A × exposure.",
         "  - PSNR is on exposed XYZ clipped to [0, 1].",
         "  - SSIM is on display sRGB and full-range BT.601 YCbCr.",
         "  - FLIP is NVIDIA's flip-evaluator, LDR, at 67 pixels per degree.",
-        "- **Training on every slice for longer helps a lot.** FLIP at (0°, 0°) from the first pass (slices",
-        "  held out, 6–8 epochs) to `--split all --epochs 20`: blazed 0.0174 → 0.0047, sinusoidal",
-        "  0.0170 → 0.0035, CD 0.183 → 0.067, snake 0.046 → 0.017 (the paper's 0.03 is met), scratches",
-        "  0.215 → 0.071, pits 0.228 → 0.119. The held-out",
-        "  protocol measures interpolation in t; the shipped models are meant to be used everywhere, so the",
-        "  `all` models ship. Their reports have no held-out volume slices; the BRDF slices are off-grid in",
-        "  (u, v, w) and remain an honest test.",
-        "- **Network size matters less than training budget here.** At one budget (3 M samples, 8 epochs) on",
-        "  the blazed grating, the paper's 290k-parameter size reaches mean FLIP 0.0161 over the five slices",
-        "  and `small` 0.0175 with 9.8 % of the multiply-adds; the shipped `small` blazed model, trained on every",
-        "  sample for 20 epochs, reaches 0.0058 (docs/benchmarks.md, \"Run time against error\").",
+        "- **Training on every slice for longer helps a lot.** A first pass that held slices 4, 7 and 10 out",
+        "  and ran 6–8 epochs scored worse at (0°, 0°) on every material than the `--split all --epochs 20`",
+        "  models that ship (docs/experiments/2026-11-21-twenty-micron-tiles.md). The held-out protocol measures",
+        "  interpolation in t; the shipped models are meant to be used everywhere, so the `all` models ship.",
+        "  Their reports have no held-out volume slices; the BRDF slices are off-grid in (u, v, w) and remain an",
+        "  honest test.",
+        "- **Network size matters less than training budget here.** At one budget on the blazed grating the",
+        "  paper's 290k-parameter size and `small` score within their seeds' spread, and the shipped `small`",
+        "  blazed model, trained on every sample for longer, beats both (docs/benchmarks.md, \"Run time against",
+        "  error\").",
         "- **Where the paper's targets are missed:**",
         "  - In every history.json the training loss is still falling at the last epoch: the runs are",
         "    budget-limited, not converged.",
@@ -412,16 +529,17 @@ def main() -> None:
         "  - Random structures (CD pits, scratches, hemispherical pits) are the worst. Their ground truth is",
         "    full of speckle at the scale of the window's specular lobe: its std in u is 1/(kσs) ≈ 0.0037 at",
         "    380 nm, one grid spacing at R = 1001.",
-        "    - The network reproduces the grid samples: held-out volume slices of the first pass reached FLIP",
-        "      0.003–0.009 at an exposure set by their brightest 0.1 %.",
+        "    - The network reproduces the grid samples: held-out volume slices of the first pass scored far",
+        "      better than the BRDF slices (docs/experiments/2026-11-21-twenty-micron-tiles.md).",
         "    - It does not reproduce the speckle between grid samples. The BRDF slices, evaluated at exact key",
-        "      vectors and exposed 2000–5000×, show exactly that. At these exposures 99 % of their pixels are",
+        "      vectors and exposed 2000–5000×, show exactly that. At these exposures nearly every pixel is",
         "      lit in the ground truth itself (docs/benchmarks.md, \"Skip work\").",
         "  - What longer, GPU-trained and feature-grid runs gave on the paper's own datasets is measured in the",
-        "    first table and in \"GPU runs on the paper's datasets\" below.",
+        "    first table; how each recipe was chosen is in \"What the studies established\" below.",
         "",
         *_presets_section(),
-        *_kept_sections(Path(arguments.out)),
+        *_studies_section(),
+        *_reproduce_section(),
         "## Every slice",
         "",
         *details,
