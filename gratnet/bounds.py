@@ -52,14 +52,8 @@ import numpy as np
 from gratnet.atomic import atomic_path
 from gratnet.encoding import range_inverse
 from gratnet.errors import GratNetError
-from gratnet.modelfile import (
-    ModelFile,
-    _hidden_activation,
-    _output_activation,
-    load_model,
-    mlp_forward,
-    network_inputs,
-)
+from gratnet.modelfile import ModelFile, load_model, mlp_forward, network_inputs
+from gratnet.network import activate_hidden, activate_output
 
 __all__ = [
     "DISPLAY_SKIP_THRESHOLD",
@@ -262,12 +256,12 @@ def compute_output_bounds(model: ModelFile, parameters: BoundParameters | None =
         i = np.arange(start, min(start + rows_per_batch, resolution))
         x = (tables["u"][i][:, None, :] + tables["v"][None, :, :] + tables["sum"][i[:, None] + j[None, :]]
              + tables["difference"][i[:, None] - j[None, :] + resolution - 1] + tables["t"][k][None, None, :])
-        x = _hidden_activation(x.reshape(-1, x.shape[-1]), model.activation)
+        x = activate_hidden(x.reshape(-1, x.shape[-1]), model.activation)
         last = len(weights) - 1
         for layer, (weight, bias) in enumerate(zip(weights, biases, strict=True)):
             x = x @ weight + bias
-            x = (_output_activation(x, model.output_activation) if layer == last
-                 else _hidden_activation(x, model.activation))
+            x = (activate_output(x, model.output_activation) if layer == last
+                 else activate_hidden(x, model.activation))
         y = x.reshape(i.size, resolution, 3)
         row_max[k, i] = np.maximum.reduceat(y, v_starts, axis=1)
     cell_max = np.maximum.reduceat(row_max, u_starts, axis=1)  # (t_samples, Cu, Cv, 3)

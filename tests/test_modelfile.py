@@ -1,4 +1,5 @@
-"""Tests for gratnet.modelfile: the model .npz format, the shader's weight texture, the numpy evaluator."""
+"""Tests for gratnet.modelfile and gratnet.network: the model .npz format, the shader's weight texture, the numpy
+evaluator."""
 
 from __future__ import annotations
 
@@ -15,19 +16,16 @@ import torch
 from gratnet.encoding import EncodingSpec, RangeSpec, encode, network_coordinates
 from gratnet.errors import GratNetError
 from gratnet.modelfile import (
-    ACTIVATIONS,
     FORMAT_NAME,
     FORMAT_VERSION,
-    OUTPUT_ACTIVATIONS,
     ModelFile,
     evaluate_keys,
     load_model,
     mlp_forward,
     pack_texture,
     save_model,
-    texture_forward,
-    texture_layout,
 )
+from gratnet.network import ACTIVATIONS, OUTPUT_ACTIVATIONS, texture_forward, texture_layout
 
 REPO = Path(__file__).resolve().parents[1]
 ENCODING = EncodingSpec.for_grid(101, 5)  # 163 features
@@ -660,11 +658,12 @@ def test_module_never_imports_torch(saved):
     code = (
         "import sys\n"
         "import gratnet.modelfile as m\n"
+        "import gratnet.network as n\n"
         "assert 'torch' not in sys.modules, 'imported by gratnet.modelfile'\n"
         "model = m.load_model(sys.argv[1])\n"
         "texture, layout = m.pack_texture(model)\n"
         "xyz = m.evaluate_keys(model, 0.1, -0.2, -0.5)\n"
-        "m.texture_forward(texture, layout, model.activation, model.output_activation, [[0.0] * 163])\n"
+        "n.texture_forward(texture, layout, model.activation, model.output_activation, [[0.0] * 163])\n"
         "m.save_model(sys.argv[1], model)\n"
         "assert 'torch' not in sys.modules, 'imported while using gratnet.modelfile'\n"
         "print(xyz.shape)\n"
