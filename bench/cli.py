@@ -47,9 +47,8 @@ def run(arguments: argparse.Namespace) -> int:
     from gratnet.atomic import check_output_folder
     from gratnet.brdf import check_exposure
     from gratnet.errors import GratNetError
+    from viewer.catalog import check_mesh_spec, resolve_material, shipped_materials
     from viewer.context import create_headless_context
-    from viewer.render_cli import resolve_material, shipped_materials
-    from viewer.scene_supply import check_mesh_spec
 
     config = from_arguments(BenchConfig, arguments)
     config.size_list(), config.path_list()  # validate before any work

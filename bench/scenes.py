@@ -30,8 +30,8 @@ __all__ = ["SceneView", "available_render_paths", "check_render_paths", "json_li
            "run_scene_bench", "scene_frame_times", "scene_view", "write_scene_outputs"]
 
 def available_render_paths() -> tuple[str, ...]:
-    """The render paths a :class:`~viewer.scene.SceneRenderer` takes (:data:`viewer.deferred.RENDER_PATHS`)."""
-    from viewer.deferred import RENDER_PATHS
+    """The render paths a :class:`~viewer.scene.SceneRenderer` takes (:data:`viewer.scene.RENDER_PATHS`)."""
+    from viewer.scene import RENDER_PATHS
 
     return tuple(RENDER_PATHS)
 
@@ -102,7 +102,7 @@ def scene_frame_times(ctx: Any, model: Any, model_path: str, view: SceneView, we
                       max_seconds: float) -> list[dict[str, Any]]:
     """One row per (size, samples) for one model on one weights path and render path (see the module
     docstring); ``model_path`` only labels the rows."""
-    from viewer.render_cli import build_mesh
+    from viewer.catalog import build_mesh
     from viewer.scene import SceneRenderer
 
     start = time.perf_counter()

@@ -21,8 +21,8 @@ import numpy as np
 from bench.scenes import scene_view
 from gratnet.modelfile import load_model
 from trainer.metrics import flip, psnr_xyz
+from viewer.catalog import resolve_material
 from viewer.context import create_headless_context
-from viewer.render_cli import resolve_material
 from viewer.scene import SceneRenderer
 
 
@@ -66,7 +66,7 @@ def main() -> None:
     images: dict[int, np.ndarray] = {}
     seconds: dict[int, float] = {}
     with SceneRenderer(ctx, load_model(path)) as renderer:
-        from viewer.render_cli import build_mesh
+        from viewer.catalog import build_mesh
 
         buffers = renderer.upload(build_mesh("cd"))
 

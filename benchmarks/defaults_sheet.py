@@ -22,10 +22,11 @@ from gratnet.atomic import atomic_path
 from gratnet.modelfile import load_model
 from gratnet.showcase import black_fraction
 from viewer.camera import Camera, Light
+from viewer.catalog import MESHES, build_mesh, resolve_material, shipped_materials
 from viewer.context import create_headless_context
 from viewer.defaults import FOV_DEGREES, resolve_defaults
-from viewer.render_cli import MESHES, build_mesh, parse_size, resolve_material, shipped_materials
 from viewer.scene import SceneRenderer
+from viewer.scene_config import parse_size
 
 _LABEL_HEIGHT = 26
 

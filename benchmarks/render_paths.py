@@ -31,8 +31,8 @@ import numpy as np  # noqa: E402
 from bench.scenes import scene_view  # noqa: E402
 from gratnet.modelfile import ModelFile, load_model  # noqa: E402
 from viewer.camera import Light  # noqa: E402
+from viewer.catalog import build_mesh, resolve_material  # noqa: E402
 from viewer.context import create_headless_context  # noqa: E402
-from viewer.render_cli import build_mesh, resolve_material  # noqa: E402
 from viewer.scene import SceneRenderer  # noqa: E402
 
 

@@ -1,6 +1,6 @@
 """How long the viewer window takes to show a first picture, and how long each of its frames blocks input.
 
-Drives the real window (``viewer.app.ViewerWindow``, needs an X display, e.g. Xvfb) through a scripted
+Drives the real window (``viewer.window.ViewerWindow``, needs an X display, e.g. Xvfb) through a scripted
 session and prints one JSON object:
 
 1. launch with ``--material`` on ``--mesh``; ``first_picture_s``: seconds from ``--launched-at`` (the
@@ -187,7 +187,8 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--background", action=argparse.BooleanOptionalAction, default=True)
     arguments = parser.parse_args(argv)
 
-    from viewer.app import ViewerState, ViewerWindow
+    from viewer.state import ViewerState
+    from viewer.window import ViewerWindow
 
     width, height = (int(v) for v in arguments.size.split(","))
     state = ViewerState(material=arguments.material, mesh=arguments.mesh, camera_distance=0.15, light_theta=30.0)
@@ -205,12 +206,12 @@ def main(argv: list[str] | None = None) -> int:
         first = window.first_picture_at
         report["first_picture_s"] = None if took is None or first is None else first - arguments.launched_at
         report["weights_path_first"] = app.weights_path_in_use()
-        worker = app._supply._worker  # noqa: SLF001 - the child's own timings, for the report
+        worker = app.supply.worker  # the child's own timings, for the report
         report["worker_s"] = {} if worker is None else {" ".join(k): round(v, 3) for k, v in worker.seconds.items()}
         report["worker_started_s"] = None if worker is None else round(worker.started - arguments.launched_at, 3)
         report["worker_ready_at_s"] = {} if worker is None else {
             " ".join(k): round(v - arguments.launched_at, 3) for k, v in worker.ready_at.items()}
-        ready_at = app._supply.display_ready_at  # noqa: SLF001
+        ready_at = app.supply.display_ready_at
         report["display_import_done_s"] = None if ready_at is None else round(ready_at - arguments.launched_at, 3)
 
         session.phase = "interact"

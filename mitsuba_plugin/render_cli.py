@@ -28,7 +28,7 @@ from pathlib import Path
 
 from gratnet.config import add_arguments, add_quiet_flag, config_field, from_arguments
 from gratnet.errors import GratNetError
-from viewer.render_cli import SceneConfig, add_scene_arguments
+from viewer.scene_config import SceneConfig, add_scene_arguments
 
 __all__ = ["MitsubaRenderConfig", "parse_environment", "register", "run"]
 
@@ -110,7 +110,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 def _resolve_config(arguments: argparse.Namespace) -> MitsubaRenderConfig:
     """The config from the flags, every value checked as ``gratnet render`` checks it (nothing rendered,
     Mitsuba not loaded yet)."""
-    from viewer.render_cli import check_scene, scene_fields
+    from viewer.scene_config import check_scene, scene_fields
 
     config = dataclasses.replace(from_arguments(MitsubaRenderConfig, arguments), **scene_fields(arguments),
                                  environment=str(arguments.environment))
@@ -138,7 +138,8 @@ def run(arguments: argparse.Namespace) -> int:
     from gratnet.modelfile import load_model
     from mitsuba_plugin.runtime import resolve_variant
     from viewer.camera import Camera, Light
-    from viewer.render_cli import build_mesh, resolve_material, resolve_scene_command, warn_if_black, write_render
+    from viewer.catalog import build_mesh, resolve_material
+    from viewer.scene_config import resolve_scene_command, warn_if_black, write_render
 
     out = Path(arguments.out)
 

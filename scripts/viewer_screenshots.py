@@ -18,8 +18,8 @@ from PIL import Image
 
 from gratnet.atomic import atomic_path
 from gratnet.cli import build_parser
-from viewer.app import ViewerWindow
-from viewer.view_cli import _state
+from viewer.view_cli import starting_state
+from viewer.window import ViewerWindow
 
 
 def main() -> None:
@@ -33,7 +33,7 @@ def main() -> None:
     view = build_parser(only="view").parse_args(
         ["view", "--material", arguments.material, "--mesh", arguments.mesh, "--size", "480,400"])
     captures: list[np.ndarray] = []
-    with ViewerWindow(_state(view), (480, 400)) as window:
+    with ViewerWindow(starting_state(view), (480, 400)) as window:
         started = time.perf_counter()
         while len(captures) < len(times):
             window.frame(capture=True)

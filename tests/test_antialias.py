@@ -207,7 +207,7 @@ def test_render_spp_writes_the_mean_and_records_it(tmp_path, capsys):
 
 
 def test_render_spp_flag_is_the_samples_flag(tmp_path):
-    from viewer.render_cli import MAX_SAMPLES as CLI_MAX
+    from viewer.scene_config import MAX_SAMPLES as CLI_MAX
 
     assert CLI_MAX == MAX_SAMPLES  # the CLI repeats the limit (it defers numpy)
     assert main(["render", "--material", str(BLAZED), "--mesh", "plane", "--size", "8,8", "--samples", "2",

@@ -26,7 +26,7 @@ from gratnet.modelfile import ModelFile, save_model
 from gratnet.volume import Volume, write_volume
 from tests.test_modelfile import flip_in_member
 
-# Imported here, unpatched: these modules bind viewer.render_cli.resolve_material by name when first imported,
+# Imported here, unpatched: these modules bind viewer.catalog.resolve_material by name when first imported,
 # and a first import inside a test that patches it (bench, view) would keep the patch for the whole worker.
 importlib.import_module("viewer.scene_supply")
 importlib.import_module("viewer.app")
@@ -360,9 +360,9 @@ WRITERS: dict[str, tuple[list[str], str, bool]] = {
                             "trainer.heightfield_cli.load_heightfield", False),
     "train": (["train", "{volume}", "--quiet", "--out", "{out}"], "gratnet.volume.read_volume", True),
     "evaluate": (["evaluate", "{model}", "--quiet", "--out", "{out}"], "gratnet.modelfile.load_model", True),
-    "bench": (["bench", "--quiet", "--out", "{out}"], "viewer.render_cli.resolve_material", True),
+    "bench": (["bench", "--quiet", "--out", "{out}"], "viewer.catalog.resolve_material", True),
     "view screenshots": (["view", "--screenshot-dir", "{out}", "--max-frames", "1"],
-                         "viewer.render_cli.resolve_material", True),
+                         "viewer.catalog.resolve_material", True),
     "mitsuba-render": ([*MITSUBA, "--out", "{out}.png"], "gratnet.modelfile.load_model", False),
     "mitsuba-render exr": ([*MITSUBA, "--out", "{out}.exr"], "gratnet.modelfile.load_model", False),
 }
@@ -612,9 +612,9 @@ def test_negative_values_in_comma_lists_parse_everywhere(tmp_path, capsys, form)
         ["render", "--out", "x.png", *flag("--light", "-30,0"), *flag("--point-light", "-0.1,0,0.2"),
          *flag("--camera", "0.2,-90,-45"), *flag("--exposure", "-0")])
     assert (render.light_text, render.point_light_text, render.camera_text) == ("-30,0", "-0.1,0,0.2", "0.2,-90,-45")
-    from viewer.render_cli import _resolve_config
+    from viewer.render_cli import resolve_config
 
-    config = _resolve_config(render)
+    config = resolve_config(render)
     assert (config.light_theta_degrees, config.point_light, config.camera_elevation_degrees) == (
         -30.0, (-0.1, 0.0, 0.2), -45.0)
     assert str(config.exposure) == "0.0"  # -0 is 0

@@ -31,8 +31,8 @@ from gratnet.showcase import (
     suggest_exposure,
 )
 from viewer import defaults
+from viewer.catalog import ASSETS, MESHES, shipped_materials
 from viewer.meshes import plane, sphere
-from viewer.render_cli import ASSETS, MESHES, shipped_materials
 
 MATERIALS = shipped_materials()
 
@@ -208,7 +208,7 @@ def test_materials_never_seen_get_finite_defaults_on_every_mesh(kind):
 
 
 def defaults_mesh(name: str) -> object:
-    from viewer.render_cli import build_mesh
+    from viewer.catalog import build_mesh
 
     return build_mesh(name)
 
@@ -255,7 +255,7 @@ THIN_RING = {("paper-blazed", "sphere")}
 @pytest.mark.parametrize("material", MATERIALS)
 def test_every_shipped_material_shows_its_diffraction_on_every_mesh_at_the_defaults(ctx, material):
     from viewer.camera import Camera, Light
-    from viewer.render_cli import build_mesh
+    from viewer.catalog import build_mesh
     from viewer.scene import SceneRenderer
 
     failures = []
@@ -305,8 +305,10 @@ def test_render_warns_about_a_black_picture_and_its_suggestion_shows_it(ctx, tmp
 
 
 def _filled(argv: list[str]) -> argparse.Namespace:
+    from viewer.scene_config import fill_scene_defaults
+
     arguments = build_parser().parse_args(argv)
-    defaults.fill_scene_defaults(arguments)
+    fill_scene_defaults(arguments)
     return arguments
 
 
@@ -322,31 +324,18 @@ def test_render_and_view_resolve_identical_defaults(material):
     assert (rendered.light_text, rendered.exposure) == (viewed.light_text, viewed.exposure)
 
 
-def test_viewer_helpers_switch_to_the_pairs_defaults_and_hint_at_black_pictures():
-    from viewer.app import ViewerState
-
-    changes = defaults.switch_changes(ViewerState(material="blazed", mesh="cd"), material="snake")
-    assert changes == {"material": "snake", "mesh": "cd", **defaults.state_defaults("snake", "cd")}
-    assert defaults.switch_changes(ViewerState(), mesh="no-such-mesh") == {"material": "blazed", "mesh": "no-such-mesh"}
-    image = np.zeros((20, 20, 3))
-    image[0, :10] = _xyz_of_linear_srgb([1e-6, 2e-6, 1e-6])  # lit, but black on the display at exposure 1
-    message, suggestion = defaults.black_picture_hint(image, 1.0)
-    assert message.startswith("100.0 % of the picture is black at exposure 1: try exposure") and suggestion > 1e3
-    assert defaults.black_picture_hint(image * 1e6, 1e6) is None  # 10 of 400 pixels shown: 97.5 % black
-    assert defaults.black_picture_hint(np.zeros((4, 4, 3)), 1.0)[1] is None
-
-
 def test_view_starting_state_and_render_config_use_the_defaults_and_flags_override(ctx, tmp_path):
     import json
 
-    from viewer.view_cli import _state
+    from viewer.default_view import state_defaults
+    from viewer.view_cli import starting_state
 
-    state = _state(build_parser().parse_args(["view", "--material", "pits", "--mesh", "sphere"]))
+    state = starting_state(build_parser().parse_args(["view", "--material", "pits", "--mesh", "sphere"]))
     d = defaults.resolve_defaults("pits", "sphere")
     assert (state.light_theta, state.light_phi, state.camera_distance, state.camera_azimuth, state.camera_elevation,
             state.exposure) == (d.light_theta_degrees, d.light_phi_degrees, d.camera_distance,
                                 d.camera_azimuth_degrees, d.camera_elevation_degrees, d.exposure)
-    assert defaults.state_defaults("pits", "sphere") == {
+    assert state_defaults("pits", "sphere") == {
         "light_theta": state.light_theta, "light_phi": state.light_phi, "camera_distance": state.camera_distance,
         "camera_azimuth": state.camera_azimuth, "camera_elevation": state.camera_elevation, "exposure": state.exposure}
     out = tmp_path / "pits.png"

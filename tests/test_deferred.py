@@ -144,10 +144,10 @@ def test_samples_average_single_jittered_renders(scenes, monkeypatch, chunked):
     mesh = compact_disc()
     size = (24, 20)
     if chunked:  # two samples per G-buffer: the mean accumulates over two chunks
-        monkeypatch.setattr(viewer.deferred, "_CHUNK_TEXELS", 2 * size[0] * size[1])
+        monkeypatch.setattr(viewer.deferred, "CHUNK_TEXELS", 2 * size[0] * size[1])
     offsets = sample_offsets(4)
-    mean = scene._render(mesh, DISC_CAMERA, DISC_LIGHT, size, EXPOSURE, 1.5, 1, offsets_px=offsets)[0]
-    singles = [scene._render(mesh, DISC_CAMERA, DISC_LIGHT, size, EXPOSURE, 1.5, 1, offsets_px=offsets[k:k + 1])[0]
+    mean = scene.render_rgba(mesh, DISC_CAMERA, DISC_LIGHT, size, EXPOSURE, offsets_px=offsets)
+    singles = [scene.render_rgba(mesh, DISC_CAMERA, DISC_LIGHT, size, EXPOSURE, offsets_px=offsets[k:k + 1])
                for k in range(4)]
     expected = np.mean(np.asarray(singles, dtype=np.float64), axis=0)
     # Sample k is rasterized k·H rows up in the G-buffer: its varyings are interpolated at other window
@@ -156,18 +156,18 @@ def test_samples_average_single_jittered_renders(scenes, monkeypatch, chunked):
     assert np.any((mean[..., 3] > 0) & (mean[..., 3] < 1))  # edge pixels: partial coverage
     assert not np.allclose(singles[0], singles[1])  # the offsets moved the image
     # One sample at (0, 0) is the un-jittered render, bit for bit.
-    centre = scene._render(mesh, DISC_CAMERA, DISC_LIGHT, size, EXPOSURE, 1.5, 1, offsets_px=np.zeros((1, 2)))[0]
+    centre = scene.render_rgba(mesh, DISC_CAMERA, DISC_LIGHT, size, EXPOSURE, offsets_px=np.zeros((1, 2)))
     np.testing.assert_array_equal(centre, scene.render_rgba(mesh, DISC_CAMERA, DISC_LIGHT, size, EXPOSURE))
 
 
 def test_overdraw_costs_no_evaluation_on_the_deferred_path(scenes):
-    from tests.test_skip_work import _two_planes
+    from tests.test_skip_work import two_planes
 
     camera = Camera(distance=0.3, azimuth_deg=0.0, elevation_deg=90.0, fov_deg=30.0)
     light = Light.directional(20.0, 0.0)
     counts: dict[str, int] = {}
-    deferred = scenes["ssbo"].render_rgba(_two_planes(), camera, light, (48, 48), EXPOSURE, statistics=counts)
-    forward = scenes["forward"].render_rgba(_two_planes(), camera, light, (48, 48), EXPOSURE)
+    deferred = scenes["ssbo"].render_rgba(two_planes(), camera, light, (48, 48), EXPOSURE, statistics=counts)
+    forward = scenes["forward"].render_rgba(two_planes(), camera, light, (48, 48), EXPOSURE)
     covered = int(np.count_nonzero(deferred[..., 3] > 0))
     assert counts["evaluations"] == counts["fragments"] == covered  # the near plane only, no pre-pass needed
     np.testing.assert_allclose(deferred, forward, rtol=1e-5, atol=1e-7 * np.abs(forward).max())
@@ -203,12 +203,11 @@ def test_bad_render_path_weights_and_offsets_raise(ctx, model, scenes):
     with pytest.raises(GratNetError, match="fp16"):
         SceneRenderer(ctx, huge, weights_path="texture", deferred_weights="ssbo-fp16")
     with pytest.raises(GratNetError, match="sample offsets"):
-        scenes["ssbo"]._render(plane(1.0), DISC_CAMERA, DISC_LIGHT, (4, 4), 1.0, 1.5, 1, offsets_px=np.zeros((2, 3)))
+        scenes["ssbo"].render_rgba(plane(1.0), DISC_CAMERA, DISC_LIGHT, (4, 4), 1.0, offsets_px=np.zeros((2, 3)))
 
 
 def test_auto_measures_once_and_caches_the_verdict(ctx, model, tmp_path, monkeypatch):
-    from viewer.deferred import render_path_cache_file
-    from viewer.scene import SceneRenderer
+    from viewer.scene import SceneRenderer, render_path_cache_file
 
     monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path))
     with SceneRenderer(ctx, model, weights_path="texture") as scene:

@@ -27,7 +27,7 @@ from gratnet.brdf import a_term  # noqa: E402
 from gratnet.modelfile import evaluate_keys, load_model  # noqa: E402
 from mitsuba_plugin import shading  # noqa: E402
 from mitsuba_plugin.runtime import llvm_usable, set_variant  # noqa: E402
-from viewer.render_cli import ASSETS  # noqa: E402
+from viewer.catalog import ASSETS  # noqa: E402
 
 MATERIAL = ASSETS / "cd" / "model.npz"
 needs_llvm = pytest.mark.skipif(not llvm_usable(),

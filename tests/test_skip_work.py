@@ -177,7 +177,7 @@ def _scene(ctx, model):
     return SceneRenderer(ctx, model, weights_path=TEXTURE, render_path="forward")  # the deferred one: test_deferred
 
 
-def _two_planes():
+def two_planes():
     """Two overlapping squares facing +z, the far one (z = 0) drawn first: overdraw without a pre-pass."""
     from viewer.meshes import Mesh, plane
 
@@ -197,8 +197,8 @@ def test_depth_prepass_evaluates_each_visible_pixel_once(ctx):
     with _scene(ctx, tiny_model()) as scene:
         once: dict[str, int] = {}
         overdraw: dict[str, int] = {}
-        with_prepass = scene.render_rgba(_two_planes(), camera, light, (64, 64), 1.0, statistics=once)
-        without = scene.render_rgba(_two_planes(), camera, light, (64, 64), 1.0, depth_prepass=False,
+        with_prepass = scene.render_rgba(two_planes(), camera, light, (64, 64), 1.0, statistics=once)
+        without = scene.render_rgba(two_planes(), camera, light, (64, 64), 1.0, depth_prepass=False,
                                     statistics=overdraw)
     covered = int(np.count_nonzero(with_prepass[..., 3] > 0))
     np.testing.assert_array_equal(with_prepass, without)  # the pre-pass changes no pixel

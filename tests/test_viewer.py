@@ -30,14 +30,10 @@ from PIL import Image
 
 from gratnet.cli import main
 from gratnet.errors import GratNetError
-from viewer.app import (
-    SLIDERS,
-    ResolutionPolicy,
-    ViewerApp,
-    ViewerState,
-    drive_slider,
-)
+from viewer.app import ViewerApp, drive_slider
 from viewer.meshes import plane
+from viewer.scheduling import ResolutionPolicy
+from viewer.state import SLIDERS, ViewerState
 
 BLAZED = Path(__file__).resolve().parents[1] / "assets" / "blazed" / "model.npz"
 EXPOSURE = 5000.0
@@ -170,7 +166,7 @@ SPHERE = ViewerState(mesh="sphere", camera_distance=0.2, camera_elevation=30.0, 
 
 def _reference_render(viewer: ViewerApp, samples: int) -> np.ndarray:
     """SceneRenderer's own ``samples``-sample render of the viewer's view, on the viewer's renderer and mesh."""
-    renderer, buffers = viewer._supply.scene(viewer.state, preview=False)
+    renderer, buffers = viewer.supply.scene(viewer.state, preview=False)
     state = viewer.state
     return renderer.render(buffers, state.camera(), state.light(), viewer.full_size(), state.exposure,
                            state.effective_ior, samples=samples)
@@ -205,7 +201,7 @@ def test_progressive_antialiasing_equals_the_k_sample_render_and_restarts_on_a_c
         levels = np.abs(viewer.image.pixels.astype(int) - SceneRenderer.display_srgb8(reference).astype(int))
         # The deferred path rasterizes N samples as N stacked viewports: a sample's varyings are interpolated at
         # other window coordinates than in a one-sample render (float32 rounding, amplified at sharp highlights).
-        deferred = viewer._supply.scene(viewer.state, preview=False)[0].render_path == "deferred"
+        deferred = viewer.supply.scene(viewer.state, preview=False)[0].render_path == "deferred"
         if budget > 1 and not deferred:  # the same matrices as SceneRenderer's: float32 rounding only
             np.testing.assert_allclose(accumulated, reference, rtol=1e-5, atol=1e-6 * scale)
             assert levels.max() <= 1
@@ -288,8 +284,8 @@ def test_state_changes_are_checked_and_clamped(app):
 
 def test_a_switch_brings_the_default_view_of_the_new_material_and_mesh(app):
     """The panel's material / mesh / slice choices go through switch(): the new pair's default view, the
-    one gratnet view and gratnet render start with (viewer.defaults.state_defaults)."""
-    from viewer.defaults import VIEW_FIELDS, state_defaults
+    one gratnet view and gratnet render start with (viewer.default_view.state_defaults)."""
+    from viewer.default_view import VIEW_FIELDS, state_defaults
 
     assert app.switch(material="cd", mesh="sphere")
     wanted = state_defaults("cd", "sphere", False, app.state.fov, app.state.effective_ior)
@@ -306,7 +302,7 @@ def test_a_switch_brings_the_default_view_of_the_new_material_and_mesh(app):
 def test_a_default_view_worked_out_in_the_background_yields_to_the_user():
     """In the window's background mode the defaults come from a worker process; a user who moves the light,
     camera or exposure (or switches again) before they arrive keeps their choice."""
-    from viewer.defaults import DefaultViewRequests, state_defaults
+    from viewer.default_view import DefaultViewRequests, state_defaults
 
     requests = DefaultViewRequests(background=True)
     try:
@@ -419,7 +415,7 @@ def display(xvfb, monkeypatch) -> str:
 
 @pytest.fixture
 def window(display, tmp_path) -> Iterator[object]:
-    from viewer.app import ViewerWindow
+    from viewer.window import ViewerWindow
 
     clock = FakeClock()
     # Compiling in the window's thread (background=False): these tests count frames and renders; the
@@ -532,9 +528,9 @@ def test_a_headless_context_and_a_window_in_one_process(display):
     """A current EGL context (a headless renderer) must not stop the window's GLX context from becoming
     current (libglvnd: one API per thread; Xlib would exit the process), and works again afterwards."""
     from gratnet.modelfile import load_model
-    from viewer.app import ViewerWindow
     from viewer.context import create_headless_context
     from viewer.scene import SceneRenderer
+    from viewer.window import ViewerWindow
 
     headless = create_headless_context()
     try:
@@ -641,19 +637,19 @@ def test_gratnet_view_without_a_display_is_one_line_and_exit_2(monkeypatch, caps
 
 def test_gratnet_view_flags_make_the_starting_state():
     from gratnet.cli import build_parser
-    from viewer.view_cli import _state
+    from viewer.view_cli import starting_state
 
     arguments = build_parser(only="view").parse_args(
         ["view", "--mesh", "sphere", "--light", "35,-60", "--camera", "0.3,10,20", "--exposure", "7", "--ior", "0",
          "--slice"])
-    state = _state(arguments)
+    state = starting_state(arguments)
     assert (state.mesh, state.light_theta, state.light_phi, state.camera_distance, state.camera_azimuth,
             state.camera_elevation, state.exposure, state.slice_mode) == ("sphere", 35, -60, 0.3, 10, 20, 7, True)
     assert state.fresnel is False  # --ior 0: no Fresnel, as in gratnet render
     with pytest.raises(GratNetError, match="ior"):
-        _state(build_parser(only="view").parse_args(["view", "--ior", "1e31"]))
+        starting_state(build_parser(only="view").parse_args(["view", "--ior", "1e31"]))
     with pytest.raises(GratNetError, match="--light"):
-        _state(build_parser(only="view").parse_args(["view", "--light", "45"]))
+        starting_state(build_parser(only="view").parse_args(["view", "--light", "45"]))
 
 
 def test_setup_installs_xvfb():

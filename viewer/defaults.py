@@ -36,14 +36,14 @@ A BRDF slice (``--slice``) takes a light 30° from the normal on the side opposi
 that the peak lands near the slice's centre, and the exposure of step 3 predicted on the slice's own
 view directions.
 
-Explicit flags always override: :func:`fill_scene_defaults` fills only the flags left unset. Results are
+Explicit flags always override: ``viewer.scene_config.fill_scene_defaults`` fills only the flags left unset;
+the viewer asks for a pair's defaults off its window's thread (``viewer.default_view``). Results are
 rounded (0.1°, 1 mm, 3 significant digits) so that they read well in a config file and on a slider.
-Runtime-side: numpy and pyrr, no GL.
+The algorithm only (numpy and pyrr, no GL, no flags, no processes). Runtime-side.
 """
 
 from __future__ import annotations
 
-import argparse
 import dataclasses
 import functools
 import math
@@ -64,19 +64,12 @@ if TYPE_CHECKING:  # the heavy imports wait until a default is computed: `gratne
 __all__ = [
     "CAMERA_AZIMUTH_DEGREES",
     "FALLBACK",
-    "VIEW_FIELDS",
-    "DefaultViewRequests",
     "FOV_DEGREES",
     "SceneDefaults",
-    "black_picture_hint",
-    "fill_scene_defaults",
-    "with_fallback",
     "resolve_defaults",
     "scene_defaults",
     "slice_defaults",
-    "state_defaults",
     "surface_samples",
-    "switch_changes",
 ]
 
 #: The orbit camera's azimuth (degrees from +x): the eye on the −y side, looking towards +y.
@@ -407,7 +400,7 @@ def _resolve_cached(model_path: str, stamp: tuple[int, int], mesh_spec: str, sli
     model = load_model(model_path)
     if slice_mode:
         return slice_defaults(model, ior=ior)
-    from viewer.render_cli import build_mesh
+    from viewer.catalog import build_mesh
 
     return scene_defaults(model, build_mesh(mesh_spec), fov_degrees, ior)  # type: ignore[arg-type]
 
@@ -421,7 +414,7 @@ def resolve_defaults(material: str, mesh: str, slice_mode: bool = False, fov_deg
     Raises:
         GratNetError: unknown material or mesh, unreadable model or mesh file.
     """
-    from viewer.render_cli import resolve_material
+    from viewer.catalog import resolve_material
 
     path = resolve_material(material)
     try:
@@ -431,208 +424,3 @@ def resolve_defaults(material: str, mesh: str, slice_mode: bool = False, fov_deg
     mesh_key = mesh if slice_mode or mesh in ("cd", "sphere", "plane") else str(Path(mesh).expanduser().resolve())
     return _resolve_cached(str(path), (status.st_mtime_ns, status.st_size), "" if slice_mode else mesh_key,
                            bool(slice_mode), float(fov_degrees), ior)
-
-
-def with_fallback(arguments: argparse.Namespace) -> argparse.Namespace:
-    """A copy of ``arguments`` whose unset ``--light``, ``--camera`` and ``--exposure`` hold :data:`FALLBACK`'s
-    values: the command checks the flags the user gave on it before :func:`fill_scene_defaults` reads the
-    model, so that bad input is refused before any work."""
-    probe = argparse.Namespace(**vars(arguments))
-    probe.light_text = FALLBACK.light_text if probe.light_text is None else probe.light_text
-    probe.camera_text = FALLBACK.camera_text if probe.camera_text is None else probe.camera_text
-    probe.exposure = FALLBACK.exposure if probe.exposure is None else probe.exposure
-    return probe
-
-
-def fill_scene_defaults(arguments: argparse.Namespace) -> SceneDefaults | None:
-    """Fill the unset ``--light``, ``--camera`` and ``--exposure`` of a ``render`` or ``view`` command line
-    (``arguments.light_text``, ``camera_text``, ``exposure`` left ``None``) from :func:`resolve_defaults`.
-
-    Flags the user gave are kept as given (and checked later by the command's own validation). Nothing is
-    computed when all three are given, or when ``--point-light`` replaces the light and the camera and
-    exposure are given.
-
-    Returns:
-        the defaults used, or ``None`` when none were needed.
-    """
-    point_light = getattr(arguments, "point_light_text", None) is not None
-    if arguments.light_text is None and point_light:
-        arguments.light_text = FALLBACK.light_text  # unused: --point-light replaces the directional light
-    if arguments.light_text is not None and arguments.camera_text is not None and arguments.exposure is not None:
-        return None
-    fresnel = getattr(arguments, "fresnel", True)
-    ior = arguments.ior if fresnel and arguments.ior not in (None, 0) else None
-    if ior is not None and not (isinstance(ior, (int, float)) and math.isfinite(ior) and ior > 0.0):
-        ior = 1.5  # an invalid --ior is reported by the command's own check; the defaults must not fail first
-    fov = getattr(arguments, "fov_degrees", FOV_DEGREES)
-    if not (isinstance(fov, (int, float)) and 0.0 < fov < 180.0):
-        fov = FOV_DEGREES
-    defaults = resolve_defaults(arguments.material, arguments.mesh, bool(getattr(arguments, "slice", False)),
-                                float(fov), ior)
-    if arguments.light_text is None:
-        arguments.light_text = defaults.light_text
-    if arguments.camera_text is None:
-        arguments.camera_text = defaults.camera_text
-    if arguments.exposure is None:
-        arguments.exposure = defaults.exposure * (_point_light_distance_squared(arguments) or 1.0)
-    return defaults
-
-
-def _point_light_distance_squared(arguments: argparse.Namespace) -> float | None:
-    """|position|² (m²) of a ``--point-light X,Y,Z`` whose irradiance at the origin is 1/|position|² of a
-    directional light's: the default exposure is scaled by it. ``None`` without one, or when it does not
-    parse (the command's own check reports that)."""
-    text = getattr(arguments, "point_light_text", None)
-    if text is None:
-        return None
-    try:
-        position = [float(part) for part in str(text).split(",")]
-    except ValueError:
-        return None
-    squared = sum(x * x for x in position)
-    if len(position) != 3 or not (math.isfinite(squared) and squared > 0):
-        return None
-    return _significant(squared)
-
-
-def state_defaults(material: str, mesh: str, slice_mode: bool = False, fov_degrees: float = FOV_DEGREES,
-                   ior: float | None = 1.5) -> dict[str, float]:
-    """The viewer's fields for :func:`resolve_defaults` (``ViewerState`` names), for the viewer to apply when
-    the material or the mesh changes: ``ViewerApp.set(**state_defaults(...))``."""
-    defaults = resolve_defaults(material, mesh, slice_mode, fov_degrees, ior)
-    return {"light_theta": defaults.light_theta_degrees, "light_phi": defaults.light_phi_degrees,
-            "camera_distance": defaults.camera_distance, "camera_azimuth": defaults.camera_azimuth_degrees,
-            "camera_elevation": defaults.camera_elevation_degrees, "exposure": defaults.exposure}
-
-
-# --------------------------------------------------------------------------------------------------
-# For the viewer: small calls for viewer/app.py (no GL, no imgui)
-
-
-def switch_changes(state: Any, material: str | None = None, mesh: str | None = None) -> dict[str, Any]:
-    """The ``ViewerApp.set(**changes)`` that switches a viewer ``state`` to another material and/or mesh
-    together with that pair's defaults (light, camera, exposure: the values ``gratnet view`` starts with),
-    so that the new material shows its diffraction at once.
-
-    Args:
-        state: the current ``viewer.app.ViewerState`` (its ``material``, ``mesh``, ``slice_mode``, ``fov``,
-            ``effective_ior`` are used).
-        material, mesh: the new ones (``None``: unchanged).
-
-    Returns:
-        ``{"material": …, "mesh": …, "light_theta": …, …, "exposure": …}``; only the new material and mesh
-        when their defaults cannot be computed (the viewer then reports the load error itself).
-    """
-    changes: dict[str, Any] = {"material": material or state.material, "mesh": mesh or state.mesh}
-    try:
-        changes.update(state_defaults(changes["material"], changes["mesh"], state.slice_mode, state.fov,
-                                      state.effective_ior))
-    except GratNetError:
-        pass
-    return changes
-
-
-#: Niceness of the viewer's default-view worker process (os.nice increment).
-DEFAULTS_WORKER_NICENESS = 19
-#: The viewer fields a default view sets (ViewerState names).
-VIEW_FIELDS = ("light_theta", "light_phi", "camera_distance", "camera_azimuth", "camera_elevation", "exposure")
-
-
-class DefaultViewRequests:
-    """The viewer's default view for its material, mesh and mode, worked out off the window's thread.
-
-    :func:`state_defaults` costs about 0.5 s of numpy the first time for a pair (cached after), far over a
-    frame's budget; with ``background`` it runs in one worker process (started at the first request) and
-    :meth:`take` hands the result over once it is ready. A process, not a thread: on a thread its numpy
-    calls held the GIL for long enough to stretch the window's frames to 0.3 s (measured with
-    benchmarks/viewer_latency.py). A result is dropped when the user has moved the light, camera or
-    exposure, or switched again, since it was asked for: their choice wins.
-    """
-
-    def __init__(self, background: bool) -> None:
-        self._background = background
-        self._executor: Any = None  # concurrent.futures.ProcessPoolExecutor, made at the first request
-        self._pending: tuple[Any, tuple[Any, ...], Any] | None = None  # (future or result, asked-for key, view)
-
-    @staticmethod
-    def _key(state: Any) -> tuple[Any, ...]:
-        return state.material, state.mesh, state.slice_mode, state.fov, state.effective_ior
-
-    @staticmethod
-    def _view(state: Any) -> tuple[float, ...]:
-        return tuple(getattr(state, name) for name in VIEW_FIELDS)
-
-    def request(self, state: Any) -> None:
-        """Ask for the default view of ``state``'s material, mesh and mode (replaces an earlier request)."""
-        key = self._key(state)
-        if not self._background:
-            try:
-                result: Any = state_defaults(*key)
-            except GratNetError:
-                result = None
-        else:
-            if self._executor is None:
-                import multiprocessing
-                from concurrent.futures import ProcessPoolExecutor
-
-                # spawn: a forked copy of a process holding a GL context and threads is not safe. Niceness 19:
-                # at the window's priority (or at 10) its numpy took enough of 2 busy cores to stretch the
-                # window's frames to 0.2–1.1 s (tests/test_viewer.py test_window_never_blocks failed 3 of 4
-                # runs beside a low-priority job); at 19 it passed 4 of 4 there, using what the window leaves.
-                self._executor = ProcessPoolExecutor(1, mp_context=multiprocessing.get_context("spawn"),
-                                                     initializer=os.nice, initargs=(DEFAULTS_WORKER_NICENESS,))
-            result = self._executor.submit(state_defaults, *key)
-        self._pending = (result, key, self._view(state))
-
-    @property
-    def pending(self) -> bool:
-        """Whether a request is still being worked out."""
-        return self._pending is not None and hasattr(self._pending[0], "done") and not self._pending[0].done()
-
-    def take(self, state: Any) -> dict[str, float] | None:
-        """The ``ViewerApp.set(**changes)`` for the last request once it is ready and still wanted, else ``None``."""
-        if self._pending is None:
-            return None
-        result, key, view = self._pending
-        if hasattr(result, "done"):
-            if not result.done():
-                return None
-            try:
-                result = result.result()
-            except Exception:  # noqa: BLE001 - any failure (also a lost worker) only means no default view
-                result = None  # the viewer reports an unusable material or mesh itself
-        self._pending = None
-        if result is None or self._key(state) != key or self._view(state) != view:
-            return None
-        return result
-
-    def release(self) -> None:
-        """Stop the worker process (a computation under way finishes in the background and is dropped)."""
-        if self._executor is not None:
-            self._executor.shutdown(wait=False, cancel_futures=True)
-            self._executor = None
-        self._pending = None
-
-
-def black_picture_hint(xyz_exposed: Any, exposure: float) -> tuple[str, float | None] | None:
-    """For the viewer's status line: ``(message, suggested exposure)`` when a finished picture is at least
-    99 % black on the display (``gratnet.showcase.black_fraction``), else ``None``.
-
-    Args:
-        xyz_exposed: the rendered CIE XYZ with ``exposure`` applied, ``(H, W, 3)`` (``SceneRenderer.render``).
-        exposure: the exposure it was rendered at.
-
-    Returns:
-        the message ("… % of the picture is black at exposure E: try exposure S") and ``S`` (``None`` when no
-        pixel is lit: the light or the camera must move instead).
-    """
-    from gratnet.showcase import BLACK_FRACTION_WARNING, black_fraction, suggest_exposure
-
-    fraction = black_fraction(xyz_exposed)
-    if fraction < BLACK_FRACTION_WARNING:
-        return None
-    suggestion = suggest_exposure(xyz_exposed, exposure)
-    where = f"{100.0 * fraction:.1f} % of the picture is black at exposure {exposure:g}"
-    if suggestion is None:
-        return f"{where}, and no pixel is lit: move the light or the camera", None
-    return f"{where}: try exposure {suggestion:g}", suggestion

@@ -3,7 +3,8 @@
 :class:`~viewer.scene.SceneRenderer` renders a mesh on one of two paths with the same output (exposed CIE
 XYZ and coverage, ``float32`` ``(H, W, 4)``, row 0 at the top):
 
-* ``forward``: ``shaders/surface.glsl`` runs the network in the fragment shader (depth pre-pass first);
+* ``forward`` (:mod:`viewer.forward`): ``shaders/surface.glsl`` runs the network in the fragment shader
+  (depth pre-pass first);
 * ``deferred`` (this module):
 
   1. **G-buffer**: ``surface.glsl`` compiled with ``GBUFFER`` rasterizes the mesh with the depth test and
@@ -36,42 +37,30 @@ software rasterizer (llvmpipe: 1.2–1.3× faster than ``ssbo``, docs/benchmarks
 ``ssbo`` on a GPU (the fastest form of the H100 micro-benchmark, shared/notes/opengl-on-a-gpu.md; the
 compute pass itself is not measured on a GPU yet).
 
-Choosing the path (:func:`choose_render_path`): ``auto`` times both paths on a probe scene (the CD disc at
-:data:`PROBE_SIZE`) on the current context for this network's shape, and caches the verdict in
-``$XDG_CACHE_HOME/gratnet/render_path.json`` (else ``~/.cache/…``), keyed by ``GL_RENDERER`` and the
-network shape, so later runs do not measure again.
+Which path a render takes: :func:`viewer.scene.choose_render_path`.
 
 Rendering only: no glfw, no imgui, no torch.
 """
 
 from __future__ import annotations
 
-import json
-import math
-import os
-import time
+import logging
 from collections.abc import Callable
-from pathlib import Path
-from typing import TYPE_CHECKING
 
 import moderngl
 import numpy as np
 
 from gratnet.errors import GratNetError
-from viewer.antialias import check_offsets
+from viewer.antialias import check_offsets, jitter_matrix
+from viewer.camera import Camera, Light
+from viewer.forward import SURFACE_PROGRAM
 from viewer.glsl import compile_compute, compile_program
-from viewer.renderer import _LOG, _SOFTWARE_RASTERIZERS, _set, skip_threshold_value
+from viewer.renderer import NetworkRenderer, is_software_rasterizer, set_uniform, skip_threshold_value
+from viewer.surface import MeshBuffers, set_surface_uniforms
 
-if TYPE_CHECKING:
-    from gratnet.modelfile import ModelFile
-    from viewer.camera import Camera, Light
-    from viewer.scene import MeshBuffers, SceneRenderer
+__all__ = ["CHUNK_TEXELS", "DEFERRED_WEIGHTS", "FP16_MAX", "FP16_RELATIVE_ERROR", "DeferredRenderer"]
 
-__all__ = ["DEFERRED_WEIGHTS", "PROBE_SIZE", "RENDER_PATHS", "DeferredRenderer", "check_render_path",
-           "choose_render_path", "render_path_cache_file"]
-
-#: ``render_path`` values of :class:`~viewer.scene.SceneRenderer` and ``--render-path``.
-RENDER_PATHS = ("auto", "forward", "deferred")
+_LOG = logging.getLogger("gratnet.deferred")  # the gratnet command shows its INFO lines (gratnet/cli.py)
 #: Where the compute pass reads the weights (see the module docstring).
 DEFERRED_WEIGHTS = ("auto", "texture", "ssbo", "shared", "baked", "ssbo-fp16", "shared-fp16")
 #: Largest finite IEEE half: a weight beyond it cannot be stored as fp16.
@@ -80,25 +69,12 @@ FP16_MAX = 65504.0
 #: least 1e-3 of the image's peak. Measured ≤ 0.41 % on the shipped cd and blazed nets
 #: (docs/benchmarks.md); tests/test_deferred.py holds it for a random net.
 FP16_RELATIVE_ERROR = 0.01
-#: The ``auto`` probe: the CD disc at this size (pixels), each path timed as the best of two renders (one
-#: when it is already 1.5× slower than the other's best), after one untimed render that compiles it.
-PROBE_SIZE = (128, 128)
-_PROBE_RENDERS = 2
-_PROBE_CLEAR_RATIO = 1.5
 _PROGRAM = "deferred"
 _SHADE_GROUP = 64  # invocations per SHADE work group
 _TILE = 8  # COMPACT / RESOLVE work groups: 8×8 texels
 _LIST_BINDING = 7  # SSBO bindings: skip counters 5 (renderer.py), weights 6, the list 7
 _WEIGHTS_BINDING = 6
-_CACHE_VERSION = 2  # 2: the key names a feature-grid model's levels
-_CHUNK_TEXELS = 1 << 26  # G-buffer texels per chunk of samples at most (1 GiB of RGBA32F)
-
-
-def check_render_path(render_path: object) -> str:
-    """``render_path`` if it is one of :data:`RENDER_PATHS`, else :class:`GratNetError` (one line)."""
-    if not isinstance(render_path, str) or render_path not in RENDER_PATHS:
-        raise GratNetError(f"render path must be one of {', '.join(RENDER_PATHS)}, got {render_path!r}")
-    return render_path
+CHUNK_TEXELS = 1 << 26  # G-buffer texels per chunk of samples at most (1 GiB of RGBA32F)
 
 
 def _groups(count: int, size: int) -> int:
@@ -109,28 +85,25 @@ class DeferredRenderer:
     """The deferred path of a :class:`~viewer.scene.SceneRenderer` (see the module docstring).
 
     Args:
-        scene: the owner; its :class:`~viewer.renderer.NetworkRenderer` gives the defines, model uniforms,
-            weights and skip bound, its uniform setter the camera and light.
+        network: the owner's :class:`~viewer.renderer.NetworkRenderer`: the defines, model uniforms, weights
+            and skip bound (:mod:`viewer.surface` sets the camera and light).
         weights: one of :data:`DEFERRED_WEIGHTS`.
 
     Attributes:
         weights: the weights source chosen (never ``auto``).
     """
 
-    def __init__(self, scene: SceneRenderer, weights: str = "auto") -> None:
+    def __init__(self, network: NetworkRenderer, weights: str = "auto") -> None:
         if weights not in DEFERRED_WEIGHTS:
             raise GratNetError(f"deferred weights must be one of {', '.join(DEFERRED_WEIGHTS)}, got {weights!r}")
-        network = scene.network
         if weights == "auto":
-            renderer = str(scene.ctx.info.get("GL_RENDERER", "")).lower()
-            software = any(name in renderer for name in _SOFTWARE_RASTERIZERS)
+            software = is_software_rasterizer(network.ctx)
             weights = "baked" if network.weights_path == "baked" else "texture" if software else "ssbo"
         if weights == "baked" and network.weights_path != "baked":
             raise GratNetError("deferred weights 'baked' need a SceneRenderer with weights_path='baked'")
         if weights.endswith("-fp16") and not np.all(np.abs(network.packed_weights) <= FP16_MAX):
             raise GratNetError(f"deferred weights {weights!r}: the net has weights beyond fp16's range (±{FP16_MAX:g})")
-        self.scene = scene
-        self.ctx = scene.ctx
+        self.ctx = network.ctx
         self.network = network
         self.weights = weights
         self._programs: dict[str, moderngl.Program | moderngl.ComputeShader] = {}
@@ -148,8 +121,8 @@ class DeferredRenderer:
 
     def _gbuffer_program(self) -> moderngl.Program:
         if "gbuffer" not in self._programs:
-            self._programs["gbuffer"] = compile_program(self.ctx, "surface", {**self.network.defines, "GBUFFER": 1},
-                                                        self.network.shader_root)
+            defines = {**self.network.defines, "GBUFFER": 1}
+            self._programs["gbuffer"] = compile_program(self.ctx, SURFACE_PROGRAM, defines, self.network.shader_root)
         return self._programs["gbuffer"]  # type: ignore[return-value]
 
     def _compute(self, kernel: str, counting: bool = False) -> moderngl.ComputeShader:
@@ -158,7 +131,7 @@ class DeferredRenderer:
             defines = {**self._defines(), kernel: 1}
             overrides = None
             if kernel == "SHADE":
-                overrides = self.network._overrides if self.weights == "baked" else None
+                overrides = self.network.overrides if self.weights == "baked" else None
                 if self.weights not in ("texture", "baked"):
                     defines["WEIGHTS_BINDING"] = _WEIGHTS_BINDING
                     texels = int(np.prod(self.network.packed_weights.shape[:2]))
@@ -184,7 +157,7 @@ class DeferredRenderer:
                                        f"the GPU's compute shared memory (32 KiB on llvmpipe): {error}") from error
                 raise
             if kernel == "SHADE":
-                self.network._model_uniforms(program, "ssbo" if self.weights.endswith("-fp16") else self.weights)
+                self.network.model_uniforms(program, "ssbo" if self.weights.endswith("-fp16") else self.weights)
             self._programs[key] = program
         return self._programs[key]  # type: ignore[return-value]
 
@@ -253,18 +226,18 @@ class DeferredRenderer:
         offsets = np.zeros((1, 2)) if offsets_px is None else check_offsets(offsets_px)
         threshold = skip_threshold_value(skip_threshold)
         max_rows = int(self.ctx.info.get("GL_MAX_TEXTURE_SIZE", 16384))
-        per_chunk = max(1, min(len(offsets), max_rows // height, _CHUNK_TEXELS // (width * height)))
+        per_chunk = max(1, min(len(offsets), max_rows // height, CHUNK_TEXELS // (width * height)))
         gbuffer_program = self._gbuffer_program()
-        self.scene._set_uniforms(camera, light, width, height, float(exposure), ior, gbuffer_program)
+        set_surface_uniforms(gbuffer_program, camera, light, width, height, float(exposure), ior)
         compact = self._compute("COMPACT", counting=statistics is not None)
-        bound, unit = self.network._skip_uniforms(compact, threshold)
+        bound, unit = self.network.skip_uniforms(compact, threshold)
         args, shade, resolve = self._compute("ARGS"), self._compute("SHADE"), self._compute("RESOLVE")
         view_projection = np.ascontiguousarray(camera.view_projection(width / height), dtype=np.float32)
         vertex_array = None
-        if uploaded.vertex_array is not None:
-            vertex_array = self.scene._vertex_array(gbuffer_program, uploaded.buffers, uploaded.index_buffer)
+        if not uploaded.empty:
+            vertex_array = uploaded.vertex_array_for(gbuffer_program)
         if statistics is not None:
-            self.network._reset_counters()
+            self.network.reset_counters()
         chunks = [offsets[k:k + per_chunk] for k in range(0, len(offsets), per_chunk)]
         texture, framebuffer = self._gbuffer(width, height * len(chunks[0]))
         list_buffer = self._list_buffer(width * height * len(chunks[0]))
@@ -289,16 +262,16 @@ class DeferredRenderer:
                     shade.run_indirect(list_buffer, 0)
                     self.ctx.memory_barrier()
                     if output is not None:
-                        _set(resolve, "u_samples", len(chunk))
-                        _set(resolve, "u_height", height)
-                        _set(resolve, "u_scale", 1.0 / len(offsets))
-                        _set(resolve, "u_accumulate", number > 0)
+                        set_uniform(resolve, "u_samples", len(chunk))
+                        set_uniform(resolve, "u_height", height)
+                        set_uniform(resolve, "u_scale", 1.0 / len(offsets))
+                        set_uniform(resolve, "u_accumulate", number > 0)
                         texture.bind_to_image(0, read=True, write=False)
                         output.bind_to_image(1, read=True, write=True)
                         resolve.run(_groups(width, _TILE), _groups(height, _TILE))
                         self.ctx.memory_barrier()
                 if statistics is not None:
-                    self.network._read_counters(statistics)
+                    self.network.read_counters(statistics)
                 result = (output if output is not None else texture).read(alignment=1)
         finally:
             scope.release()
@@ -319,10 +292,8 @@ class DeferredRenderer:
             for k, offset in enumerate(chunk):
                 matrix = view_projection
                 if offset[0] != 0.0 or offset[1] != 0.0:  # (0, 0): the forward path's matrix, bit for bit
-                    from viewer.antialias import jitter_matrix  # here: it imports scipy.stats (~1 s)
-
                     matrix = np.ascontiguousarray(view_projection @ jitter_matrix(offset, width, height))
-                _set(program, "u_view_projection", matrix.astype(np.float32))
+                set_uniform(program, "u_view_projection", matrix.astype(np.float32))
                 box = (0, k * height, width, height)
                 self.ctx.viewport = box
                 self.ctx.scissor = box  # the viewport does not clip every implementation's guard band
@@ -348,112 +319,3 @@ class DeferredRenderer:
             depth.release()
             texture.release()
             self._targets = None
-
-
-# -------------------------------------------------------------------------------------------------
-# Choosing the path by measurement
-
-
-def render_path_cache_file() -> Path:
-    """The JSON file of measured ``auto`` verdicts: ``$XDG_CACHE_HOME/gratnet/render_path.json`` (else
-    ``~/.cache/gratnet/render_path.json``)."""
-    base = os.environ.get("XDG_CACHE_HOME")
-    return (Path(base) if base else Path.home() / ".cache") / "gratnet" / "render_path.json"
-
-
-def _cache_key(scene: SceneRenderer) -> str:
-    """GL_RENDERER, the network's shape and where both paths read the weights: what the verdict depends on."""
-    network = scene.network
-    model = network.model
-    return (f"v{_CACHE_VERSION}|{scene.ctx.info.get('GL_RENDERER', '?')}|{'-'.join(map(str, model.layer_sizes))}|"
-            f"{model.activation}|{model.encoding.frequencies},{model.encoding.t_frequencies}|{network.weights_path}|"
-            f"{scene.deferred.weights}|{_grid_signature(model)}")
-
-
-def _grid_signature(model: ModelFile) -> str:
-    """A feature-grid model's levels (their fetches cost both paths alike, but not alike to a pure MLP); each
-    level's shape names its C, hence its ceil(C/4) textures."""
-    if not model.grids:
-        return "mlp"
-    return "grid:" + ",".join("x".join(map(str, np.shape(grid))) for grid in model.grids)
-
-
-def _read_cache(path: Path) -> dict[str, dict[str, object]]:
-    try:
-        entries = json.loads(path.read_text(encoding="utf-8"))
-    except (OSError, ValueError):
-        return {}
-    return entries if isinstance(entries, dict) else {}
-
-
-def _write_cache(path: Path, key: str, entry: dict[str, object]) -> None:
-    """Add ``entry`` under ``key``, atomically; a cache that cannot be written only costs a later probe."""
-    from gratnet.atomic import write_text_atomic
-
-    entries = _read_cache(path)
-    entries[key] = entry
-    try:
-        path.parent.mkdir(parents=True, exist_ok=True)
-        write_text_atomic(path, json.dumps(entries, indent=1, sort_keys=True) + "\n")
-    except (OSError, GratNetError) as error:
-        _LOG.info("cannot write the render-path cache %s: %s", path, error)
-
-
-def _probe_ms(render: Callable[[], None], rival_ms: float = math.inf) -> float:
-    """Best wall time (ms) of up to :data:`_PROBE_RENDERS` renders after one untimed render that compiles the
-    programs; stops early once a render is clearly slower than ``rival_ms`` (the verdict is clear)."""
-    render()
-    best = math.inf
-    for _ in range(_PROBE_RENDERS):
-        start = time.perf_counter()
-        render()
-        best = min(best, 1e3 * (time.perf_counter() - start))
-        if best > _PROBE_CLEAR_RATIO * rival_ms:
-            break
-    return best
-
-
-def choose_render_path(scene: SceneRenderer, render_path: str = "auto", measure: bool = True) -> tuple[str, str]:
-    """``(path, reason)``: ``render_path`` itself unless ``auto``, which takes the cached verdict for this
-    ``GL_RENDERER`` and network shape, or measures both paths on the probe scene (the CD disc at
-    :data:`PROBE_SIZE`, default light and camera) and caches the faster (:func:`render_path_cache_file`).
-    ``measure=False``: no probe; ``forward`` while nothing is cached (the viewer: its compile process measures)."""
-    check_render_path(render_path)
-    if render_path != "auto":
-        return render_path, "requested"
-    cache = render_path_cache_file()
-    key = _cache_key(scene)
-    entry = _read_cache(cache).get(key)
-    if isinstance(entry, dict) and entry.get("path") in ("forward", "deferred") and isinstance(entry.get("reason"),
-                                                                                               str):
-        return str(entry["path"]), f"{entry['reason']} (cached)"
-    if not measure:
-        return "forward", "auto: not measured yet on this GPU for this network shape (forward until it is)"
-
-    from viewer.camera import Camera, Light
-    from viewer.defaults import FALLBACK
-    from viewer.meshes import compact_disc
-
-    _LOG.info("render path auto: timing the forward and deferred paths on a %d×%d probe (once per GPU and network "
-              "shape; cached in %s)", *PROBE_SIZE, cache)
-    camera = Camera(FALLBACK.camera_distance, FALLBACK.camera_azimuth_degrees, FALLBACK.camera_elevation_degrees)
-    light = Light.directional(FALLBACK.light_theta_degrees, FALLBACK.light_phi_degrees)
-    uploaded = scene.upload(compact_disc())
-    times: dict[str, float] = {}
-    try:
-        for path in ("deferred", "forward"):
-            def render(path: str = path) -> None:
-                scene._render_path_probe(uploaded, camera, light, PROBE_SIZE, path)
-                scene.ctx.finish()
-
-            times[path] = _probe_ms(render, min(times.values(), default=math.inf))
-    finally:
-        uploaded.release()
-    path = min(times, key=lambda name: times[name])
-    other = "forward" if path == "deferred" else "deferred"
-    renderer = scene.ctx.info.get("GL_RENDERER", "?")
-    reason = (f"{path}: {times[path]:.1f} ms vs {other} {times[other]:.1f} ms at {PROBE_SIZE[0]}×{PROBE_SIZE[1]} "
-              f"(CD disc probe) on {renderer}")
-    _write_cache(cache, key, {"path": path, "reason": reason, "forward_ms": round(times["forward"], 3),
-                              "deferred_ms": round(times["deferred"], 3)})
-    return path, reason

@@ -37,7 +37,11 @@ __all__ = [
     "NetworkRenderer",
     "check_grid_texture_units",
     "choose_weights_path",
+    "ior_uniform",
+    "is_software_rasterizer",
     "model_defines",
+    "set_uniform",
+    "skip_threshold_value",
     "xyz_to_linear_srgb_matrix",
 ]
 
@@ -49,7 +53,7 @@ WEIGHTS_PATHS = ("auto", "texture", "baked")
 #: compile + first draw: 2.8 s at 3.9k MACs, 23–29 s at 28.4k (the shipped 163-108-66-40-24-3), 131 s at
 #: 59k (funnel-176); the 28.4k net then ran 4–7x faster than on the texture path (docs/benchmarks.md).
 BAKED_MAX_MACS = 32_000
-_SOFTWARE_RASTERIZERS = ("llvmpipe", "softpipe", "swrast")  # substrings of GL_RENDERER
+SOFTWARE_RASTERIZERS = ("llvmpipe", "softpipe", "swrast")  # substrings of GL_RENDERER
 _LOG = logging.getLogger("gratnet.renderer")  # the gratnet command shows its INFO lines (gratnet/cli.py)
 
 # Codes of the GLSL `const int`s (shaders/encoding.glsl, mlp.glsl, range.glsl, evaluate_keys.glsl).
@@ -142,7 +146,7 @@ def xyz_to_linear_srgb_matrix() -> np.ndarray:
     return np.asarray(colour.RGB_COLOURSPACES["sRGB"].matrix_XYZ_to_RGB, dtype=np.float64)
 
 
-def _ior_uniform(ior: float | None) -> float:
+def ior_uniform(ior: float | None) -> float:
     """The shader's IOR uniform: 0 turns Fresnel off (``None`` or 0, as in physics.md eq. 5)."""
     from gratnet.brdf import check_ior
 
@@ -160,7 +164,7 @@ def skip_threshold_value(threshold: float | None) -> float:
     return value
 
 
-def _set(program: moderngl.Program | moderngl.ComputeShader, name: str, value: object) -> None:
+def set_uniform(program: moderngl.Program | moderngl.ComputeShader, name: str, value: object) -> None:
     """Set a uniform that the program must have (a missing one means shader and renderer disagree)."""
     if name not in program:
         raise GratNetError(f"GLSL program lacks uniform {name!r}; the shaders and viewer/renderer.py disagree")
@@ -174,7 +178,7 @@ def _set(program: moderngl.Program | moderngl.ComputeShader, name: str, value: o
 def is_software_rasterizer(ctx: moderngl.Context) -> bool:
     """Whether ``ctx`` renders on the CPU (Mesa llvmpipe, softpipe, swrast), from its GL_RENDERER string."""
     renderer = str(ctx.info.get("GL_RENDERER", "")).lower()
-    return any(name in renderer for name in _SOFTWARE_RASTERIZERS)
+    return any(name in renderer for name in SOFTWARE_RASTERIZERS)
 
 
 def choose_weights_path(ctx: moderngl.Context, model: ModelFile, weights_path: str = "auto") -> str:
@@ -241,12 +245,12 @@ class NetworkRenderer:
         self.defines = model_defines(model)
         self.shader_root = shader_root
         self.weights_path = choose_weights_path(ctx, model, weights_path)
-        self._overrides: dict[str, GeneratedSource] = {}
+        self.overrides: dict[str, GeneratedSource] = {}
         self.baked_source: str | None = None
         if self.weights_path == "baked":
             label = f"{'-'.join(map(str, model.layer_sizes))} {model.activation}"
             self.baked_source = baked_source if baked_source is not None else baked_mlp_source(model, label)
-            self._overrides["mlp.glsl"] = GeneratedSource(f"<baked mlp.glsl: {label}>", self.baked_source)
+            self.overrides["mlp.glsl"] = GeneratedSource(f"<baked mlp.glsl: {label}>", self.baked_source)
             texture = np.zeros((1, 1, 4), dtype=np.float32)  # a placeholder: the baked programs read no texture
         height, width = texture.shape[:2]
         self._weights = ctx.texture((width, height), 4, np.ascontiguousarray(texture).tobytes(), dtype="f4")
@@ -281,7 +285,7 @@ class NetworkRenderer:
     # ---------------------------------------------------------------------------------------------
     # Programs
 
-    def _model_uniforms(self, program: moderngl.Program | moderngl.ComputeShader, weights: str | None = None) -> None:
+    def model_uniforms(self, program: moderngl.Program | moderngl.ComputeShader, weights: str | None = None) -> None:
         """Everything the encoding, MLP and range-transform includes read, from the model. ``weights``: where
         the program's mlp.glsl reads them (``texture``, ``baked``, or the deferred path's ``ssbo``/``shared``;
         default: :attr:`weights_path`)."""
@@ -292,28 +296,28 @@ class NetworkRenderer:
         model = self.model
         if weights != "baked":  # the baked mlp.glsl has the layout and activations in its code
             if weights == "texture":
-                _set(program, "u_weights", 0)
+                set_uniform(program, "u_weights", 0)
             else:
-                _set(program, "u_weights_width", int(self.packed_weights.shape[1]))
-            _set(program, "u_layer_count", len(self.layout))
-            _set(program, "u_layers", layers)
-            _set(program, "u_hidden_activation", _HIDDEN[model.activation])
-            _set(program, "u_output_activation", _OUTPUT[model.output_activation])
+                set_uniform(program, "u_weights_width", int(self.packed_weights.shape[1]))
+            set_uniform(program, "u_layer_count", len(self.layout))
+            set_uniform(program, "u_layers", layers)
+            set_uniform(program, "u_hidden_activation", _HIDDEN[model.activation])
+            set_uniform(program, "u_output_activation", _OUTPUT[model.output_activation])
         if self._grids:
-            _set(program, "u_grid", np.arange(_GRID_UNIT, _GRID_UNIT + len(self._grids), dtype=np.int32))
-            _set(program, "u_grid_hardware_filter", int(self.grid_filter == "hardware"))
-            _set(program, "u_grid_smoothstep", int(model.grid_interpolation == "smoothstep"))
-        _set(program, "u_scheme", _SCHEMES[model.scheme])
+            set_uniform(program, "u_grid", np.arange(_GRID_UNIT, _GRID_UNIT + len(self._grids), dtype=np.int32))
+            set_uniform(program, "u_grid_hardware_filter", int(self.grid_filter == "hardware"))
+            set_uniform(program, "u_grid_smoothstep", int(model.grid_interpolation == "smoothstep"))
+        set_uniform(program, "u_scheme", _SCHEMES[model.scheme])
         # encoded_feature (encoding.glsl) reads the counts; the baked MLP has them in its code, so baked
         # programs that do not call encoded_feature (all but encode_keys) lack these uniforms.
         if weights != "baked" or "u_frequencies" in program:
-            _set(program, "u_frequencies", model.encoding.frequencies)
-            _set(program, "u_t_frequencies", model.encoding.t_frequencies)
-        _set(program, "u_frequency", _frequency_table(model, int(self.defines["MAX_FREQUENCIES"])))
-        _set(program, "u_range_kind", _RANGES[model.range.kind])
-        _set(program, "u_range_bits", float(model.range.bits))
-        _set(program, "u_range_power", float(model.range.power))
-        _set(program, "u_range_white", tuple(float(c) for c in model.range.white))
+            set_uniform(program, "u_frequencies", model.encoding.frequencies)
+            set_uniform(program, "u_t_frequencies", model.encoding.t_frequencies)
+        set_uniform(program, "u_frequency", _frequency_table(model, int(self.defines["MAX_FREQUENCIES"])))
+        set_uniform(program, "u_range_kind", _RANGES[model.range.kind])
+        set_uniform(program, "u_range_bits", float(model.range.bits))
+        set_uniform(program, "u_range_power", float(model.range.power))
+        set_uniform(program, "u_range_white", tuple(float(c) for c in model.range.white))
 
     def program(self, name: str) -> moderngl.Program:
         """Program ``name`` (``brdf_slice``, ``evaluate_keys``, ``display``, or another program of the network
@@ -322,18 +326,18 @@ class NetworkRenderer:
             if name == "display":
                 program = compile_program(self.ctx, name, {}, self.shader_root)
                 matrix = xyz_to_linear_srgb_matrix()
-                _set(program, "u_xyz_to_linear_srgb", np.ascontiguousarray(matrix.T, dtype=np.float32))
-                _set(program, "u_xyz", 1)
+                set_uniform(program, "u_xyz_to_linear_srgb", np.ascontiguousarray(matrix.T, dtype=np.float32))
+                set_uniform(program, "u_xyz", 1)
             else:
                 if self.weights_path == "baked":
                     _LOG.info("program %r with baked weights (%d MACs per pixel): the first draw JIT-compiles "
                               "it, which can take ~25 s at 28k MACs on llvmpipe; Mesa's shader cache keeps it",
                               name, self.model.macs_per_evaluation)
-                program = compile_program(self.ctx, name, self.defines, self.shader_root, self._overrides)
-                self._model_uniforms(program)
+                program = compile_program(self.ctx, name, self.defines, self.shader_root, self.overrides)
+                self.model_uniforms(program)
                 if name == "evaluate_keys":
-                    _set(program, "u_inputs", 1)
-                    _set(program, "u_inputs2", 2)
+                    set_uniform(program, "u_inputs", 1)
+                    set_uniform(program, "u_inputs2", 2)
             self._programs[name] = program
             self._vertex_arrays[name] = self.ctx.vertex_array(program, [])  # full-screen triangle: no buffers
         return self._programs[name]
@@ -405,7 +409,7 @@ class NetworkRenderer:
             self._skip_texture.filter = (moderngl.NEAREST, moderngl.NEAREST)
         return self._skip_texture
 
-    def _skip_uniforms(self, program: moderngl.Program | moderngl.ComputeShader, skip_threshold: float | None
+    def skip_uniforms(self, program: moderngl.Program | moderngl.ComputeShader, skip_threshold: float | None
                        ) -> tuple[moderngl.Texture, int]:
         """Set skip.glsl's uniforms on ``program``; returns ``(texture, unit)`` of the bound to bind."""
         threshold = skip_threshold_value(skip_threshold)
@@ -413,11 +417,11 @@ class NetworkRenderer:
             _LOG.info("skipping work is not built for feature-grid models: evaluating every pixel")
             threshold = 0.0
         texture = self._skip_bound_texture(threshold)
-        _set(program, "u_skip_threshold", threshold)
-        _set(program, "u_skip_bound", _SKIP_BOUND_UNIT)
+        set_uniform(program, "u_skip_threshold", threshold)
+        set_uniform(program, "u_skip_bound", _SKIP_BOUND_UNIT)
         # Read only when skipping (skip.glsl returns first otherwise): no colour-science import (~1 s) then.
         matrix = display_skip_matrix() if threshold > 0.0 else np.zeros((3, 3))
-        _set(program, "u_skip_matrix", np.ascontiguousarray(matrix.T, dtype=np.float32))  # GLSL: column-major
+        set_uniform(program, "u_skip_matrix", np.ascontiguousarray(matrix.T, dtype=np.float32))  # GLSL: column-major
         return texture, _SKIP_BOUND_UNIT
 
     def counting_program(self, name: str) -> tuple[str, moderngl.Program]:
@@ -428,8 +432,8 @@ class NetworkRenderer:
         if key not in self._programs:
             self.program(name)  # compile errors surface from the plain program first
             defines = {**self.defines, "COUNT_EVALUATIONS": 1, "SKIP_COUNTER_BINDING": _SKIP_COUNTER_BINDING}
-            program = compile_program(self.ctx, name, defines, self.shader_root, self._overrides)
-            self._model_uniforms(program)
+            program = compile_program(self.ctx, name, defines, self.shader_root, self.overrides)
+            self.model_uniforms(program)
             self._programs[key] = program
             self._vertex_arrays[key] = self.ctx.vertex_array(program, [])
         return key, self._programs[key]
@@ -440,16 +444,16 @@ class NetworkRenderer:
         key = name + _DEPTH_ONLY_SUFFIX
         if key not in self._programs:
             self._programs[key] = compile_program(self.ctx, name, {**self.defines, "DEPTH_ONLY": 1},
-                                                  self.shader_root, self._overrides)
+                                                  self.shader_root, self.overrides)
         return self._programs[key]
 
-    def _reset_counters(self) -> None:
+    def reset_counters(self) -> None:
         if self._skip_counters is None:
             self._skip_counters = self.ctx.buffer(reserve=4 * _SKIP_COUNTER_SLOTS)
         self._skip_counters.write(np.zeros(_SKIP_COUNTER_SLOTS, dtype=np.uint32).tobytes())
         self._skip_counters.bind_to_storage_buffer(_SKIP_COUNTER_BINDING)
 
-    def _read_counters(self, statistics: dict[str, int]) -> None:
+    def read_counters(self, statistics: dict[str, int]) -> None:
         assert self._skip_counters is not None
         self.ctx.finish()
         counts = np.frombuffer(self._skip_counters.read(), dtype=np.uint32)
@@ -494,19 +498,19 @@ class NetworkRenderer:
         program = self.program(name)
         if statistics is not None:
             name, program = self.counting_program(name)
-            self._reset_counters()
-        bound, unit = self._skip_uniforms(program, skip_threshold)
-        _set(program, "u_size", int(size))
-        _set(program, "u_light", tuple(float(c) for c in direction(theta_deg, phi_deg)))
-        _set(program, "u_exposure", float(exposure))
-        _set(program, "u_ior", _ior_uniform(ior))
+            self.reset_counters()
+        bound, unit = self.skip_uniforms(program, skip_threshold)
+        set_uniform(program, "u_size", int(size))
+        set_uniform(program, "u_light", tuple(float(c) for c in direction(theta_deg, phi_deg)))
+        set_uniform(program, "u_exposure", float(exposure))
+        set_uniform(program, "u_ior", ior_uniform(ior))
         targets = [self.ctx.texture((size, size), 4, dtype="f4") for _ in range(2)]
         framebuffer = self.ctx.framebuffer(color_attachments=targets)
         try:
             scissor = None if rows is None else (0, size - rows[1], size, rows[1] - rows[0])  # GL rows: bottom up
             self._draw(name, framebuffer, ((bound, unit),), scissor)
             if statistics is not None:
-                self._read_counters(statistics)
+                self.read_counters(statistics)
             images = [
                 np.frombuffer(framebuffer.read(components=4, dtype="f4", attachment=k), dtype=np.float32)
                 .reshape(size, size, 4)[::-1, :, :3]  # GL rows start at the bottom; ours at the top
@@ -552,9 +556,9 @@ class NetworkRenderer:
                   ior: float = 0.0) -> np.ndarray:
         """Run evaluate_keys in ``mode`` on ``(N, 3)`` inputs; returns ``(N, 4)`` float32."""
         program = self.program("evaluate_keys")
-        _set(program, "u_mode", mode)
-        _set(program, "u_block", block)
-        _set(program, "u_ior", ior)
+        set_uniform(program, "u_mode", mode)
+        set_uniform(program, "u_block", block)
+        set_uniform(program, "u_ior", ior)
         count = first.shape[0]
         result = np.empty((count, 4), dtype=np.float32)
         for start in range(0, count, _PASS_PIXELS):
@@ -636,7 +640,7 @@ class NetworkRenderer:
         first = light.reshape(-1, 3).astype(np.float32)
         if first.shape[0] == 0:
             return np.zeros(shape, dtype=np.float32)
-        values = self._evaluate(_MODE_A_TERM, first, view.reshape(-1, 3).astype(np.float32), ior=_ior_uniform(ior))
+        values = self._evaluate(_MODE_A_TERM, first, view.reshape(-1, 3).astype(np.float32), ior=ior_uniform(ior))
         return values[:, 0].reshape(shape)
 
     # ---------------------------------------------------------------------------------------------
@@ -652,7 +656,7 @@ class NetworkRenderer:
             raise GratNetError(f"XYZ image must have shape (H, W, 3), got {image.shape}")
         height, width = image.shape[:2]
         program = self.program("display")
-        _set(program, "u_exposure", float(exposure))
+        set_uniform(program, "u_exposure", float(exposure))
         padded = np.zeros((height, width, 4), dtype=np.float32)
         padded[..., :3] = image[::-1]  # our row 0 is the top; GL's is the bottom
         source = self.ctx.texture((width, height), 4, padded.tobytes(), dtype="f4")

@@ -8,12 +8,16 @@ The output is **exposed CIE XYZ**, linear, ``float32`` ``(H, W, 3)`` with row 0 
 mesh does not cover are 0 (``render_rgba``'s alpha is the coverage, 1 or 0). The depth test is on, face
 culling off (back faces are covered but black).
 
-Two render paths (issue 12, ``render_path``): this module's forward path, and the deferred one of
-:mod:`viewer.deferred` (a G-buffer pass, then the network in a compute shader over the pixels that need
-it), which also takes sub-pixel sample offsets; ``_render`` dispatches between them in one place.
+Two render paths (issue 12, ``render_path``) with the same output: :mod:`viewer.forward` (the network in
+the fragment shader) and :mod:`viewer.deferred` (a G-buffer pass, then the network in a compute shader over
+the pixels that need it). Both take sub-pixel sample offsets and share the mesh buffers and surface
+uniforms of :mod:`viewer.surface`; :meth:`SceneRenderer.render_rgba` dispatches between them in one place,
+and :func:`choose_render_path` (``auto``) times both once per GPU and network shape on a probe scene (the
+CD disc at :data:`PROBE_SIZE`) and caches the verdict in ``$XDG_CACHE_HOME/gratnet/render_path.json``
+(else ``~/.cache/…``), keyed by ``GL_RENDERER`` and the network shape.
 
-Work skipped (issue 5): a depth pre-pass (on by default) draws the mesh's depth first, so that the shading
-pass runs the network once per visible pixel (no overdraw); back faces and A = 0 never run it; with a
+Work skipped (issue 5): the forward path's depth pre-pass (on by default) draws the mesh's depth first, so
+that the shading pass runs the network once per visible pixel (no overdraw); back faces and A = 0 never run it; with a
 ``skip_threshold`` (:data:`~gratnet.bounds.DISPLAY_SKIP_THRESHOLD` for 8-bit display output, as
 ``gratnet render --skip-dark`` passes) pixels whose output bound (``gratnet.bounds``) cannot reach the
 display's smallest step are 0 without running it. Nothing skips by default: exact linear values for EXR
@@ -34,8 +38,12 @@ Rendering only: no glfw, no imgui, no torch.
 
 from __future__ import annotations
 
-import dataclasses
+import json
+import logging
 import math
+import os
+import time
+from collections.abc import Callable
 from pathlib import Path
 
 import moderngl
@@ -44,65 +52,34 @@ import numpy as np
 from gratnet.display import xyz_to_display_srgb8, xyz_to_linear_srgb
 from gratnet.errors import GratNetError
 from gratnet.modelfile import ModelFile
-from viewer.antialias import check_offsets, jitter_matrix, sample_range_offsets
+from viewer.antialias import check_offsets, sample_range_offsets
 from viewer.camera import Camera, Light
-from viewer.glsl import compile_program
+from viewer.deferred import DeferredRenderer
+from viewer.forward import ForwardRenderer
 from viewer.meshes import Mesh
-from viewer.renderer import NetworkRenderer, _ior_uniform, _set, skip_threshold_value
+from viewer.renderer import NetworkRenderer, skip_threshold_value
+from viewer.surface import MeshBuffers, check_size, upload_mesh
 
-__all__ = ["MAX_IMAGE_SIZE", "MeshBuffers", "SceneRenderer", "check_size"]
+__all__ = ["PROBE_SIZE", "RENDER_PATHS", "SceneRenderer", "check_render_path", "choose_render_path",
+           "render_path_cache_file"]
 
-#: Largest image side (pixels); GL implementations guarantee at least this much for render targets.
-MAX_IMAGE_SIZE = 16384
-_PROGRAM = "surface"
-_ACCUMULATE = "accumulate"  # shaders/accumulate.glsl: adds a sample image into a float32 sum
-_SAMPLE_UNIT = 1  # texture unit of accumulate.glsl's u_sample (the weights use 0, the skip bound 3)
-_LIGHT_KINDS = {"directional": 0, "point": 1}  # LIGHT_* of shaders/surface.glsl
-_ATTRIBUTES = (("in_position", "positions"), ("in_normal", "normals"), ("in_tangent", "tangents"))
+_LOG = logging.getLogger("gratnet.scene")  # the gratnet command shows its INFO lines (gratnet/cli.py)
 
-
-def check_size(size: object) -> tuple[int, int]:
-    """``(width, height)`` from a pair of positive integers ≤ :data:`MAX_IMAGE_SIZE`, else GratNetError."""
-    try:
-        width, height = size  # type: ignore[misc]
-    except (TypeError, ValueError):
-        raise GratNetError(f"image size must be (width, height), got {size!r}") from None
-    for value in (width, height):
-        if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or not 1 <= value <= MAX_IMAGE_SIZE:
-            raise GratNetError(f"image width and height must be integers in 1 … {MAX_IMAGE_SIZE}, got {size!r}")
-    return int(width), int(height)
+#: ``render_path`` values of :class:`SceneRenderer` and ``--render-path``.
+RENDER_PATHS = ("auto", "forward", "deferred")
+#: The ``auto`` probe: the CD disc at this size (pixels), each path timed as the best of two renders (one
+#: when it is already 1.5× slower than the other's best), after one untimed render that compiles it.
+PROBE_SIZE = (128, 128)
+_PROBE_RENDERS = 2
+_PROBE_CLEAR_RATIO = 1.5
+_CACHE_VERSION = 2  # 2: the key names a feature-grid model's levels
 
 
-def _color_masks(enabled: bool, attachments: int) -> object:
-    """moderngl 5's ``Framebuffer.color_mask`` value: one RGBA tuple, or a list of them for several attachments."""
-    mask = (enabled,) * 4
-    return mask if attachments == 1 else [mask] * attachments
-
-
-@dataclasses.dataclass(eq=False)
-class MeshBuffers:
-    """A mesh uploaded to the GPU: one vertex buffer per attribute and the index buffer.
-
-    Keep one for a mesh that is drawn many times (an interactive view); :meth:`release` frees it.
-    """
-
-    mesh: Mesh
-    buffers: dict[str, moderngl.Buffer]
-    index_buffer: moderngl.Buffer | None
-    vertex_array: moderngl.VertexArray | None
-    #: The same buffers bound to the depth pre-pass's program (made on the first pre-pass).
-    depth_vertex_array: moderngl.VertexArray | None = None
-
-    def release(self) -> None:
-        for vertex_array in (self.vertex_array, self.depth_vertex_array):
-            if vertex_array is not None:
-                vertex_array.release()
-        for buffer in self.buffers.values():
-            buffer.release()
-        if self.index_buffer is not None:
-            self.index_buffer.release()
-        self.buffers.clear()
-        self.vertex_array = self.depth_vertex_array = self.index_buffer = None
+def check_render_path(render_path: object) -> str:
+    """``render_path`` if it is one of :data:`RENDER_PATHS`, else :class:`GratNetError` (one line)."""
+    if not isinstance(render_path, str) or render_path not in RENDER_PATHS:
+        raise GratNetError(f"render path must be one of {', '.join(RENDER_PATHS)}, got {render_path!r}")
+    return render_path
 
 
 class SceneRenderer:
@@ -115,29 +92,30 @@ class SceneRenderer:
         weights_path: ``auto``, ``texture`` or ``baked``: where the shader reads the weights
             (:class:`~viewer.renderer.NetworkRenderer`; the choice is ``self.network.weights_path``).
         baked_source: as :class:`~viewer.renderer.NetworkRenderer` (a baked ``mlp.glsl`` made earlier).
-        render_path: ``forward`` (the network in the fragment shader), ``deferred`` (a G-buffer pass, then the
-            network in a compute shader over the pixels that need it: :mod:`viewer.deferred`) or ``auto``
-            (:func:`viewer.deferred.choose_render_path`: measured once per GPU and network shape, cached).
-            Both give the same images; :meth:`render_layers` (key vectors and A) and BRDF slices always run
-            forward, and ``depth_prepass`` only concerns the forward path.
+        render_path: ``forward`` (:mod:`viewer.forward`), ``deferred`` (:mod:`viewer.deferred`) or ``auto``
+            (:func:`choose_render_path`: measured once per GPU and network shape, cached). Both give the same
+            images; :meth:`render_layers` (key vectors and A) and BRDF slices always run forward, and
+            ``depth_prepass`` only concerns the forward path.
         deferred_weights: where the deferred path's compute shader reads the weights
             (:data:`viewer.deferred.DEFERRED_WEIGHTS`).
         measure_render_path: ``auto`` may time both paths when nothing is cached (False: ``forward`` then;
             the viewer, whose compile process measures off the window's thread).
+
+    Attributes:
+        network: the :class:`~viewer.renderer.NetworkRenderer` (weights, programs, BRDF slices).
+        forward, deferred: the two paths (:class:`~viewer.forward.ForwardRenderer`,
+            :class:`~viewer.deferred.DeferredRenderer`); each compiles nothing until used.
     """
 
     def __init__(self, ctx: moderngl.Context, model: ModelFile, shader_root: str | Path | None = None,
                  weights_path: str = "auto", baked_source: str | None = None, render_path: str = "auto",
                  deferred_weights: str = "auto", measure_render_path: bool = True) -> None:
-        from viewer.deferred import DeferredRenderer, check_render_path
-
         self._requested_path = check_render_path(render_path)
         self.ctx = ctx
         self.network = NetworkRenderer(ctx, model, shader_root, weights_path, baked_source)
         self.model = model
-        self._accumulate_program: moderngl.Program | None = None
-        self._accumulate_array: moderngl.VertexArray | None = None
-        self.deferred = DeferredRenderer(self, deferred_weights)  # compiles nothing until used
+        self.forward = ForwardRenderer(self.network)
+        self.deferred = DeferredRenderer(self.network, deferred_weights)
         self._render_path: tuple[str, str] | None = None
         self._measure_render_path = measure_render_path
 
@@ -153,67 +131,26 @@ class SceneRenderer:
 
     def _resolved_path(self) -> tuple[str, str]:
         if self._render_path is None:
-            from viewer.deferred import choose_render_path
-
             self._render_path = choose_render_path(self, self._requested_path, self._measure_render_path)
         return self._render_path
 
-    def _render_path_probe(self, uploaded: MeshBuffers, camera: Camera, light: Light, size: tuple[int, int],
-                           path: str) -> None:
-        """One render on ``path`` (the ``auto`` probe of :func:`viewer.deferred.choose_render_path`)."""
-        saved, self._render_path = self._render_path, (path, "probe")
-        try:
-            self._render(uploaded, camera, light, size, 1.0, 1.5, 1)
-        finally:
-            self._render_path = saved
-
     @property
     def program(self) -> moderngl.Program:
-        """The ``surface`` program, compiled on first use with the network's defines and model uniforms."""
-        return self.network.program(_PROGRAM)
+        """The forward path's ``surface`` program, compiled on first use (the buffers of :meth:`upload` bind to it)."""
+        return self.forward.program
 
     def upload(self, mesh: Mesh) -> MeshBuffers:
-        """Upload ``mesh`` for drawing (the caller releases the result)."""
+        """Upload ``mesh`` for drawing on either path (the caller releases the result)."""
         if not isinstance(mesh, Mesh):
             raise GratNetError(f"expected a viewer.meshes.Mesh, got {type(mesh).__name__}")
-        program = self.program
-        buffers: dict[str, moderngl.Buffer] = {}
-        if mesh.triangle_count == 0:
-            return MeshBuffers(mesh, buffers, None, None)
-        for attribute, field in _ATTRIBUTES:
-            buffers[attribute] = self.ctx.buffer(np.ascontiguousarray(getattr(mesh, field)).tobytes())
-        index_buffer = self.ctx.buffer(np.ascontiguousarray(mesh.indices).tobytes())
-        return MeshBuffers(mesh, buffers, index_buffer, self._vertex_array(program, buffers, index_buffer))
-
-    def _vertex_array(self, program: moderngl.Program, buffers: dict[str, moderngl.Buffer],
-                      index_buffer: moderngl.Buffer | None) -> moderngl.VertexArray:
-        """``buffers`` bound to ``program``'s attributes (one the compiler dropped cannot be bound)."""
-        content = [(buffers[attribute], "3f", attribute) for attribute, _ in _ATTRIBUTES if attribute in program]
-        return self.ctx.vertex_array(program, content, index_buffer=index_buffer, index_element_size=4)
-
-    def _set_uniforms(self, camera: Camera, light: Light, width: int, height: int, exposure: float,
-                      ior: float | None, program: moderngl.Program | None = None) -> None:
-        if not isinstance(camera, Camera):
-            raise GratNetError(f"expected a viewer.camera.Camera, got {type(camera).__name__}")
-        if not isinstance(light, Light):
-            raise GratNetError(f"expected a viewer.camera.Light, got {type(light).__name__}")
-        if not math.isfinite(exposure) or exposure < 0.0:
-            raise GratNetError(f"exposure must be a finite number ≥ 0, got {exposure!r}")
-        program = self.program if program is None else program
-        _set(program, "u_view_projection", np.ascontiguousarray(camera.view_projection(width / height)))
-        _set(program, "u_eye", tuple(float(c) for c in camera.eye()))
-        _set(program, "u_light_kind", _LIGHT_KINDS[light.kind])
-        _set(program, "u_light", tuple(float(c) for c in light.vector))
-        _set(program, "u_light_intensity", float(light.intensity))
-        _set(program, "u_exposure", float(exposure))
-        _set(program, "u_ior", _ior_uniform(ior))
+        return upload_mesh(self.ctx, self.program, mesh)
 
     def render_layers(self, mesh: Mesh | MeshBuffers, camera: Camera, light: Light,
                       size: tuple[int, int] = (256, 256), exposure: float = 1.0,
                       ior: float | None = 1.5, *, skip_threshold: float | None = None, depth_prepass: bool = True,
                       statistics: dict[str, int] | None = None, samples: int = 1,
                       first_sample: int = 0) -> tuple[np.ndarray, np.ndarray]:
-        """:meth:`render_rgba` and, per pixel, the key vector and the A-term behind it.
+        """:meth:`render_rgba` and, per pixel, the key vector and the A-term behind it (forward path).
 
         Returns:
             ``(rgba, key_a)``, both ``float32`` ``(H, W, 4)`` with row 0 at the top: ``rgba`` as
@@ -222,13 +159,14 @@ class SceneRenderer:
             With ``samples`` > 1 both are means over the samples (as :meth:`render_rgba`).
         """
         rgba, key_a = self._render(mesh, camera, light, size, exposure, ior, 2, skip_threshold, depth_prepass,
-                                   statistics, samples, first_sample)
+                                   statistics, self._offsets(samples, first_sample, None), "forward")
         return rgba, key_a
 
     def render_rgba(self, mesh: Mesh | MeshBuffers, camera: Camera, light: Light, size: tuple[int, int] = (256, 256),
                     exposure: float = 1.0, ior: float | None = 1.5, *, skip_threshold: float | None = None,
                     depth_prepass: bool = True, statistics: dict[str, int] | None = None, samples: int = 1,
-                    first_sample: int = 0) -> np.ndarray:
+                    first_sample: int = 0, offsets_px: np.ndarray | None = None,
+                    render_path: str | None = None) -> np.ndarray:
         """Exposed CIE XYZ and coverage, ``float32`` ``(H, W, 4)``, row 0 at the top.
 
         Channels 0–2: ``exposure · irradiance · A(ωi, ωo) · XYZ(−(ωi + ωo))`` (physics.md eq. 5–7) with
@@ -250,145 +188,41 @@ class SceneRenderer:
         hit the mesh). ``first_sample``: start at that index of the sequence (progressive accumulation adds
         samples k, k + 1, … one render at a time; the mean of samples 0 … N−1 so rendered is the N-sample
         render). ``samples=1`` (the default) is the render without anti-aliasing, bit for bit.
+        ``offsets_px``: explicit sub-pixel offsets instead (pixels, ``(N, 2)``, x right, y up).
+
+        ``render_path``: ``forward`` or ``deferred`` for this render only (default: :attr:`render_path`).
         """
+        offsets = self._offsets(samples, first_sample, offsets_px)
+        path = self.render_path if render_path is None else render_path
+        if path not in ("forward", "deferred"):
+            raise GratNetError(f"a render takes the forward or the deferred path, got {render_path!r}")
         return self._render(mesh, camera, light, size, exposure, ior, 1, skip_threshold, depth_prepass,
-                            statistics, samples, first_sample)[0]
+                            statistics, offsets, path)[0]
+
+    @staticmethod
+    def _offsets(samples: int, first_sample: int, offsets_px: np.ndarray | None) -> np.ndarray:
+        """The sub-pixel offsets of samples ``first_sample`` … ``first_sample + samples − 1``
+        (:func:`viewer.antialias.sample_offsets`), or ``offsets_px`` checked."""
+        return sample_range_offsets(samples, first_sample) if offsets_px is None else check_offsets(offsets_px)
 
     def _render(self, mesh: Mesh | MeshBuffers, camera: Camera, light: Light, size: tuple[int, int],
-                exposure: float, ior: float | None, layers: int, skip_threshold: float | None = None,
-                depth_prepass: bool = True, statistics: dict[str, int] | None = None, samples: int = 1,
-                first_sample: int = 0, offsets_px: np.ndarray | None = None) -> list[np.ndarray]:
-        """Every render method's checks, then the render path with the sub-pixel offsets of samples
-        ``first_sample`` … ``first_sample + samples − 1`` (:func:`viewer.antialias.sample_offsets`), or
-        explicit ``offsets_px`` (pixels, ``(N, 2)``: tests and benchmarks)."""
+                exposure: float, ior: float | None, layers: int, skip_threshold: float | None,
+                depth_prepass: bool, statistics: dict[str, int] | None, offsets: np.ndarray,
+                path: str) -> list[np.ndarray]:
+        """Every render method's checks (before any GL work), then ``path``; a :class:`Mesh` is uploaded for
+        this render only."""
         width, height = check_size(size)
-        skip_threshold_value(skip_threshold)  # check before any GL work
-        offsets = sample_range_offsets(samples, first_sample) if offsets_px is None else check_offsets(offsets_px)
-        if layers == 1 and self.render_path == "deferred":
-            # The deferred path (viewer/deferred.py) takes all samples in one list; render_layers stays forward.
-            uploaded = mesh if isinstance(mesh, MeshBuffers) else self.upload(mesh)
-            try:
+        skip_threshold_value(skip_threshold)
+        uploaded = mesh if isinstance(mesh, MeshBuffers) else self.upload(mesh)
+        try:
+            if path == "deferred":  # all samples in one list; render_layers stays forward
                 return [self.deferred.render(uploaded, camera, light, (width, height), exposure, ior, skip_threshold,
                                              statistics, offsets)]
-            finally:
-                if uploaded is not mesh:
-                    uploaded.release()
-        return self._render_forward(mesh, camera, light, (width, height), exposure, ior, layers, skip_threshold,
-                                    depth_prepass, statistics, offsets)
-
-    def _render_forward(self, mesh: Mesh | MeshBuffers, camera: Camera, light: Light, size: tuple[int, int],
-                        exposure: float, ior: float | None, layers: int, skip_threshold: float | None,
-                        depth_prepass: bool, statistics: dict[str, int] | None,
-                        offsets: np.ndarray) -> list[np.ndarray]:
-        """The forward path: per sample (``offsets``, pixels, ``(N, 2)``) a depth pre-pass and the shading
-        pass (:meth:`_draw_sample`) into float targets; with N > 1 each sample is added into RGBA32F sums on
-        the GPU (``accumulate.glsl``, additive blending) and the mean is read back once. One sample is read
-        directly (bit-identical to a render without anti-aliasing when its offset is the pixel centre)."""
-        width, height = size
-        program = self.program
-        if statistics is not None:
-            _, program = self.network.counting_program(_PROGRAM)
-        self._set_uniforms(camera, light, width, height, float(exposure), ior, program)
-        bound, unit = self.network._skip_uniforms(program, skip_threshold)
-        uploaded = mesh if isinstance(mesh, MeshBuffers) else self.upload(mesh)
-        vertex_array = uploaded.vertex_array
-        if vertex_array is not None and program is not self.program:  # the counting variant: its own binding
-            vertex_array = self._vertex_array(program, uploaded.buffers, uploaded.index_buffer)
-        count = len(offsets)
-        targets = [self.ctx.texture((width, height), 4, dtype="f4") for _ in range(layers)]
-        depth = self.ctx.depth_renderbuffer((width, height))
-        framebuffer = self.ctx.framebuffer(color_attachments=targets, depth_attachment=depth)
-        sums = [self.ctx.texture((width, height), 4, dtype="f4") for _ in range(layers)] if count > 1 else []
-        sum_framebuffers = [self.ctx.framebuffer(color_attachments=[target]) for target in sums]
-        # The scope restores the caller's framebuffer and enable flags (a window may share this context).
-        scope = self.ctx.scope(framebuffer, enable_only=moderngl.DEPTH_TEST)
-        try:
-            with scope:
-                for target in sum_framebuffers:
-                    target.clear(0.0, 0.0, 0.0, 0.0)
-                if statistics is not None:
-                    self.network._reset_counters()
-                for offset in offsets:
-                    self._draw_sample(framebuffer, uploaded, vertex_array, program, bound, unit, camera,
-                                      (width, height), offset, layers, depth_prepass)
-                    if count > 1:
-                        self._accumulate(targets, sum_framebuffers)
-                if statistics is not None:
-                    self.network._read_counters(statistics)
-                if count > 1:
-                    data = [target.read() for target in sums]
-                else:
-                    data = [framebuffer.read(components=4, dtype="f4", attachment=k) for k in range(layers)]
+            return self.forward.render(uploaded, camera, light, (width, height), exposure, ior, layers,
+                                       skip_threshold, depth_prepass, statistics, offsets)
         finally:
-            scope.release()
-            for owned in (framebuffer, depth, *targets, *sum_framebuffers, *sums):
-                owned.release()
-            if vertex_array is not None and vertex_array is not uploaded.vertex_array:
-                vertex_array.release()
             if uploaded is not mesh:
                 uploaded.release()
-        # GL rows start at the bottom; ours at the top. N samples: the float32 sum over N (their mean).
-        images = [np.frombuffer(layer, dtype=np.float32).reshape(height, width, 4)[::-1].copy() for layer in data]
-        if count > 1:
-            images = [image / np.float32(count) for image in images]
-        return images
-
-    def _draw_sample(self, framebuffer: moderngl.Framebuffer, uploaded: MeshBuffers,
-                     vertex_array: moderngl.VertexArray | None, program: moderngl.Program, bound: moderngl.Texture,
-                     unit: int, camera: Camera, size: tuple[int, int], offset: np.ndarray, layers: int,
-                     depth_prepass: bool) -> None:
-        """One sample of the forward path into ``framebuffer`` (cleared first): the camera's view-projection
-        moved by ``offset`` (pixels, x right, y up; :func:`viewer.antialias.jitter_matrix`), then the depth
-        pre-pass and the shading pass. The other uniforms are set by the caller."""
-        width, height = size
-        view_projection = camera.view_projection(width / height)
-        if np.any(offset != 0.0):  # the pixel centre: the un-jittered matrix itself (bit-identical renders)
-            view_projection = view_projection @ jitter_matrix(offset, width, height)
-        view_projection = np.ascontiguousarray(view_projection, dtype=np.float32)
-        _set(program, "u_view_projection", view_projection)
-        framebuffer.use()  # the scope binds the framebuffer but leaves the viewport as it was
-        framebuffer.clear(0.0, 0.0, 0.0, 0.0, depth=1.0)
-        if vertex_array is None:
-            return
-        self.network.use_weights(0)
-        bound.use(location=unit)
-        if depth_prepass:
-            # Pass 1: depth only (the DEPTH_ONLY program: same vertex stage, no MLP; colour writes masked).
-            # Pass 2: the invariant vertex stage gives bit-identical depths, so LEQUAL passes exactly the
-            # visible surface and early fragment tests stop every other fragment before the MLP.
-            depth_program = self.network.depth_only_program(_PROGRAM)
-            _set(depth_program, "u_view_projection", view_projection)
-            if uploaded.depth_vertex_array is None:
-                uploaded.depth_vertex_array = self._vertex_array(depth_program, uploaded.buffers,
-                                                                 uploaded.index_buffer)
-            framebuffer.color_mask = _color_masks(False, layers)
-            try:
-                uploaded.depth_vertex_array.render(moderngl.TRIANGLES)
-            finally:
-                framebuffer.color_mask = _color_masks(True, layers)
-            self.ctx.depth_func = "<="
-        try:
-            vertex_array.render(moderngl.TRIANGLES)
-        finally:
-            self.ctx.depth_func = "<"  # moderngl's default
-
-    def _accumulate(self, samples: list[moderngl.Texture], sums: list[moderngl.Framebuffer]) -> None:
-        """Add each sample image into its RGBA32F sum: a full-screen draw with additive blending."""
-        if self._accumulate_program is None:
-            self._accumulate_program = compile_program(self.ctx, _ACCUMULATE, {}, self.network.shader_root)
-            self._accumulate_array = self.ctx.vertex_array(self._accumulate_program, [])
-        program, array = self._accumulate_program, self._accumulate_array
-        _set(program, "u_sample", _SAMPLE_UNIT)
-        self.ctx.enable_only(moderngl.BLEND)
-        self.ctx.blend_func = moderngl.ONE, moderngl.ONE
-        try:
-            for sample, target in zip(samples, sums, strict=True):
-                sample.use(location=_SAMPLE_UNIT)
-                target.use()
-                array.render(moderngl.TRIANGLES, vertices=3)
-        finally:
-            self.ctx.blend_func = moderngl.DEFAULT_BLENDING
-            self.ctx.enable_only(moderngl.DEPTH_TEST)
 
     def render(self, mesh: Mesh | MeshBuffers, camera: Camera, light: Light, size: tuple[int, int] = (256, 256),
                exposure: float = 1.0, ior: float | None = 1.5, *, skip_threshold: float | None = None,
@@ -441,9 +275,114 @@ class SceneRenderer:
 
     def release(self) -> None:
         """Free the GL objects (the context belongs to the caller)."""
-        for owned in (self._accumulate_array, self._accumulate_program):
-            if owned is not None:
-                owned.release()
-        self._accumulate_array = self._accumulate_program = None
+        self.forward.release()
         self.deferred.release()
         self.network.release()
+
+
+# -------------------------------------------------------------------------------------------------
+# Choosing the path by measurement
+
+
+def render_path_cache_file() -> Path:
+    """The JSON file of measured ``auto`` verdicts: ``$XDG_CACHE_HOME/gratnet/render_path.json`` (else
+    ``~/.cache/gratnet/render_path.json``)."""
+    base = os.environ.get("XDG_CACHE_HOME")
+    return (Path(base) if base else Path.home() / ".cache") / "gratnet" / "render_path.json"
+
+
+def _cache_key(scene: SceneRenderer) -> str:
+    """GL_RENDERER, the network's shape and where both paths read the weights: what the verdict depends on."""
+    network = scene.network
+    model = network.model
+    return (f"v{_CACHE_VERSION}|{scene.ctx.info.get('GL_RENDERER', '?')}|{'-'.join(map(str, model.layer_sizes))}|"
+            f"{model.activation}|{model.encoding.frequencies},{model.encoding.t_frequencies}|{network.weights_path}|"
+            f"{scene.deferred.weights}|{_grid_signature(model)}")
+
+
+def _grid_signature(model: ModelFile) -> str:
+    """A feature-grid model's levels (their fetches cost both paths alike, but not alike to a pure MLP); each
+    level's shape names its C, hence its ceil(C/4) textures."""
+    if not model.grids:
+        return "mlp"
+    return "grid:" + ",".join("x".join(map(str, np.shape(grid))) for grid in model.grids)
+
+
+def _read_cache(path: Path) -> dict[str, dict[str, object]]:
+    try:
+        entries = json.loads(path.read_text(encoding="utf-8"))
+    except (OSError, ValueError):
+        return {}
+    return entries if isinstance(entries, dict) else {}
+
+
+def _write_cache(path: Path, key: str, entry: dict[str, object]) -> None:
+    """Add ``entry`` under ``key``, atomically; a cache that cannot be written only costs a later probe."""
+    from gratnet.atomic import write_text_atomic
+
+    entries = _read_cache(path)
+    entries[key] = entry
+    try:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        write_text_atomic(path, json.dumps(entries, indent=1, sort_keys=True) + "\n")
+    except (OSError, GratNetError) as error:
+        _LOG.info("cannot write the render-path cache %s: %s", path, error)
+
+
+def _probe_ms(render: Callable[[], None], rival_ms: float = math.inf) -> float:
+    """Best wall time (ms) of up to :data:`_PROBE_RENDERS` renders after one untimed render that compiles the
+    programs; stops early once a render is clearly slower than ``rival_ms`` (the verdict is clear)."""
+    render()
+    best = math.inf
+    for _ in range(_PROBE_RENDERS):
+        start = time.perf_counter()
+        render()
+        best = min(best, 1e3 * (time.perf_counter() - start))
+        if best > _PROBE_CLEAR_RATIO * rival_ms:
+            break
+    return best
+
+
+def choose_render_path(scene: SceneRenderer, render_path: str = "auto", measure: bool = True) -> tuple[str, str]:
+    """``(path, reason)``: ``render_path`` itself unless ``auto``, which takes the cached verdict for this
+    ``GL_RENDERER`` and network shape, or measures both paths on the probe scene (the CD disc at
+    :data:`PROBE_SIZE`, default light and camera) and caches the faster (:func:`render_path_cache_file`).
+    ``measure=False``: no probe; ``forward`` while nothing is cached (the viewer: its compile process measures)."""
+    check_render_path(render_path)
+    if render_path != "auto":
+        return render_path, "requested"
+    cache = render_path_cache_file()
+    key = _cache_key(scene)
+    entry = _read_cache(cache).get(key)
+    if isinstance(entry, dict) and entry.get("path") in ("forward", "deferred") and isinstance(entry.get("reason"),
+                                                                                               str):
+        return str(entry["path"]), f"{entry['reason']} (cached)"
+    if not measure:
+        return "forward", "auto: not measured yet on this GPU for this network shape (forward until it is)"
+
+    from viewer.defaults import FALLBACK
+    from viewer.meshes import compact_disc
+
+    _LOG.info("render path auto: timing the forward and deferred paths on a %d×%d probe (once per GPU and network "
+              "shape; cached in %s)", *PROBE_SIZE, cache)
+    camera = Camera(FALLBACK.camera_distance, FALLBACK.camera_azimuth_degrees, FALLBACK.camera_elevation_degrees)
+    light = Light.directional(FALLBACK.light_theta_degrees, FALLBACK.light_phi_degrees)
+    uploaded = scene.upload(compact_disc())
+    times: dict[str, float] = {}
+    try:
+        for path in ("deferred", "forward"):
+            def render(path: str = path) -> None:
+                scene.render_rgba(uploaded, camera, light, PROBE_SIZE, render_path=path)
+                scene.ctx.finish()
+
+            times[path] = _probe_ms(render, min(times.values(), default=math.inf))
+    finally:
+        uploaded.release()
+    path = min(times, key=lambda name: times[name])
+    other = "forward" if path == "deferred" else "deferred"
+    renderer = scene.ctx.info.get("GL_RENDERER", "?")
+    reason = (f"{path}: {times[path]:.1f} ms vs {other} {times[other]:.1f} ms at {PROBE_SIZE[0]}×{PROBE_SIZE[1]} "
+              f"(CD disc probe) on {renderer}")
+    _write_cache(cache, key, {"path": path, "reason": reason, "forward_ms": round(times["forward"], 3),
+                              "deferred_ms": round(times["deferred"], 3)})
+    return path, reason

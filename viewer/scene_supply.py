@@ -26,14 +26,13 @@ import time
 import types
 from collections.abc import Callable
 from concurrent.futures import Future, ThreadPoolExecutor
-from pathlib import Path
 from typing import Any
 
 from gratnet.errors import GratNetError
+from viewer.catalog import build_mesh, check_mesh_spec, resolve_material
 from viewer.compile_worker import GROUPS, CompileWorker, shader_cache_enabled, warm_group, window_render_path
-from viewer.render_cli import MESHES, build_mesh, resolve_material
 
-__all__ = ["PREVIEW_MESHES", "SceneSupply", "check_mesh_spec", "start_display_import"]
+__all__ = ["PREVIEW_MESHES", "SceneSupply", "start_display_import"]
 
 
 def _preview_disc() -> Any:
@@ -87,17 +86,6 @@ def _import_colour() -> None:
             del sys.modules["colour.plotting"]
 
 
-def check_mesh_spec(spec: str) -> None:
-    """The cheap checks of ``build_mesh`` (a built-in name, or an existing .obj file), without building it."""
-    if spec in MESHES:
-        return
-    path = Path(spec).expanduser()
-    if path.suffix.lower() != ".obj":
-        raise GratNetError(f"unknown mesh {spec!r}: choose {', '.join(MESHES)} or the path of a Wavefront .obj file")
-    if not path.is_file():
-        raise GratNetError(f"mesh file {spec} does not exist")
-
-
 class SceneSupply:
     """Renderers and meshes for the viewer (see the module docstring).
 
@@ -112,8 +100,8 @@ class SceneSupply:
 
     def __init__(self, ctx: Any, weights_path: str = "auto", background: bool = False,
                  worker: CompileWorker | None = None, render_path: str = "auto") -> None:
-        from viewer.deferred import check_render_path
         from viewer.renderer import WEIGHTS_PATHS
+        from viewer.scene import check_render_path
 
         if weights_path not in WEIGHTS_PATHS:
             raise GratNetError(f"weights path must be one of {', '.join(WEIGHTS_PATHS)}, got {weights_path!r}")
@@ -296,6 +284,12 @@ class SceneSupply:
         if not state.slice_mode and isinstance(self._meshes.get(_mesh_key(state.mesh, False)), Future):
             return f"loading the mesh {state.mesh}..."
         return ""
+
+    @property
+    def worker(self) -> CompileWorker | None:
+        """The compile child of the current material (its ``seconds`` and ``ready_at`` time each program), or
+        ``None`` when the programs compile in this process."""
+        return self._worker
 
     def display_ready(self) -> bool:
         """Whether colour-science is imported (the thread that imports it has finished)."""

@@ -1,4 +1,4 @@
-"""``gratnet view``: the interactive viewer (a glfw window with an imgui panel; viewer.app).
+"""``gratnet view``: the interactive viewer (a glfw window with an imgui panel: viewer.window over viewer.app).
 
     gratnet view --material blazed --mesh cd --size 512,512
 
@@ -32,13 +32,23 @@ from __future__ import annotations
 
 import argparse
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from gratnet.config import add_quiet_flag, parse_float, parse_int
 from gratnet.errors import GratNetError
-from viewer.defaults import fill_scene_defaults, with_fallback
-from viewer.render_cli import RENDER_PATH_HELP, RENDER_PATHS, WEIGHT_PATHS, add_scene_arguments
+from viewer.scene_config import (
+    RENDER_PATH_HELP,
+    RENDER_PATHS,
+    WEIGHT_PATHS,
+    add_scene_arguments,
+    fill_scene_defaults,
+    with_fallback,
+)
 
-__all__ = ["register", "run"]
+if TYPE_CHECKING:  # the viewer's modules load numpy and pyrr: `gratnet --help` stays quick without them
+    from viewer.state import ViewerState
+
+__all__ = ["register", "run", "starting_state"]
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
@@ -83,7 +93,7 @@ def _scene_numbers(arguments: argparse.Namespace) -> tuple[float, float, float, 
     ``gratnet render`` checks them (one line if bad): θ, φ, distance, azimuth, elevation."""
     import dataclasses
 
-    from viewer.render_cli import RenderConfig, check_scene, scene_fields
+    from viewer.scene_config import RenderConfig, check_scene, scene_fields
 
     config = dataclasses.replace(RenderConfig(), **scene_fields(arguments), exposure=arguments.exposure,
                                  ior=arguments.ior)
@@ -92,12 +102,13 @@ def _scene_numbers(arguments: argparse.Namespace) -> tuple[float, float, float, 
             config.camera_azimuth_degrees, config.camera_elevation_degrees)
 
 
-def _state(arguments: argparse.Namespace) -> object:
-    """The starting :class:`~viewer.app.ViewerState`, every value checked before a window opens."""
+def starting_state(arguments: argparse.Namespace) -> ViewerState:
+    """The starting :class:`~viewer.state.ViewerState`, every value checked before a window opens."""
     from gratnet.atomic import check_output_folder
     from gratnet.modelfile import load_model
-    from viewer.app import SLIDERS, ViewerState
-    from viewer.render_cli import MAX_SAMPLES, MESHES, build_mesh, resolve_material
+    from viewer.catalog import MESHES, build_mesh, resolve_material
+    from viewer.scene_config import MAX_SAMPLES
+    from viewer.state import SLIDERS, ViewerState
 
     check_output_folder(arguments.screenshot_dir, "--screenshot-dir")
     if not 1 <= arguments.spp <= MAX_SAMPLES:
@@ -127,11 +138,11 @@ def _state(arguments: argparse.Namespace) -> object:
 
 def run(arguments: argparse.Namespace) -> int:
     """Open the window and run it until it is closed (or ``--max-frames``)."""
-    from viewer.app import ViewerWindow
-    from viewer.render_cli import parse_size
+    from viewer.scene_config import parse_size
+    from viewer.window import ViewerWindow
 
     size = parse_size(arguments.size_text)
-    state = _state(arguments)
+    state = starting_state(arguments)
     extra = [] if state.mesh in ("cd", "sphere", "plane") else [state.mesh]
     with ViewerWindow(state, size, screenshot_dir=arguments.screenshot_dir, extra_meshes=extra,
                       weights_path=arguments.weights_path, max_samples=arguments.spp,

@@ -1,0 +1,335 @@
+"""The scene every rendering command shares: its configuration, its flags, its checks and its output.
+
+``gratnet render``, ``gratnet view``, ``gratnet mitsuba-render``, the viewer's screenshots and the Mitsuba
+plugin build on this one library module, so that a flag means the same thing everywhere:
+
+- **Configuration**: :class:`SceneConfig` (one light, an orbit camera, a material on a mesh, exposure,
+  Fresnel) and :class:`RenderConfig` (``gratnet render``'s: slice, weights and render path, ``--spp``),
+  typed dataclasses whose fields are the commands' flags (``gratnet.config``) and whose resolved values
+  are saved beside every output.
+- **Flags**: :func:`add_scene_arguments` declares ``--light``, ``--point-light``, ``--camera``,
+  ``--exposure`` and ``--size`` once; :func:`scene_fields` parses them; :func:`with_fallback` and
+  :func:`fill_scene_defaults` fill the ones left out from the material and the mesh (viewer.defaults).
+- **Checks**, before any work (one line, exit status 2): :func:`check_scene`, :func:`check_scene_numbers`,
+  :func:`parse_size`, and :func:`resolve_scene_command`, the order every command takes.
+- **Output**: :func:`write_render` (``.png``: 8-bit display sRGB; ``.exr``: linear sRGB float32 with its
+  chromaticities) with its ``NAME.config.json``, landing together or not at all; :func:`warn_if_black`.
+
+Imports nothing heavy at module level (``gratnet --help`` stays quick). Runtime-side: no torch, no GL.
+"""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import math
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any, TypeVar
+
+from gratnet.config import config_field, parse_float, parse_numbers
+from gratnet.errors import GratNetError
+from viewer.defaults import FALLBACK, FOV_DEGREES, SceneDefaults, resolve_defaults
+
+ConfigT = TypeVar("ConfigT")
+
+__all__ = ["MAX_SAMPLES", "RENDER_PATHS", "RENDER_PATH_HELP", "WEIGHT_PATHS", "RenderConfig", "SceneConfig",
+           "add_scene_arguments", "check_scene", "check_scene_numbers", "fill_scene_defaults", "parse_size",
+           "resolve_scene_command", "scene_fields", "warn_if_black", "with_fallback", "write_render"]
+_OUTPUT_SUFFIXES = (".png", ".exr")
+#: Largest --spp of ``gratnet render``: viewer.antialias.MAX_SAMPLES (repeated: this module defers numpy).
+MAX_SAMPLES = 1024
+#: ``--weights-path`` choices: viewer.renderer.WEIGHTS_PATHS (repeated here: importing it loads moderngl).
+WEIGHT_PATHS = ("auto", "texture", "baked")
+#: ``--render-path`` choices: viewer.scene.RENDER_PATHS (repeated here for the same reason).
+RENDER_PATHS = ("auto", "forward", "deferred")
+#: ``--render-path`` help, shared by every command that renders a mesh.
+RENDER_PATH_HELP = ("mesh renders: forward (the network in the fragment shader), deferred (a G-buffer pass, then the "
+                    "network in a compute shader for the pixels that need it) or auto (the faster on this GPU for "
+                    "this network's size, timed once on a small probe and cached)")
+#: sRGB / Rec. 709 primaries and D65 white (x, y pairs) for the EXR ``chromaticities`` attribute.
+_SRGB_CHROMATICITIES = (0.64, 0.33, 0.30, 0.60, 0.15, 0.06, 0.3127, 0.3290)
+
+
+@dataclasses.dataclass
+class SceneConfig:
+    """One light, an orbit camera, a material on a mesh: what every rendering command shares."""
+
+    material: str = config_field("blazed", "shipped material name (assets/NAME/model.npz) or a model-file path")
+    mesh: str = config_field("cd", "cd, sphere, plane, or the path of a Wavefront .obj file (metres, +z up)")
+    light_theta_degrees: float = config_field(FALLBACK.light_theta_degrees,
+                                              "directional light: polar angle from +z, degrees", cli=False)
+    light_phi_degrees: float = config_field(FALLBACK.light_phi_degrees, "directional light: azimuth from +x, degrees",
+                                            cli=False)
+    point_light: tuple[float, float, float] | None = config_field(
+        None, "point light position, metres (replaces the directional light)", cli=False)
+    camera_distance: float = config_field(FALLBACK.camera_distance, "camera distance from the origin, metres",
+                                          cli=False)
+    camera_azimuth_degrees: float = config_field(FALLBACK.camera_azimuth_degrees, "camera azimuth from +x, degrees",
+                                                 cli=False)
+    camera_elevation_degrees: float = config_field(FALLBACK.camera_elevation_degrees,
+                                                   "camera elevation above the xy-plane, degrees", cli=False)
+    fov_degrees: float = config_field(FOV_DEGREES, "vertical field of view, degrees (typical: 20 to 60)", flag="--fov")
+    exposure: float = config_field(FALLBACK.exposure, "exposure: the linear factor applied to the rendered CIE XYZ "
+                                   "(A · XYZ per unit irradiance) before display", cli=False)
+    width: int = config_field(512, "image width, pixels", cli=False)
+    height: int = config_field(512, "image height, pixels", cli=False)
+    ior: float = config_field(1.5, "refractive index for the Fresnel factor of the A-term (typical: 1.3 to 2.5; "
+                              "0: none)")
+    fresnel: bool = config_field(True, "apply the Fresnel factor (--no-fresnel: R/R0 = 1)")
+
+    @property
+    def effective_ior(self) -> float | None:
+        """The A-term's ``ior`` argument: ``None`` when Fresnel is off."""
+        return self.ior if self.fresnel and self.ior != 0 else None
+
+
+@dataclasses.dataclass
+class RenderConfig(SceneConfig):
+    """Rendering a material on a mesh (or its BRDF slice) with one light and an orbit camera."""
+
+    slice: bool = config_field(False, "render the network's BRDF slice for the light θ,φ instead of a mesh")
+    weights_path: str = config_field(
+        "auto", "where the shader reads the network's weights: texture (packed RGBA32F texture), baked "
+        "(literals in a generated shader: faster on a CPU rasterizer, slower first compile) or auto (baked for "
+        "nets up to 32k multiply-adds (the shipped size) on a CPU rasterizer such as Mesa llvmpipe, else texture)",
+        choices=WEIGHT_PATHS)
+    render_path: str = config_field("auto", RENDER_PATH_HELP, choices=RENDER_PATHS)
+    skip_dark: bool = config_field(
+        False, "PNG only: skip the network where exposure · A · (the model's cached output bound) cannot reach the "
+        "display's smallest step; the first use per model builds the bound (minutes on a CPU)")
+    spp: int = config_field(
+        1, f"samples per pixel (anti-aliasing; 1 … {MAX_SAMPLES}, typical: 1, 4, 16, 64): the mean of renders at "
+        "sub-pixel offsets (Halton 2,3; the first at the pixel centre); costs about spp × one render. As "
+        "mitsuba-render's --spp", aliases=("--samples",))
+
+
+def _numbers(text: str, count: int | tuple[int, ...], flag: str, form: str) -> list[float]:
+    """Comma-separated numbers that float32 holds (``count`` of them), or a one-line GratNetError naming
+    ``flag``. Negative values parse in both ``--flag -1,2`` and ``--flag=-1,2`` (gratnet.cli)."""
+    return parse_numbers(text, count, flag, form)
+
+
+#: Ranges of the scene's numbers that the float32 shaders handle (beyond them view matrices, 1/d² and
+#: exposure · A · XYZ overflow or lose every digit).
+ANGLE_LIMIT_DEGREES = 1e6
+DISTANCE_RANGE_METRES = (1e-6, 1e6)
+
+
+def check_scene_numbers(light: tuple[float, float] | None, point: tuple[float, ...] | None,
+                        camera: tuple[float, float, float]) -> None:
+    """Refuse (one line) light, point-light and camera values the float32 shaders cannot use."""
+    low, high = DISTANCE_RANGE_METRES
+    for flag, angles in (("--light", light or ()), ("--camera", camera[1:])):
+        for angle in angles:
+            if abs(angle) > ANGLE_LIMIT_DEGREES:
+                raise GratNetError(f"{flag} angles must lie within ±{ANGLE_LIMIT_DEGREES:g} degrees "
+                                   f"(typical: 0 to 90 and −180 to 180), got {angle:g}")
+    if not low <= camera[0] <= high:
+        raise GratNetError(f"--camera distance must be from {low:g} to {high:g} metres (typical: 0.1 to 1), "
+                           f"got {camera[0]:g}")
+    if point is not None:
+        if max(abs(value) for value in point) > high:
+            raise GratNetError(f"--point-light coordinates must lie within ±{high:g} metres, got {point}")
+        if math.hypot(*point) < low:
+            raise GratNetError(f"--point-light must be at least {low:g} m from the origin, got {point}")
+
+
+def parse_size(text: str) -> tuple[int, int]:
+    """'W,H' (or 'N' for N×N) → (W, H), integers in 1 … MAX_IMAGE_SIZE."""
+    from viewer.surface import MAX_IMAGE_SIZE
+
+    form = f"W,H: two integers in 1 … {MAX_IMAGE_SIZE} such as 512,512"
+    values = _numbers(text, (1, 2), "--size", form)
+    if not all(value.is_integer() and 1 <= value <= MAX_IMAGE_SIZE for value in values):
+        raise GratNetError(f"--size expects {form}, got {text!r}")
+    width = int(values[0])
+    return width, int(values[-1])
+
+
+def add_scene_arguments(parser: argparse.ArgumentParser, *, point_light: str | None = None,
+                        exposure_of: str = "XYZ", size: str = "image size in pixels (typical: 256,256 to 1024,1024)"
+                        ) -> None:
+    """``--light``, ``--camera``, ``--exposure``, ``--size`` (and ``--point-light`` where ``point_light`` gives its
+    help): one declaration for ``render``, ``view`` and ``mitsuba-render``, so that they mean the same and have
+    the same defaults everywhere (:func:`scene_fields` parses them)."""
+    shown = "chosen from the material and mesh so that the diffraction shows"
+    same = "the same in render, view and mitsuba-render"
+    parser.add_argument("--light", dest="light_text", default=None, metavar="θ,φ",
+                        help=f"directional light in world space: polar angle from +z and azimuth from +x, degrees "
+                        f"(default: {shown}; {same})")
+    if point_light is not None:
+        parser.add_argument("--point-light", dest="point_light_text", default=None, metavar="X,Y,Z", help=point_light)
+    parser.add_argument("--camera", dest="camera_text", default=None, metavar="DIST,AZIMUTH,ELEVATION",
+                        help="orbit camera around the origin: metres, degrees, degrees (default: chosen with the "
+                        "light: the distance that frames the mesh, azimuth -90)")
+    parser.add_argument("--exposure", type=parse_float, default=None,
+                        help=f"exposure: the factor applied to {exposure_of} before display, linear (default: {shown} "
+                        f"without saturating; {same})")
+    parser.add_argument("--size", dest="size_text", default="512,512", metavar="W,H", help=f"{size}; default: 512,512")
+
+
+def scene_fields(arguments: argparse.Namespace) -> dict[str, Any]:
+    """``--light``, ``--point-light``, ``--camera`` and ``--size`` parsed into the config fields that ``render``,
+    ``mitsuba-render`` (and ``view``) share: ``light_theta_degrees`` … ``height`` (one line if malformed)."""
+    theta, phi = _numbers(arguments.light_text, 2, "--light", "θ,φ in degrees such as 45,90")
+    distance, azimuth, elevation = _numbers(arguments.camera_text, 3, "--camera",
+                                            "DIST,AZIMUTH,ELEVATION (metres, degrees, degrees) such as 0.25,-90,45")
+    point = None
+    if getattr(arguments, "point_light_text", None) is not None:
+        point = tuple(_numbers(arguments.point_light_text, 3, "--point-light", "X,Y,Z in metres such as 0,0.1,0.2"))
+    width, height = parse_size(arguments.size_text)
+    return {"light_theta_degrees": theta, "light_phi_degrees": phi, "point_light": point,
+            "camera_distance": distance, "camera_azimuth_degrees": azimuth, "camera_elevation_degrees": elevation,
+            "width": width, "height": height}
+
+
+def check_scene(config: Any) -> None:
+    """Refuse (one line) a scene the float32 shaders cannot use: exposure, IOR, light, point light, camera
+    (elevation and field of view included). ``config``: a :class:`RenderConfig` or a config with its fields."""
+    from gratnet.brdf import check_exposure, check_ior
+    from viewer.camera import Camera
+
+    check_exposure(config.exposure)
+    check_ior(config.ior)  # 0: no Fresnel; 1 is its limit (physics.md, "The A-term")
+    camera = (config.camera_distance, config.camera_azimuth_degrees, config.camera_elevation_degrees)
+    check_scene_numbers((config.light_theta_degrees, config.light_phi_degrees), config.point_light, camera)
+    Camera(*camera, fov_deg=config.fov_degrees)  # checks the elevation and the field of view
+
+
+def resolve_scene_command(arguments: argparse.Namespace, resolve: Callable[[argparse.Namespace], ConfigT]) -> ConfigT:
+    """The steps every rendering command takes before any work, in order: the output's suffix and place
+    (and its config's), the flags given (``resolve`` on :func:`with_fallback`), then the
+    unset ``--light``/``--camera``/``--exposure`` from the material and mesh (which reads the model), then
+    ``resolve`` for real."""
+    from gratnet.atomic import check_output_file
+    from gratnet.config import config_path_for
+
+    out = Path(arguments.out)
+    if out.suffix.lower() not in _OUTPUT_SUFFIXES:
+        raise GratNetError(f"--out must end in .png (display sRGB) or .exr (linear sRGB float), got {arguments.out}")
+    check_output_file(out)
+    check_output_file(config_path_for(out))
+    resolve(with_fallback(arguments))  # the flags given are checked before the defaults read the model
+    fill_scene_defaults(arguments)  # the unset --light, --camera, --exposure, from the material and mesh
+    return resolve(arguments)
+
+
+def write_render(out: Path, xyz: Any, *, linear_srgb: Any = None, **documents: Any) -> None:
+    """The image (``.png``: 8-bit display sRGB; ``.exr``: linear sRGB float32, ``linear_srgb`` if given, else
+    converted from ``xyz``) and its ``NAME.config.json`` (``documents``), landing together or not at all.
+
+    Args:
+        xyz: the exposed CIE XYZ image ``(H, W, 3)``.
+    """
+    import numpy as np
+
+    from gratnet.atomic import atomic_paths
+    from gratnet.config import config_path_for, config_text
+    from gratnet.display import xyz_to_display_srgb8, xyz_to_linear_srgb
+
+    xyz = np.asarray(xyz, dtype=np.float64)
+    with atomic_paths(out, config_path_for(out)) as (image_temporary, config_temporary):
+        if out.suffix.lower() == ".png":
+            from PIL import Image
+
+            Image.fromarray(xyz_to_display_srgb8(xyz, 1.0)).save(image_temporary, format="PNG")
+        else:
+            linear = xyz_to_linear_srgb(xyz) if linear_srgb is None else linear_srgb
+            _write_exr(image_temporary, np.asarray(linear, dtype=np.float32), out)
+        config_temporary.write_text(config_text(out, **documents), encoding="utf-8")
+
+
+
+# ----------------------------------------------------------------------------------------------
+# The flags left out: from the material and the mesh (viewer.defaults)
+
+
+def with_fallback(arguments: argparse.Namespace) -> argparse.Namespace:
+    """A copy of ``arguments`` whose unset ``--light``, ``--camera`` and ``--exposure`` hold :data:`FALLBACK`'s
+    values: the command checks the flags the user gave on it before :func:`fill_scene_defaults` reads the
+    model, so that bad input is refused before any work."""
+    probe = argparse.Namespace(**vars(arguments))
+    probe.light_text = FALLBACK.light_text if probe.light_text is None else probe.light_text
+    probe.camera_text = FALLBACK.camera_text if probe.camera_text is None else probe.camera_text
+    probe.exposure = FALLBACK.exposure if probe.exposure is None else probe.exposure
+    return probe
+
+
+def fill_scene_defaults(arguments: argparse.Namespace) -> SceneDefaults | None:
+    """Fill the unset ``--light``, ``--camera`` and ``--exposure`` of a ``render`` or ``view`` command line
+    (``arguments.light_text``, ``camera_text``, ``exposure`` left ``None``) from :func:`resolve_defaults`.
+
+    Flags the user gave are kept as given (and checked later by the command's own validation). Nothing is
+    computed when all three are given, or when ``--point-light`` replaces the light and the camera and
+    exposure are given.
+
+    Returns:
+        the defaults used, or ``None`` when none were needed.
+    """
+    point_light = getattr(arguments, "point_light_text", None) is not None
+    if arguments.light_text is None and point_light:
+        arguments.light_text = FALLBACK.light_text  # unused: --point-light replaces the directional light
+    if arguments.light_text is not None and arguments.camera_text is not None and arguments.exposure is not None:
+        return None
+    fresnel = getattr(arguments, "fresnel", True)
+    ior = arguments.ior if fresnel and arguments.ior not in (None, 0) else None
+    if ior is not None and not (isinstance(ior, (int, float)) and math.isfinite(ior) and ior > 0.0):
+        ior = 1.5  # an invalid --ior is reported by the command's own check; the defaults must not fail first
+    fov = getattr(arguments, "fov_degrees", FOV_DEGREES)
+    if not (isinstance(fov, (int, float)) and 0.0 < fov < 180.0):
+        fov = FOV_DEGREES
+    defaults = resolve_defaults(arguments.material, arguments.mesh, bool(getattr(arguments, "slice", False)),
+                                float(fov), ior)
+    if arguments.light_text is None:
+        arguments.light_text = defaults.light_text
+    if arguments.camera_text is None:
+        arguments.camera_text = defaults.camera_text
+    if arguments.exposure is None:
+        arguments.exposure = defaults.exposure * (_point_light_distance_squared(arguments) or 1.0)
+    return defaults
+
+
+def _point_light_distance_squared(arguments: argparse.Namespace) -> float | None:
+    """|position|² (m²) of a ``--point-light X,Y,Z`` whose irradiance at the origin is 1/|position|² of a
+    directional light's: the default exposure is scaled by it. ``None`` without one, or when it does not
+    parse (the command's own check reports that)."""
+    text = getattr(arguments, "point_light_text", None)
+    if text is None:
+        return None
+    try:
+        position = [float(part) for part in str(text).split(",")]
+    except ValueError:
+        return None
+    squared = sum(x * x for x in position)
+    if len(position) != 3 or not (math.isfinite(squared) and squared > 0):
+        return None
+    return float(f"{squared:.3g}")  # as the defaults are rounded (viewer.defaults)
+
+
+def warn_if_black(xyz: object, exposure: float) -> None:
+    """The black-picture hint (gratnet.showcase.black_image_hint) on stderr; the exit status is unchanged."""
+    import sys
+
+    from gratnet.showcase import black_image_hint
+
+    hint = black_image_hint(xyz, exposure)  # type: ignore[arg-type]
+    if hint is not None:
+        print(f"warning: {hint}", file=sys.stderr)
+
+
+def _write_exr(path: Path, linear_srgb: object, name: Path) -> None:
+    """Float32 channels R, G, B of a linear-sRGB image (row 0 at the top), ZIP-compressed, to ``path`` (a
+    temporary of :func:`gratnet.atomic.atomic_paths`; ``name``: the output it becomes, for messages)."""
+    import numpy as np
+    import OpenEXR
+
+    image = np.asarray(linear_srgb, dtype=np.float32)
+    header = {"compression": OpenEXR.ZIP_COMPRESSION, "type": OpenEXR.scanlineimage,
+              "chromaticities": _SRGB_CHROMATICITIES}
+    channels = {channel: np.ascontiguousarray(image[..., k]) for k, channel in enumerate("RGB")}
+    try:
+        with OpenEXR.File(header, channels) as exr:
+            exr.write(str(path))
+    except Exception as error:  # OpenEXR raises plain exceptions (RuntimeError, …)
+        raise GratNetError(f"cannot write {name}: {' '.join(str(error).split())}") from error

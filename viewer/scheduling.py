@@ -1,0 +1,198 @@
+"""How the viewer spends a frame: the resolution policy, its cost model, and the pictures in progress.
+
+A CPU rasterizer renders a full picture in seconds, so the viewer (:class:`viewer.app.ViewerApp`) renders
+reduced while the view moves (:meth:`ResolutionPolicy.reduced_factor`), refines in bands of rows once it
+stands still (:meth:`ResolutionPolicy.band_rows`, :class:`BandCamera`, :class:`Refinement`), then adds
+sub-pixel samples band by band (:class:`Accumulation`). The cost model predicts a render's seconds from
+the measured seconds per "effective pixel": a covered pixel counts 1, an uncovered one
+:data:`UNCOVERED_COST` (the network runs only where the mesh covers). Pure numpy: no GL, no glfw, no imgui.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from typing import Any
+
+import numpy as np
+
+from viewer.camera import Camera
+
+__all__ = ["UNCOVERED_COST", "Accumulation", "BandCamera", "Frame", "Refinement", "RenderStats", "ResolutionPolicy",
+           "disc_coverage", "effective_pixels", "effective_pixels_per_row", "first_band_margin", "reduced_size",
+           "upscale"]
+
+
+#: Cost of a pixel the mesh does not cover, relative to a covered one (the network runs only where covered).
+UNCOVERED_COST = 0.05
+
+
+@dataclasses.dataclass(frozen=True)
+class ResolutionPolicy:
+    """When to render reduced, when and how fast to refine (see the module docstring).
+
+    Attributes:
+        idle_seconds: the state is "moving" until it has not changed for this long.
+        interactive_budget_s: target time of one reduced-resolution render while moving.
+        refine_budget_s: target time of the refinement work done in one frame (one band). Predictions
+            were seen 1.7–2x short on a busy CPU, and a frame must stay under 150 ms (issue 11).
+        factors: the allowed reductions (divisors of width and height), smallest first.
+        default_factor: used before anything has been measured for a material and mesh.
+        band_multiple: band heights are multiples of this (llvmpipe shades 4×4 pixel blocks, so a band of
+            5 rows costs nearly as much as 8).
+    """
+
+    idle_seconds: float = 0.25
+    interactive_budget_s: float = 0.05
+    refine_budget_s: float = 0.05  # with the frame's other work, a 3x margin to the 150 ms target
+    factors: tuple[int, ...] = (2, 4, 8)
+    default_factor: int = 4
+    band_multiple: int = 4
+
+    def reduced_factor(self, full_seconds: float | None) -> int:
+        """The smallest factor whose render is predicted to fit the interactive budget (else the largest),
+        given the predicted time of a full-resolution render (``None``: nothing measured yet)."""
+        if full_seconds is None:
+            return self.default_factor
+        for factor in self.factors:
+            if full_seconds / factor**2 <= self.interactive_budget_s:
+                return factor
+        return self.factors[-1]
+
+    def band_rows(self, row_seconds: np.ndarray) -> int:
+        """Rows of the next refinement band: as many of the remaining rows (their predicted seconds, in
+        order) as fit ``refine_budget_s``, rounded down to a multiple of ``band_multiple`` (at least that
+        many); all the remaining rows when they fit or are fewer."""
+        remaining = len(row_seconds)
+        fits = int(np.searchsorted(np.cumsum(row_seconds), self.refine_budget_s, side="right"))
+        if fits >= remaining:
+            return max(1, remaining)
+        rows = max(self.band_multiple, fits - fits % self.band_multiple)
+        return max(1, min(remaining, rows))
+
+
+def reduced_size(size: tuple[int, int], factor: int) -> tuple[int, int]:
+    return max(1, math.ceil(size[0] / factor)), max(1, math.ceil(size[1] / factor))
+
+
+@dataclasses.dataclass
+class Frame:
+    """The picture on show.
+
+    Attributes:
+        key: the state and size it shows (``ViewerApp.render_key``).
+        pixels: display sRGB ``uint8`` ``(h, w, 3)``, row 0 at the top (``h, w`` = ``rendered_size`` for a
+            preview, the full size while refining and when complete).
+        full_size: ``(width, height)`` that the picture stands for (a preview is shown stretched to it).
+        rendered_size: the resolution the newest pixels were computed at.
+        complete: every pixel is at full resolution.
+        progress: the fraction of the full-resolution picture done (1 when complete).
+        version: increases whenever ``pixels`` change (the window re-uploads its texture then).
+        samples: samples per pixel of the complete picture (progressive anti-aliasing: the mean of that many
+            full-resolution samples; while the next one is added band by band, its rows already hold it).
+    """
+
+    key: tuple[Any, ...]
+    pixels: np.ndarray
+    full_size: tuple[int, int]
+    rendered_size: tuple[int, int]
+    complete: bool
+    progress: float
+    version: int
+    samples: int = 1
+
+
+@dataclasses.dataclass
+class RenderStats:
+    """Counts and times of the SceneRenderer calls (a band counts as one render)."""
+
+    renders: int = 0
+    preview_renders: int = 0
+    refine_renders: int = 0
+    last_kind: str = ""
+    last_render_s: float = 0.0
+    last_render_size: tuple[int, int] = (0, 0)
+    last_preview_s: float | None = None
+    last_preview_size: tuple[int, int] = (0, 0)
+    last_full_s: float | None = None  # the sum of a completed refinement's renders
+    last_sample_s: float | None = None  # the last band of progressive anti-aliasing (one more sample)
+    #: The window's last frame from the end of its wait for input to the buffer swap: the work of the
+    #: frame (events, panel, any render, drawing), not the idle wait (set by ViewerWindow).
+    last_frame_s: float = 0.0
+    weights_path: str = ""  # the weights path of the last render
+
+
+@dataclasses.dataclass(frozen=True)
+class BandCamera(Camera):
+    """The camera restricted to rows ``[row0, row1)`` of a ``height``-row image: the same pixel centres,
+    rasterized into a ``row1 − row0``-row target (a crop of clip space after the projection)."""
+
+    full_aspect: float = 1.0
+    height: int = 1
+    row0: int = 0
+    row1: int = 1
+
+    def view_projection(self, aspect: float) -> np.ndarray:  # noqa: ARG002 - the band's own aspect is wrong
+        full = super().view_projection(self.full_aspect)
+        scale = self.height / (self.row1 - self.row0)
+        centre = 1.0 - (self.row0 + self.row1) / self.height  # band centre in NDC y (+1 = top row's edge)
+        crop = np.eye(4, dtype=np.float64)
+        crop[1, 1] = scale
+        crop[3, 1] = -scale * centre  # row vectors: y' = scale · (y − centre · w)
+        return np.asarray(full.astype(np.float64) @ crop, dtype=np.float32)
+
+
+@dataclasses.dataclass
+class Refinement:
+    """A full-resolution picture being built band by band over the upscaled preview (slice mode: level
+    by level, each half the reduction of the last)."""
+
+    key: tuple[Any, ...]
+    pixels: np.ndarray
+    next_row: int = 0
+    next_factor: int = 1  # slice mode: the next (smaller) reduction factor
+    seconds: float = 0.0
+    xyz: np.ndarray | None = None  # mesh mode: the full-resolution exposed XYZ so far (float32)
+
+
+@dataclasses.dataclass
+class Accumulation:
+    """Progressive anti-aliasing of a still mesh view: float32 sums of the exposed XYZ of samples 0 … k−1
+    (``sums``, ``k`` = ``samples``) and, for rows before ``next_row``, sample k (``partial``)."""
+
+    key: tuple[Any, ...]
+    sums: np.ndarray
+    samples: int = 1
+    next_row: int = 0
+    partial: np.ndarray | None = None
+
+
+def effective_pixels(coverage: np.ndarray) -> float:
+    covered = float(np.count_nonzero(coverage > 0.5))
+    return covered + UNCOVERED_COST * (coverage.size - covered)
+
+
+def first_band_margin(row0: int) -> float:
+    """Prediction factor for a band: 2 for a refinement's (or a slice level's) first band, whose prediction
+    comes from renders at a lower resolution only (1.7× too short once, measured on a busy machine)."""
+    return 2.0 if row0 == 0 else 1.0
+
+
+def effective_pixels_per_row(coverage: np.ndarray) -> np.ndarray:
+    return np.sum(np.where(coverage > 0.5, 1.0, UNCOVERED_COST), axis=1)
+
+
+def disc_coverage(side: int, rows: tuple[int, int] | None = None) -> np.ndarray:
+    """1 where a ``side``² BRDF slice's pixel centre lies inside the unit disc (where the network runs), else
+    0; only ``rows`` (first, end) when given."""
+    first, end = (0, side) if rows is None else rows
+    centres = (np.arange(side) + 0.5) / side * 2.0 - 1.0
+    y = centres[first:end, None]
+    return (centres[None, :] ** 2 + y**2 <= 1.0).astype(np.float32)
+
+
+def upscale(pixels: np.ndarray, width: int, height: int) -> np.ndarray:
+    """Nearest-neighbour resize of an ``(h, w, 3)`` image to ``(height, width, 3)`` (a new array)."""
+    rows = np.minimum((np.arange(height) * pixels.shape[0]) // height, pixels.shape[0] - 1)
+    columns = np.minimum((np.arange(width) * pixels.shape[1]) // width, pixels.shape[1] - 1)
+    return np.ascontiguousarray(pixels[rows][:, columns])

@@ -1,0 +1,96 @@
+"""What decides the viewer's picture: :class:`ViewerState` and the panel's :data:`SLIDERS`.
+
+World +z up, degrees, metres, as ``gratnet render``. :meth:`ViewerState.render_config` is the ``gratnet
+render`` config that reproduces a view (the screenshot's ``.config.json``). No GL, no glfw, no imgui.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from typing import Any
+
+from gratnet.errors import GratNetError
+from viewer.camera import Camera, Light
+from viewer.defaults import FALLBACK, FOV_DEGREES
+from viewer.scene_config import RenderConfig
+
+__all__ = ["SLIDERS", "Slider", "ViewerState"]
+
+
+@dataclasses.dataclass
+class ViewerState:
+    """Everything that decides the picture (world +z up, degrees, metres; as ``gratnet render``)."""
+
+    material: str = "blazed"
+    mesh: str = "cd"
+    # The material-independent defaults shared with `gratnet render` (viewer.defaults.FALLBACK); `gratnet view`
+    # starts from viewer.defaults.resolve_defaults for its material and mesh instead.
+    light_theta: float = FALLBACK.light_theta_degrees
+    light_phi: float = FALLBACK.light_phi_degrees
+    camera_azimuth: float = FALLBACK.camera_azimuth_degrees
+    camera_elevation: float = FALLBACK.camera_elevation_degrees
+    camera_distance: float = FALLBACK.camera_distance
+    fov: float = FOV_DEGREES
+    exposure: float = FALLBACK.exposure
+    fresnel: bool = True
+    ior: float = 1.5
+    slice_mode: bool = False
+
+    def key(self) -> tuple[Any, ...]:
+        """The values that decide the pixels (two states with equal keys render the same picture)."""
+        return dataclasses.astuple(self)
+
+    @property
+    def effective_ior(self) -> float | None:
+        return self.ior if self.fresnel and self.ior != 0 else None
+
+    def camera(self) -> Camera:
+        return Camera(self.camera_distance, self.camera_azimuth, self.camera_elevation, fov_deg=self.fov)
+
+    def light(self) -> Light:
+        return Light.directional(self.light_theta, self.light_phi)
+
+    def render_config(self, width: int, height: int, spp: int = 1) -> RenderConfig:
+        """The ``gratnet render`` config that reproduces this view at ``width`` × ``height`` with ``spp``
+        samples per pixel."""
+        return RenderConfig(
+            material=self.material, mesh=self.mesh, light_theta_degrees=self.light_theta,
+            light_phi_degrees=self.light_phi, camera_distance=self.camera_distance,
+            camera_azimuth_degrees=self.camera_azimuth, camera_elevation_degrees=self.camera_elevation,
+            fov_degrees=self.fov, exposure=self.exposure, width=width, height=height, ior=self.ior,
+            fresnel=self.fresnel, slice=self.slice_mode, spp=spp,
+        )
+
+
+@dataclasses.dataclass(frozen=True)
+class Slider:
+    """A numeric control of the panel: state field, label, range, logarithmic or not."""
+
+    field: str
+    label: str
+    minimum: float
+    maximum: float
+    log: bool = False
+    format: str = "%.1f"
+
+    def clamp(self, value: float) -> float:
+        value = float(value)
+        if not math.isfinite(value):
+            raise GratNetError(f"{self.field} must be a finite number, got {value!r}")
+        return min(max(value, self.minimum), self.maximum)
+
+
+#: The panel's sliders, by name (the names ``drive_slider`` and ``ViewerApp.set`` accept).
+SLIDERS: dict[str, Slider] = {
+    slider.field: slider
+    for slider in (
+        Slider("light_theta", "light theta (°)", 0.0, 89.0),  # imgui's default font has no Greek
+        Slider("light_phi", "light phi (°)", -180.0, 180.0),
+        Slider("camera_azimuth", "azimuth (°)", -180.0, 180.0),
+        Slider("camera_elevation", "elevation (°)", -89.0, 89.0),
+        Slider("camera_distance", "distance (m)", 0.02, 5.0, log=True, format="%.3f"),
+        Slider("exposure", "exposure", 1e-3, 1e7, log=True, format="%.4g"),
+        Slider("ior", "IOR", 1.05, 3.0, format="%.2f"),  # n = 1 has no Fresnel reflection: R0 = 0
+    )
+}
