@@ -1,14 +1,16 @@
-"""The ``gratnet`` command: one entry point, one subcommand per module.
+"""The ``gratnet`` command: one entry point, one subcommand per registered module.
 
-Each subcommand module exposes ``register(subparsers)``, which adds its parser and sets
-``handler=function(arguments) -> int``. Modules are imported lazily so that ``gratnet --help`` and
-the runtime subcommands never import torch.
+The packages above gratnet/ (trainer/, viewer/, bench/, sweep/, mitsuba_plugin/) register their subcommands
+as entry points of the group ``gratnet.commands`` in pyproject.toml (``render = "viewer.render_cli:register"``),
+so that this module names none of them. Each ``register(subparsers)`` adds its parser and sets
+``handler=function(arguments) -> int``. Only the entry point a command needs is loaded (all of them for
+``gratnet --help``), so that ``gratnet --help`` and the runtime subcommands never import torch.
 """
 
 from __future__ import annotations
 
 import argparse
-import importlib
+import importlib.metadata
 import logging
 import re
 import sys
@@ -18,19 +20,33 @@ from collections.abc import Sequence
 from gratnet import __version__
 from gratnet.errors import GratNetError
 
-# Subcommand name -> module that registers it (imported only when needed).
-SUBCOMMAND_MODULES: dict[str, str] = {
-    "heightfield": "trainer.heightfield_cli",
-    "groundtruth": "trainer.groundtruth_cli",
-    "brdfslice": "trainer.brdfslice_cli",
-    "train": "trainer.train_cli",
-    "evaluate": "trainer.train_cli",
-    "render": "viewer.render_cli",
-    "view": "viewer.view_cli",
-    "bench": "bench.cli",
-    "mitsuba-render": "mitsuba_plugin.render_cli",
-    "sweep": "sweep.cli",
-}
+#: The entry-point group in which packages register subcommands: name = "module:register".
+COMMAND_GROUP = "gratnet.commands"
+
+#: The order of ``gratnet --help``'s list, the order of the work (height field → ground truth → training →
+#: rendering → tools); the metadata lists entry points alphabetically. A subcommand not named here follows.
+HELP_ORDER = ("heightfield", "groundtruth", "brdfslice", "train", "evaluate", "render", "view", "bench",
+              "mitsuba-render", "sweep")
+
+#: Why no subcommand is found, and the fix: the entry points live in the installed package's metadata.
+NOT_INSTALLED = (f"no gratnet subcommands are registered (entry points {COMMAND_GROUP!r}): the gratnet package "
+                 f"is not installed; run `pip install -e .` in the repository (or see scripts/gpu_bench.sh for "
+                 f"a PYTHONPATH-only machine)")
+
+
+def subcommands() -> dict[str, importlib.metadata.EntryPoint]:
+    """Subcommand name → its registered entry point (none loaded), in :data:`HELP_ORDER`.
+
+    Raises:
+        GratNetError: none is registered (the package's metadata is not installed).
+    """
+    found: dict[str, importlib.metadata.EntryPoint] = {}
+    for entry_point in importlib.metadata.entry_points(group=COMMAND_GROUP):
+        found.setdefault(entry_point.name, entry_point)  # the first on sys.path wins, as for imports
+    if not found:
+        raise GratNetError(NOT_INSTALLED)
+    rank = {name: number for number, name in enumerate(HELP_ORDER)}
+    return {name: found[name] for name in sorted(found, key=lambda name: (rank.get(name, len(rank)), name))}
 
 
 class _HelpFormatter(argparse.HelpFormatter):
@@ -74,16 +90,20 @@ class _StderrHandler(logging.Handler):
 
 
 def build_parser(only: str | None = None) -> argparse.ArgumentParser:
-    """The full parser; with ``only``, import and register just that subcommand."""
+    """The full parser; with ``only``, load and register just that subcommand's entry point."""
+    commands = subcommands()
     parser = GratNetParser(
         prog="gratnet", description="GratNet: neural rendering of diffractive surfaces."
     )
     parser.add_argument("--version", action="version", version=f"gratnet {__version__}")
     subparsers = parser.add_subparsers(dest="command", metavar="SUBCOMMAND")
-    wanted = [SUBCOMMAND_MODULES[only]] if only is not None else list(SUBCOMMAND_MODULES.values())
-    for module_name in dict.fromkeys(wanted):  # a module may register several subcommands
-        importlib.import_module(module_name).register(subparsers)
-    for name in SUBCOMMAND_MODULES:
+    wanted = [commands[only]] if only is not None else list(commands.values())
+    registered = set()
+    for entry_point in wanted:
+        if entry_point.value not in registered:  # one register() may add several subcommands (train, evaluate)
+            registered.add(entry_point.value)
+            entry_point.load()(subparsers)
+    for name in commands:
         if name not in subparsers.choices:
             subparsers.add_parser(name, help=f"(see gratnet {name} --help)")
     return parser
@@ -93,7 +113,12 @@ def main(argv: Sequence[str] | None = None) -> int:
     """Run the ``gratnet`` command; bad input exits with one clear line and a non-zero status."""
     argv = list(sys.argv[1:] if argv is None else argv)
     command = next((word for word in argv if not word.startswith("-")), None)
-    parser = build_parser(only=command if command in SUBCOMMAND_MODULES else None)
+    try:
+        commands = subcommands()
+    except GratNetError as error:
+        print(f"gratnet: error: {error}", file=sys.stderr)
+        return error.exit_code
+    parser = build_parser(only=command if command in commands else None)
     try:
         arguments = parser.parse_args(argv)
     except SystemExit as exit_:  # --help, --version, or a one-line argparse error (GratNetParser.error)

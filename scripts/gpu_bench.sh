@@ -16,7 +16,8 @@
 set -euo pipefail
 cd "$(dirname "$0")/.."
 
-WHEELS="moderngl glcontext colour-science pyrr openexr array-api-compat pypng flip-evaluator"
+# setuptools: the build backend that installs the project's metadata there (below), should the image lack it.
+WHEELS="moderngl glcontext colour-science pyrr openexr array-api-compat pypng flip-evaluator setuptools"
 DEBS="libegl1 libglvnd0 libopengl0 libgl1 libglx0 libgles2"
 
 if [[ "${1:-}" == "--prepare" ]]; then
@@ -52,10 +53,17 @@ fi
 if compgen -G ".whl/*.whl" >/dev/null; then
     python3 -m pip install -q --no-index --no-deps --no-compile --no-cache-dir --upgrade --target /tmp/gratnet-site \
         .whl/*.whl
-    export PYTHONPATH=/tmp/gratnet-site:$PWD
-else
-    export PYTHONPATH=$PWD${PYTHONPATH:+:$PYTHONPATH}
 fi
+# The gratnet command finds its subcommands through the project's entry points (pyproject.toml
+# [project.entry-points."gratnet.commands"]), which live in installed metadata; the checkout on PYTHONPATH alone
+# has none (gratnet/cli.py then says so and exits 2). So install the project itself, without dependencies,
+# without the network and without build isolation (setuptools from the image or .whl/), into /tmp/gratnet-meta.
+# The checkout comes first on PYTHONPATH: the code and assets/ resolve from it, the copy there only brings the
+# metadata.
+rm -rf /tmp/gratnet-meta
+PYTHONPATH=/tmp/gratnet-site${PYTHONPATH:+:$PYTHONPATH} python3 -m pip install -q --no-index --no-deps \
+    --no-build-isolation --no-compile --target /tmp/gratnet-meta .
+export PYTHONPATH=$PWD:/tmp/gratnet-site:/tmp/gratnet-meta${PYTHONPATH:+:$PYTHONPATH}
 python=${PYTHON:-python3}
 export PYTHONUNBUFFERED=1
 {
