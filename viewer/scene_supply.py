@@ -1,7 +1,7 @@
 """The viewer's renderers and meshes for the material on show: ready at once, or later without blocking.
 
 :class:`SceneSupply` hands :class:`~viewer.app.ViewerApp` a :class:`~viewer.scene.SceneRenderer` and the
-uploaded mesh for a :class:`~viewer.app.ViewerState`, in one of two modes:
+uploaded mesh for a :class:`~viewer.state.ViewerState`, in one of two modes:
 
 - blocking (``background=False``; scripts and headless tests): everything is loaded and compiled when
   first asked for, as ``gratnet render`` does.
