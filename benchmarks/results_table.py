@@ -192,7 +192,7 @@ def _trained_volume(folder: Path) -> dict:
         return json.loads(str(archive["metadata_json"]))["metadata"].get("volume", {})
 
 
-def _paper_oracle(folder: Path, normal: dict, slices: int) -> float | None:
+def paper_oracle(folder: Path, normal: dict, slices: int) -> float | None:
     """The oracle's FLIP at (0°, 0°) for the volume the model was trained on: from its own evaluation, or (a
     volume scored on the GPU machine, as pits' 41 and scratches' 21 slices) from the committed oracle table of
     the same slice count."""
@@ -236,7 +236,7 @@ def paper_datasets_table(assets: Path) -> list[str]:
         paper = PAPER_FLIP_PAPER_DATASETS.get(folder.name)
         flip = normal.get("flip")
         met = "—" if paper is None or flip is None else ("**yes**" if flip <= paper else "no")
-        oracle = _paper_oracle(folder, normal, trained_on.get("slices"))
+        oracle = paper_oracle(folder, normal, trained_on.get("slices"))
         lines.append(
             f"| {folder.name} | {trained_on.get('resolution', '?')}² × {trained_on.get('slices', '?')} | {network} | "
             f"{history['parameters']} | "

@@ -52,11 +52,11 @@ def test_aimed_light_makes_the_requested_key_vector():
              "normals": np.array([[0.0, 0.0, 1.0]])}
     view = np.array([0.0, -math.sin(math.radians(45)), math.cos(math.radians(45))])
     for key in [(0.181, 0.0), (0.0, 0.3), (-0.5, 0.2)]:
-        light = defaults._aim_light(key, view, frame, 0)
+        light = defaults.aim_light(key, view, frame, 0)
         assert light is not None and abs(np.linalg.norm(light) - 1.0) < 1e-12
         np.testing.assert_allclose(-(light + view)[:2], key, atol=1e-12)  # K = −(ωi + ωo), physics.md
     # Unreachable: the light would have to be 90° or more from the normal.
-    assert defaults._aim_light((0.0, -1.8), view, frame, 0) is None
+    assert defaults.aim_light((0.0, -1.8), view, frame, 0) is None
 
 
 def test_surface_samples_are_uniform_and_carry_the_frame():
@@ -72,7 +72,7 @@ def test_surface_samples_are_uniform_and_carry_the_frame():
 
 
 def test_framing_distance_fits_the_mesh_into_the_field_of_view():
-    distance = defaults._framing_distance(sphere(radius=0.05), 40.0)
+    distance = defaults.framing_distance(sphere(radius=0.05), 40.0)
     assert distance == pytest.approx(0.05 / (defaults.FRAMING * math.sin(math.radians(20.0))), rel=1e-6)
 
 

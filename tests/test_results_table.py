@@ -77,7 +77,7 @@ def test_a_slices_table_without_the_trained_count_gives_no_oracle(tmp_path, monk
     (tmp_path / "docs" / "data" / "oracle_pits_slices.json").write_text(
         json.dumps([row for row in table if row["slices"] != 41]))
     monkeypatch.chdir(tmp_path)  # the tables are found relative to the working folder, as the script runs
-    assert results_table._paper_oracle(folder, {}, 41) is None
-    assert results_table._paper_oracle(folder, {}, 21) == pytest.approx(
+    assert results_table.paper_oracle(folder, {}, 41) is None
+    assert results_table.paper_oracle(folder, {}, 21) == pytest.approx(
         next(row["brdf_slices"][0]["flip"] for row in table if row["slices"] == 21))
-    assert results_table._paper_oracle(folder, {"oracle_flip": 0.5}, 41) == 0.5  # its own evaluation first
+    assert results_table.paper_oracle(folder, {"oracle_flip": 0.5}, 41) == 0.5  # its own evaluation first

@@ -66,6 +66,8 @@ __all__ = [
     "FALLBACK",
     "FOV_DEGREES",
     "SceneDefaults",
+    "aim_light",
+    "framing_distance",
     "resolve_defaults",
     "scene_defaults",
     "slice_defaults",
@@ -192,7 +194,7 @@ def surface_samples(mesh: Mesh, count: int = SAMPLES, seed: int = 0) -> dict[str
             "bitangents": np.cross(normals, tangents), "area": np.full(count, float(areas.sum()) / count)}
 
 
-def _framing_distance(mesh: Mesh, fov_degrees: float) -> float:
+def framing_distance(mesh: Mesh, fov_degrees: float) -> float:
     """Camera distance (metres) at which a sphere around the origin holding every vertex fills ``FRAMING``
     of the vertical half field of view."""
     import numpy as np
@@ -226,7 +228,7 @@ def _local(vectors: np.ndarray, samples: dict[str, np.ndarray], index: Any = sli
                      for name in ("tangents", "bitangents", "normals")], axis=-1)
 
 
-def _aim_light(key_uv: tuple[float, float], view_local: np.ndarray, samples: dict[str, np.ndarray],
+def aim_light(key_uv: tuple[float, float], view_local: np.ndarray, samples: dict[str, np.ndarray],
                index: int) -> np.ndarray | None:
     """The world direction towards a light that makes the key vector at sample ``index`` (seen along
     ``view_local``, its tangent frame) equal ``key_uv``; ``None`` when no light within ``MAX_LIGHT_DEGREES``
@@ -333,7 +335,7 @@ def scene_defaults(model: ModelFile, mesh: Mesh, fov_degrees: float = FOV_DEGREE
 
     display = material_display(model) if display is None else display
     samples = surface_samples(mesh)
-    distance = round(_framing_distance(mesh, fov_degrees), 3)
+    distance = round(framing_distance(mesh, fov_degrees), 3)
     field_sr = (2.0 * math.tan(math.radians(fov_degrees) / 2.0)) ** 2  # a square picture, small-angle
     best: tuple[float, tuple[Any, ...]] | None = None
     for elevation in CAMERA_ELEVATIONS_DEGREES:
@@ -348,7 +350,7 @@ def scene_defaults(model: ModelFile, mesh: Mesh, fov_degrees: float = FOV_DEGREE
         for key in display.peak_keys_uv[:AIMED_PEAKS]:
             for fraction in AIM_FRACTIONS:
                 aim = (fraction * key[0], fraction * key[1])
-                light = _aim_light(aim, view_local, samples, index)
+                light = aim_light(aim, view_local, samples, index)
                 if light is None:
                     continue
                 colour, weights = _predicted_colour(model, samples, scoring, camera, light, ior)
