@@ -24,6 +24,7 @@ from typing import Any
 
 import numpy as np
 
+from bench.tables import format_cell
 from gratnet.errors import GratNetError
 
 __all__ = ["SceneView", "available_render_paths", "check_render_paths", "json_lines", "markdown_table",
@@ -142,14 +143,6 @@ def scene_frame_times(ctx: Any, model: Any, model_path: str, view: SceneView, we
     return rows
 
 
-def _format(value: object, digits: int = 3) -> str:
-    if value is None:
-        return "—"
-    if isinstance(value, float):
-        return f"{value:.{digits}g}" if value == 0 or 1e-3 <= abs(value) < 1e5 else f"{value:.2e}"
-    return str(value)
-
-
 def _milliseconds(seconds: float | None) -> str:
     if seconds is None:
         return "—"
@@ -166,7 +159,7 @@ def markdown_table(rows: list[dict[str, Any]]) -> str:
         render_path = row["render_path"]
         if row["requested_render_path"] != render_path:
             render_path = f"{row['requested_render_path']} → {render_path}"
-        lines.append("| " + " | ".join(_format(value) for value in (
+        lines.append("| " + " | ".join(format_cell(value) for value in (
             row["model"], row["macs_per_pixel"], row["mesh"], f"{row['width']}×{row['height']}", row["weights_path"],
             render_path, row["spp"], _milliseconds(row["seconds"]), _milliseconds(row["gpu_seconds"]), row["fps"],
             row["covered_pixels"], row["gmac_per_s"], row["gl_renderer"])) + " |")

@@ -34,6 +34,7 @@ from typing import Any
 
 import numpy as np
 
+from bench.tables import format_cell
 from gratnet.atomic import write_text_atomic
 from gratnet.brdf import STANDARD_SLICES
 from gratnet.config import config_field
@@ -339,18 +340,6 @@ def run_bench(ctx: Any, entries: list[ModelEntry], config: BenchConfig, progress
                         "torch_cpu_gmac_per_s", "shader_over_torch_cpu", "shader_over_torch_cpu_mlp")
                         if key in result}))
     return results
-
-
-def format_cell(value: object, digits: int = 3) -> str:
-    """A markdown table cell: — for None, ``digits`` significant digits for a float (exponent form outside
-    [1e-3, 1e5)), anything else as str (``gratnet bench``'s and ``gratnet sweep``'s tables)."""
-    if value is None:
-        return "—"
-    if isinstance(value, float):
-        if value == 0 or 1e-3 <= abs(value) < 1e5:
-            return f"{value:.{digits}g}"
-        return f"{value:.2e}"
-    return str(value)
 
 
 def markdown_table(results: list[dict[str, Any]]) -> str:

@@ -15,6 +15,7 @@ import math
 from pathlib import Path
 from typing import Any
 
+from bench.tables import format_cell
 from gratnet.atomic import write_text_atomic
 from gratnet.figures import save_figure
 
@@ -26,8 +27,6 @@ _HEADERS = {"macs_per_pixel": "MACs/pixel", "train_seconds": "train (s)", "held_
 
 
 def _format(value: object) -> str:
-    from bench.slices import format_cell  # here: bench.slices brings the GL renderer, which a table never needs
-
     return format_cell(value, 4)
 
 
