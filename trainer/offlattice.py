@@ -4,8 +4,9 @@ A volume samples each w-slice on a uniform R² lattice of (u*, v*) (trainer/samp
 at those samples and rendered everywhere between them. On paper-scratches its error between samples was
 measured 1.1–1.6× its error at them, while the bilinear interpolation of the four corner samples lies within
 0.36–0.47·10⁻³ (RMS in the range-transformed y) of the truth at the cell centres, 5–6× closer than the network
-(docs/results.md, "The truth between samples"). So points drawn between the samples, with the bilinear value of
-their cell as target, teach the network what lies there at the accuracy of that interpolation.
+(docs/experiments/2026-11-23-scratches-truth-between-samples.md). So points drawn between the samples,
+with the bilinear value of their cell as target, teach the network what lies there at the accuracy of that
+interpolation.
 
 An off-lattice point is a uniform random point of a u*/v* cell of one training slice whose four corners are all
 training samples (cells that touch an unreachable key vector, a held-out sample or one left out by
@@ -15,7 +16,7 @@ training samples (cells that touch an unreachable key vector, a held-out sample 
 
 and target the bilinear interpolation, in the range-transformed y, of the corners (i, j), (i, j + 1),
 (i + 1, j), (i + 1, j + 1) of slice s. Slices are never interpolated: along w the 11-slice interpolation
-oracle is measurably worse than the network's own t (docs/results.md).
+oracle is measurably worse than the network's own t (docs/results.md and the logs it links).
 """
 
 from __future__ import annotations

@@ -68,13 +68,14 @@ class TrainConfig:
     )
     epochs: int = config_field(6, "passes over the training samples")
     batch_size: int = config_field(32768, "samples per optimisation step (feature grids trained markedly better "
-                                          "at 4096-8192 on a GPU: docs/results.md, 'Smaller batches')")
+                                          "at 4096-8192 on a GPU: docs/experiments/2026-11-23-smaller-batches-h100.md)")
     learning_rate: float = config_field(3e-3, "Adam's initial learning rate")
     final_learning_rate_ratio: float = config_field(0.02, "cosine schedule ends at learning_rate × this")
     adam_epsilon: float = config_field(
         1e-8, "Adam's ε of the MLP (torch's default 1e-8). The LogCosh loss of range-transformed targets is ~1e-6, "
         "so many weights' sqrt(v) sits below 1e-8 and ε, not sqrt(v), sets their step: it keeps the encoding's "
-        "near-Nyquist weights, which the samples hardly constrain, from growing (docs/results.md, 'Adam's ε')"
+        "near-Nyquist weights, which the samples hardly constrain, from growing "
+        "(docs/experiments/2026-11-25-scratches-adam-epsilon.md)"
     )
     grid_adam_epsilon: float = config_field(
         1e-8, "grid: Adam's ε of the grids (their sqrt(v) ends near 1e-10, so at 1e-8 ε sets their step; "
