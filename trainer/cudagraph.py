@@ -1,11 +1,11 @@
 """The training step replayed as one CUDA graph (``gratnet train --cuda-graph``).
 
-At the batch sizes that train feature grids best (2,048–8,192 samples: docs/experiments/2026-11-23-smaller-
-batches-h100.md) a step is about a hundred kernels of microseconds each, and the GPU waits on Python to launch
-them. Captured once with torch.cuda.CUDAGraph, a step is two launches: the batch's indices copied into a fixed
-buffer, and the replay. The captured step is :func:`trainer.train.train_step` with what it did on the host
-moved onto the
-device, so that the graph can hold it:
+At the batch sizes that train feature grids best (2,048–8,192 samples:
+docs/experiments/2026-11-23-smaller-batches-h100.md) a step is about a hundred kernels of microseconds each,
+and the GPU waits on Python to launch them. Captured once with torch.cuda.CUDAGraph, a step is two launches:
+the batch's indices copied into a fixed buffer, and the replay. The captured step is
+:func:`trainer.train.train_step` with what it did on the host moved onto the device, so that the graph can
+hold it:
 
 - the batch is gathered from the resident data set by the index buffer;
 - the learning rate is the same cosine schedule as :func:`trainer.train.make_scheduler`
