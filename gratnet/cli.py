@@ -89,9 +89,11 @@ class _StderrHandler(logging.Handler):
             self.handleError(record)
 
 
-def build_parser(only: str | None = None) -> argparse.ArgumentParser:
-    """The full parser; with ``only``, load and register just that subcommand's entry point."""
-    commands = subcommands()
+def build_parser(only: str | None = None,
+                 commands: dict[str, importlib.metadata.EntryPoint] | None = None) -> argparse.ArgumentParser:
+    """The full parser; with ``only``, load and register just that subcommand's entry point. ``commands``:
+    :func:`subcommands` when the caller has it already (default: read from the metadata)."""
+    commands = subcommands() if commands is None else commands
     parser = GratNetParser(
         prog="gratnet", description="GratNet: neural rendering of diffractive surfaces."
     )
@@ -118,7 +120,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     except GratNetError as error:
         print(f"gratnet: error: {error}", file=sys.stderr)
         return error.exit_code
-    parser = build_parser(only=command if command in commands else None)
+    parser = build_parser(only=command if command in commands else None, commands=commands)
     try:
         arguments = parser.parse_args(argv)
     except SystemExit as exit_:  # --help, --version, or a one-line argparse error (GratNetParser.error)

@@ -141,8 +141,6 @@ class SceneRenderer:
 
     def upload(self, mesh: Mesh) -> MeshBuffers:
         """Upload ``mesh`` for drawing on either path (the caller releases the result)."""
-        if not isinstance(mesh, Mesh):
-            raise GratNetError(f"expected a viewer.meshes.Mesh, got {type(mesh).__name__}")
         return upload_mesh(self.ctx, self.program, mesh)
 
     def render_layers(self, mesh: Mesh | MeshBuffers, camera: Camera, light: Light,

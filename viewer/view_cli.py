@@ -31,7 +31,6 @@ Needs a display (X11 or Wayland) and OpenGL 4.3; without one it exits with statu
 from __future__ import annotations
 
 import argparse
-from pathlib import Path
 from typing import TYPE_CHECKING
 
 from gratnet.config import add_quiet_flag, parse_float, parse_int
@@ -120,10 +119,7 @@ def starting_state(arguments: argparse.Namespace) -> ViewerState:
         raise GratNetError(f"--max-frames must be ≥ 0, got {arguments.max_frames}")
     # Read (cheaply) before a window opens: a bad model or mesh file is one line, not a broken window.
     load_model(resolve_material(arguments.material))
-    if arguments.mesh not in MESHES:
-        path = Path(arguments.mesh).expanduser()
-        if path.suffix.lower() != ".obj":
-            raise GratNetError(f"unknown mesh {arguments.mesh!r}: choose {', '.join(MESHES)} or a Wavefront .obj file")
+    if arguments.mesh not in MESHES:  # an .obj file: built now (a built-in mesh cannot fail)
         build_mesh(arguments.mesh)
     fresnel, ior = arguments.fresnel, arguments.ior
     if ior == 0:  # as in gratnet render: --ior 0 means no Fresnel factor
