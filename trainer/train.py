@@ -10,6 +10,7 @@ from __future__ import annotations
 import copy
 import dataclasses
 import json
+import logging
 import math
 import os
 import time
@@ -236,6 +237,25 @@ def read_checkpoint(path: str | os.PathLike[str], device: str | torch.device = "
         raise GratNetError(f"cannot read the checkpoint {path}: {error}") from error
 
 
+def restore_generator(generator: torch.Generator, state: dict[str, Any], path: os.PathLike[str],
+                      fallback_seed: int) -> None:
+    """Set ``generator`` (the shuffle's and the off-lattice draws') to its state saved in checkpoint ``state``.
+
+    A checkpoint written before that state was saved is still resumed, as it was then: the generator re-seeded
+    with ``fallback_seed`` (seed + epochs done), with a warning that the rest of the run will not be the one an
+    uninterrupted run would have made (its weights, Adam and schedule are still restored exactly).
+    """
+    saved = state.get("generator")
+    if saved is None:
+        logging.getLogger("gratnet.train").warning(
+            "%s predates saved shuffling state: resuming with the shuffle re-seeded, so epochs %d and later will "
+            "differ from an uninterrupted run (start afresh without --resume for an exact run)",
+            path, state["epoch"] + 1)
+        generator.manual_seed(fallback_seed)
+        return
+    generator.set_state(saved.cpu())  # map_location moved it onto the device
+
+
 def train(
     volume: Volume,
     config: TrainConfig,
@@ -267,6 +287,9 @@ def train(
     scheduler = None if graphed else make_scheduler(optimizer, config, schedule_steps, isinstance(model, GridNetwork))
     history: dict[str, Any] = {"epochs": [], "train_seconds": 0.0}
     start_epoch = done = 0
+    # The one generator of the shuffle and the off-lattice draws: a resume restores its state, so that the
+    # epochs after it draw what an uninterrupted run draws (the split's numpy generator is re-made from the seed).
+    generator = torch.Generator().manual_seed(config.seed)
     checkpoint_path = out_dir / "checkpoint.pt"
     if resume and checkpoint_path.exists():
         state = read_checkpoint(checkpoint_path, device)
@@ -292,7 +315,8 @@ def train(
         done = int(state.get("steps", state["scheduler"]["last_epoch"] if state["scheduler"] else 0))
         history, start_epoch = state["history"], state["epoch"]
         torch.set_rng_state(state["torch_rng"].cpu())  # map_location moved it onto the device
-    generator = torch.Generator().manual_seed(config.seed + start_epoch)
+        if start_epoch < config.epochs:  # else nothing is left to draw
+            restore_generator(generator, state, checkpoint_path, config.seed + start_epoch)
     # The whole data set resident on the device, indexed there: no per-step host gather or copy.
     coordinates_all = torch.from_numpy(train_samples.coordinates).to(device)
     targets_all = torch.from_numpy(train_samples.targets).to(device)
@@ -371,6 +395,7 @@ def train(
                     "epoch": epoch + 1,
                     "config": config_to_dict(config),
                     "torch_rng": torch.get_rng_state(),
+                    "generator": generator.get_state(),
                 },
                 temporary,
             )
