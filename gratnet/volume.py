@@ -50,7 +50,9 @@ __all__ = [
     "FORMAT_NAME",
     "FORMAT_VERSION",
     "Volume",
+    "VolumeHeader",
     "read_volume",
+    "read_volume_header",
     "volume_axes",
     "write_volume",
 ]
@@ -271,6 +273,45 @@ def _typed_attribute(value: object) -> object:
 # --------------------------------------------------------------------------------------------------
 
 
+@dataclass(frozen=True)
+class VolumeHeader:
+    """What a volume file's headers say, read without decoding a pixel (:func:`read_volume_header`).
+
+    Attributes:
+        slices: ``S``, the number of slices (parts).
+        resolution: ``R``, samples per side of each slice.
+        metadata: the decoded ``gratnet_metadata`` JSON.
+    """
+
+    slices: int
+    resolution: int
+    metadata: dict[str, Any]
+
+
+def read_volume_header(path: str | os.PathLike[str]) -> VolumeHeader:
+    """The slice count, resolution and metadata of a GratNet volume EXR, from its headers alone: milliseconds
+    even for a 250 MB volume, so that callers can check a volume (its source, its size against a memory limit)
+    before reading its pixels. The pixels' checksums are checked only by :func:`read_volume`.
+
+    Raises:
+        GratNetError: as :func:`read_volume` for everything its header pass checks.
+    """
+    source = Path(path)
+    _, names, metadata, resolution = _header_pass(source)
+    return VolumeHeader(slices=len(names), resolution=resolution, metadata=metadata)
+
+
+def _header_pass(source: Path) -> tuple[_OpenedFile, list[str], dict[str, Any], int]:
+    """The magic number, then the headers only: the true part count (the pixel pass silently drops parts it
+    cannot decode); foreign or too-new files are rejected before any pixel is decoded."""
+    magic = read_magic(source, "volume file", 4)
+    if magic != b"\x76\x2f\x31\x01":
+        raise GratNetError(f"{source} is not an OpenEXR file (wrong magic number)")
+    headers_file = _open_exr(source, header_only=True)
+    names, metadata, resolution = _check_headers(source, headers_file)
+    return headers_file, names, metadata, resolution
+
+
 def read_volume(path: str | os.PathLike[str]) -> Volume:
     """Read a GratNet volume EXR written by :func:`write_volume`.
 
@@ -283,14 +324,7 @@ def read_volume(path: str | os.PathLike[str]) -> Volume:
             not a GratNet volume, of an unsupported format version, or structurally inconsistent.
     """
     source = Path(path)
-    magic = read_magic(source, "volume file", 4)
-    if magic != b"\x76\x2f\x31\x01":
-        raise GratNetError(f"{source} is not an OpenEXR file (wrong magic number)")
-
-    # Pass 1: headers only. This gives the true part count (the pixel pass silently drops parts
-    # it cannot decode) and rejects foreign or too-new files before any pixel is decoded.
-    headers_file = _open_exr(source, header_only=True)
-    names, metadata, resolution = _check_headers(source, headers_file)
+    headers_file, names, metadata, resolution = _header_pass(source)  # pass 1: headers only
 
     # Pass 2: pixels.
     pixels_file = _open_exr(source, header_only=False)

@@ -4,6 +4,7 @@
 // the pixel is 0. Output 0: exposure * A(wi, wo) * XYZ(-(wi + wo)) (exposed XYZ, linear, RGBA32F);
 // output 1 (when a second attachment is bound): the network's XYZ alone (0 where the MLP was skipped).
 // The MLP is skipped where A = 0 and where the bound of skip.glsl says the display would show 0.
+// With REFERENCE the ground-truth volume's look-up (reference.glsl) takes the network's place.
 // Needs the defines of mlp.glsl and encoding.glsl (and SKIP_COUNTER_BINDING with COUNT_EVALUATIONS).
 #include "fullscreen.glsl"
 
@@ -11,12 +12,17 @@
 precision highp float;
 precision highp int;
 
-#include "encoding.glsl"
+#include "encoding.glsl"  // outside the REFERENCE choice: a file is included once, wherever it is first named
+#include "counters.glsl"
+#ifdef REFERENCE
+#include "reference.glsl"  // the ground-truth volume in place of the network
+#else
 #include "featuregrid.glsl"  // before mlp.glsl: its baked stand-in includes nothing
 #include "mlp.glsl"
 #include "range.glsl"
-#include "brdf.glsl"
 #include "skip.glsl"
+#endif
+#include "brdf.glsl"
 
 uniform int u_size;        // image width = height, pixels
 uniform vec3 u_light;      // wi: unit vector towards the light
@@ -48,6 +54,10 @@ void main() {
         count_event(COUNTER_SKIPPED_A_ZERO);
         return;
     }
+#ifdef REFERENCE
+    count_event(COUNTER_EVALUATIONS);
+    vec3 xyz = reference_xyz(key);
+#else
     encoding_set_key(key);
     if (skip_by_bound(u_exposure * a)) {
         count_event(COUNTER_SKIPPED_BOUND);
@@ -55,6 +65,7 @@ void main() {
     }
     count_event(COUNTER_EVALUATIONS);
     vec3 xyz = range_inverse(mlp_evaluate());
+#endif
     out_exposed = vec4(u_exposure * a * xyz, 1.0);
     out_network = vec4(xyz, 1.0);
 }

@@ -1,4 +1,4 @@
-// Skipping the MLP where it cannot change the displayed pixel, and counting the work done (issue 5).
+// Skipping the MLP where it cannot change the displayed pixel, (issue 5); the work counters are counters.glsl.
 //
 // Bound: u_skip_bound holds, per coarse cell of network coordinates (c_u, c_v, c_t) (docs/physics.md
 // eq. 6), an upper bound of the network's CIE XYZ (gratnet/bounds.py: sampled on a grid twice as fine
@@ -8,28 +8,9 @@
 // bound) shows display sRGB 0 whatever the network says, so the MLP is skipped and the pixel is 0.
 // u_skip_threshold <= 0 never skips (linear/EXR outputs).
 //
-// Counting: with #define COUNT_EVALUATIONS, count_event(COUNTER_*) adds 1 to a counter of the SSBO at
-// binding SKIP_COUNTER_BINDING (the renderer zeroes and reads it); otherwise it compiles to nothing.
 // Needs encoding.glsl (g_coordinates, set by encoding_set_key).
 
-const int COUNTER_FRAGMENTS = 0;      // fragments that reached the shading code (covered / in-disc pixels)
-const int COUNTER_EVALUATIONS = 1;    // MLP evaluations
-const int COUNTER_SKIPPED_A_ZERO = 2; // skipped: A = 0, back face, no irradiance
-const int COUNTER_SKIPPED_BOUND = 3;  // skipped: the bound cannot reach the display's smallest step
-const int COUNTER_BACKGROUND = 4;     // pixels with no surface (BRDF slice: outside the unit disc)
-const int COUNTER_COUNT = 8;
-
-#ifdef COUNT_EVALUATIONS
-layout(std430, binding = SKIP_COUNTER_BINDING) buffer SkipCounters {
-    uint skip_counters[COUNTER_COUNT];
-};
-#endif
-
-void count_event(int counter) {
-#ifdef COUNT_EVALUATIONS
-    atomicAdd(skip_counters[counter], 1u);
-#endif
-}
+#include "counters.glsl"
 
 uniform float u_skip_threshold;        // exposed linear sRGB; <= 0: never skip
 uniform highp sampler3D u_skip_bound;  // RGBA32F, (Cu, Cv, Ct) texels: .xyz = CIE XYZ bound of the cell

@@ -15,6 +15,8 @@
 // for fragments that have returned, so a uniform-selected depth pass cost a full shading pass.
 // Deferred path (issue 12): compiled with GBUFFER, the fragment stage stops before the network and writes
 // (key, exposure * irradiance * A) for shaders/deferred.glsl to evaluate; see surface_inputs below.
+// Reference renders (gratnet render --reference): compiled with REFERENCE, the ground-truth volume's look-up
+// (reference.glsl) takes the network's place; everything else is the same code.
 // Needs the defines of mlp.glsl and encoding.glsl (and SKIP_COUNTER_BINDING with COUNT_EVALUATIONS).
 
 #ifdef VERTEX_SHADER
@@ -49,11 +51,18 @@ precision highp int;
 
 #include "brdf.glsl"
 #ifndef GBUFFER
+// Included outside the REFERENCE choice: the preprocessor (viewer/glsl.py) includes a file once, wherever the
+// first #include of it stands, #if or not.
 #include "encoding.glsl"
+#include "counters.glsl"
+#ifdef REFERENCE
+#include "reference.glsl"  // the ground-truth volume in place of the network
+#else
 #include "featuregrid.glsl"  // before mlp.glsl: its baked stand-in includes nothing
 #include "mlp.glsl"
 #include "range.glsl"
 #include "skip.glsl"
+#endif
 #endif
 
 // Depth (and stencil) tests before the shader runs: occluded fragments never evaluate the MLP. The
@@ -151,6 +160,10 @@ void main() {
         count_event(COUNTER_SKIPPED_A_ZERO);
         return;  // and skip the network: nothing to light
     }
+#ifdef REFERENCE
+    count_event(COUNTER_EVALUATIONS);
+    vec3 xyz = reference_xyz(key);
+#else
     encoding_set_key(key);
     if (skip_by_bound(factor)) {
         count_event(COUNTER_SKIPPED_BOUND);
@@ -158,6 +171,7 @@ void main() {
     }
     count_event(COUNTER_EVALUATIONS);
     vec3 xyz = range_inverse(mlp_evaluate());
+#endif
     out_exposed = vec4(factor * xyz, 1.0);
 }
 #endif

@@ -1,4 +1,5 @@
-"""The forward render path: the network in the fragment shader of ``shaders/surface.glsl``.
+"""The forward render path: the material (network or reference look-up) in the fragment shader of
+``shaders/surface.glsl``.
 
 Per sample (a sub-pixel offset, :func:`viewer.antialias.sample_offsets`): a depth pre-pass (on by default)
 draws the mesh's depth, then the shading pass runs the network once per visible pixel (no overdraw; the
@@ -23,7 +24,7 @@ import numpy as np
 from viewer.antialias import jitter_matrix
 from viewer.camera import Camera, Light
 from viewer.glsl import compile_program
-from viewer.renderer import NetworkRenderer, set_uniform
+from viewer.shading import ShadingPrograms, set_uniform
 from viewer.surface import MeshBuffers, set_surface_uniforms
 
 __all__ = ["SURFACE_PROGRAM", "ForwardRenderer"]
@@ -41,18 +42,20 @@ def _color_masks(enabled: bool, attachments: int) -> object:
 
 
 class ForwardRenderer:
-    """The forward path over a :class:`~viewer.renderer.NetworkRenderer`'s ``surface`` program."""
+    """The forward path over a material's ``surface`` program: the network's
+    (:class:`~viewer.renderer.NetworkRenderer`) or the ground-truth volume's
+    (:class:`~viewer.reference.ReferenceRenderer`)."""
 
-    def __init__(self, network: NetworkRenderer) -> None:
-        self.network = network
-        self.ctx = network.ctx
+    def __init__(self, shading: ShadingPrograms) -> None:
+        self.shading = shading
+        self.ctx = shading.ctx
         self._accumulate_program: moderngl.Program | None = None
         self._accumulate_array: moderngl.VertexArray | None = None
 
     @property
     def program(self) -> moderngl.Program:
-        """The ``surface`` program, compiled on first use with the network's defines and model uniforms."""
-        return self.network.program(SURFACE_PROGRAM)
+        """The ``surface`` program, compiled on first use with the material's defines and uniforms."""
+        return self.shading.program(SURFACE_PROGRAM)
 
     def render(self, uploaded: MeshBuffers, camera: Camera, light: Light, size: tuple[int, int], exposure: float,
                ior: float | None, layers: int, skip_threshold: float | None, depth_prepass: bool,
@@ -62,9 +65,9 @@ class ForwardRenderer:
         width, height = size
         program = self.program
         if statistics is not None:
-            _, program = self.network.counting_program(SURFACE_PROGRAM)
+            _, program = self.shading.counting_program(SURFACE_PROGRAM)
         set_surface_uniforms(program, camera, light, width, height, float(exposure), ior)
-        bound, unit = self.network.skip_uniforms(program, skip_threshold)
+        bound, unit = self.shading.skip_uniforms(program, skip_threshold)
         vertex_array = uploaded.vertex_array
         if vertex_array is not None and program is not self.program:  # the counting variant: its own binding
             vertex_array = uploaded.vertex_array_for(program)
@@ -81,14 +84,14 @@ class ForwardRenderer:
                 for target in sum_framebuffers:
                     target.clear(0.0, 0.0, 0.0, 0.0)
                 if statistics is not None:
-                    self.network.reset_counters()
+                    self.shading.reset_counters()
                 for offset in offsets:
                     self._draw_sample(framebuffer, uploaded, vertex_array, program, bound, unit, camera,
                                       (width, height), offset, layers, depth_prepass)
                     if count > 1:
                         self._accumulate(targets, sum_framebuffers)
                 if statistics is not None:
-                    self.network.read_counters(statistics)
+                    self.shading.read_counters(statistics)
                 if count > 1:
                     data = [target.read() for target in sums]
                 else:
@@ -122,13 +125,13 @@ class ForwardRenderer:
         framebuffer.clear(0.0, 0.0, 0.0, 0.0, depth=1.0)
         if vertex_array is None:
             return
-        self.network.use_weights(0)
+        self.shading.bind_material()
         bound.use(location=unit)
         if depth_prepass:
             # Pass 1: depth only (the DEPTH_ONLY program: same vertex stage, no MLP; colour writes masked).
             # Pass 2: the invariant vertex stage gives bit-identical depths, so LEQUAL passes exactly the
             # visible surface and early fragment tests stop every other fragment before the MLP.
-            depth_program = self.network.depth_only_program(SURFACE_PROGRAM)
+            depth_program = self.shading.depth_only_program(SURFACE_PROGRAM)
             set_uniform(depth_program, "u_view_projection", view_projection)
             if uploaded.depth_vertex_array is None:
                 uploaded.depth_vertex_array = uploaded.vertex_array_for(depth_program)
@@ -146,7 +149,7 @@ class ForwardRenderer:
     def _accumulate(self, samples: list[moderngl.Texture], sums: list[moderngl.Framebuffer]) -> None:
         """Add each sample image into its RGBA32F sum: a full-screen draw with additive blending."""
         if self._accumulate_program is None:
-            self._accumulate_program = compile_program(self.ctx, _ACCUMULATE, {}, self.network.shader_root)
+            self._accumulate_program = compile_program(self.ctx, _ACCUMULATE, {}, self.shading.shader_root)
             self._accumulate_array = self.ctx.vertex_array(self._accumulate_program, [])
         program, array = self._accumulate_program, self._accumulate_array
         set_uniform(program, "u_sample", _SAMPLE_UNIT)
@@ -162,7 +165,7 @@ class ForwardRenderer:
             self.ctx.enable_only(moderngl.DEPTH_TEST)
 
     def release(self) -> None:
-        """Free this path's own GL objects (the network belongs to the caller)."""
+        """Free this path's own GL objects (the material belongs to the caller)."""
         for owned in (self._accumulate_array, self._accumulate_program):
             if owned is not None:
                 owned.release()

@@ -21,13 +21,12 @@ import moderngl
 import numpy as np
 
 from gratnet.bounds import DISPLAY_SKIP_THRESHOLD, OutputBounds, display_skip_matrix, output_bounds
-from gratnet.brdf import direction
-from gratnet.display import xyz_to_display_srgb8
 from gratnet.errors import GratNetError
 from gratnet.featuregrid import CHUNK_FEATURES, grid_chunks
 from gratnet.modelfile import LEAKY_RELU_SLOPE, ModelFile, pack_texture, texture_layout
 from viewer.baked import baked_mlp_source
 from viewer.glsl import GeneratedSource, compile_program
+from viewer.shading import STATISTICS_KEYS, ShadingPrograms, ior_uniform, set_uniform, skip_threshold_value
 
 __all__ = [
     "BAKED_MAX_MACS",
@@ -66,9 +65,6 @@ _PASS_WIDTH = 1024  # pixels per row of a key-evaluation pass
 _PASS_PIXELS = 1 << 20  # keys per pass: bounds memory and the time of one draw
 _FREQUENCY_BITS = 10  # significant bits of the exact part of s^j (see shaders/encoding.glsl)
 #: The counters of shaders/skip.glsl (COUNTER_*), in order, as the keys of a render's ``statistics`` dict.
-STATISTICS_KEYS = ("fragments", "evaluations", "skipped_a_zero", "skipped_bound", "background")
-_SKIP_COUNTER_BINDING = 5  # SSBO binding of the counters (shaders/skip.glsl)
-_SKIP_COUNTER_SLOTS = 8
 _SKIP_BOUND_UNIT = 3  # texture unit of u_skip_bound (weights: 0; evaluate_keys/display inputs: 1, 2)
 #: Texture unit of a feature-grid model's first grid texture: chunk k of level l (featuregrid.glsl) is on unit
 #: _GRID_UNIT + l * chunks + k, chunks = ceil(C/4) (level l: _GRID_UNIT + l when C ≤ 4).
@@ -79,8 +75,6 @@ _OTHER_SAMPLERS = 4
 #: How a feature-grid model's grids are interpolated (shaders/featuregrid.glsl): ``manual`` (eight texelFetches,
 #: float32 weights: eq. 6g exactly) or ``hardware`` (one GL_LINEAR texture() call; GPUs may quantise the weights).
 GRID_FILTERS = ("manual", "hardware")
-_COUNTING_SUFFIX = "#count"  # program-cache key of a program compiled with COUNT_EVALUATIONS
-_DEPTH_ONLY_SUFFIX = "#depth"  # ... and of one compiled with DEPTH_ONLY (the depth pre-pass)
 
 
 def model_defines(model: ModelFile) -> dict[str, int | float]:
@@ -146,35 +140,6 @@ def xyz_to_linear_srgb_matrix() -> np.ndarray:
     return np.asarray(colour.RGB_COLOURSPACES["sRGB"].matrix_XYZ_to_RGB, dtype=np.float64)
 
 
-def ior_uniform(ior: float | None) -> float:
-    """The shader's IOR uniform: 0 turns Fresnel off (``None`` or 0, as in physics.md eq. 5)."""
-    from gratnet.brdf import check_ior
-
-    checked = check_ior(ior, "ior")  # 1 is allowed: R/R0 has a limit there (physics.md, "The A-term")
-    return 0.0 if checked is None else checked
-
-
-def skip_threshold_value(threshold: float | None) -> float:
-    """The shaders' ``u_skip_threshold``: ``None`` or 0 turns skipping off (exact linear output)."""
-    if threshold is None:
-        return 0.0
-    value = float(threshold)
-    if not (math.isfinite(value) and value >= 0.0):
-        raise GratNetError(f"skip threshold must be a finite number ≥ 0 (0 or None: off), got {threshold!r}")
-    return value
-
-
-def set_uniform(program: moderngl.Program | moderngl.ComputeShader, name: str, value: object) -> None:
-    """Set a uniform that the program must have (a missing one means shader and renderer disagree)."""
-    if name not in program:
-        raise GratNetError(f"GLSL program lacks uniform {name!r}; the shaders and viewer/renderer.py disagree")
-    member = program[name]
-    if isinstance(value, np.ndarray):
-        member.write(value.tobytes())  # type: ignore[union-attr]
-    else:
-        member.value = value  # type: ignore[union-attr]
-
-
 def is_software_rasterizer(ctx: moderngl.Context) -> bool:
     """Whether ``ctx`` renders on the CPU (Mesa llvmpipe, softpipe, swrast), from its GL_RENDERER string."""
     renderer = str(ctx.info.get("GL_RENDERER", "")).lower()
@@ -209,7 +174,7 @@ def choose_weights_path(ctx: moderngl.Context, model: ModelFile, weights_path: s
     return "baked" if software and model.macs_per_evaluation <= BAKED_MAX_MACS else "texture"
 
 
-class NetworkRenderer:
+class NetworkRenderer(ShadingPrograms):
     """Renders a model's BRDF slices and evaluates it at key vectors on the GPU (one fragment per value).
 
     Args:
@@ -239,13 +204,10 @@ class NetworkRenderer:
         #: The packed weight texture (docs/formats.md), ``float32`` ``(rows, texels per row, 4)``, on either path
         #: (the deferred path's weight buffers hold the same texels).
         self.packed_weights = np.ascontiguousarray(texture, dtype=np.float32)
-        self.ctx = ctx
+        super().__init__(ctx, model_defines(model), shader_root)
         self.model = model
         self.layout = layout
-        self.defines = model_defines(model)
-        self.shader_root = shader_root
         self.weights_path = choose_weights_path(ctx, model, weights_path)
-        self.overrides: dict[str, GeneratedSource] = {}
         self.baked_source: str | None = None
         if self.weights_path == "baked":
             label = f"{'-'.join(map(str, model.layer_sizes))} {model.activation}"
@@ -272,13 +234,10 @@ class NetworkRenderer:
                 texture3d.filter = (moderngl.LINEAR, moderngl.LINEAR)  # texelFetch ignores it; texture() filters
                 texture3d.repeat_x = texture3d.repeat_y = texture3d.repeat_z = False  # clamp to edge: eq. 6g clamps c
                 self._grids.append(texture3d)
-        self._programs: dict[str, moderngl.Program] = {}
-        self._vertex_arrays: dict[str, moderngl.VertexArray] = {}
         # Skipping work (gratnet/bounds.py, shaders/skip.glsl): the bound table and the counters are made on
         # first use; the 1-texel placeholder is bound when skipping is off (the sampler must read something).
         self._output_bounds: OutputBounds | None = None
         self._skip_texture: moderngl.Texture | None = None
-        self._skip_counters: moderngl.Buffer | None = None
         self._skip_placeholder = ctx.texture3d((1, 1, 1), 4, np.zeros(4, dtype=np.float32).tobytes(), dtype="f4")
         self._skip_placeholder.filter = (moderngl.NEAREST, moderngl.NEAREST)
 
@@ -319,62 +278,44 @@ class NetworkRenderer:
         set_uniform(program, "u_range_power", float(model.range.power))
         set_uniform(program, "u_range_white", tuple(float(c) for c in model.range.white))
 
+    def configure_program(self, program: moderngl.Program, name: str) -> None:
+        """The model's uniforms (:meth:`model_uniforms`), and evaluate_keys' input units."""
+        self.model_uniforms(program)
+        if name == "evaluate_keys":
+            set_uniform(program, "u_inputs", 1)
+            set_uniform(program, "u_inputs2", 2)
+
+    def material_textures(self) -> tuple[tuple[moderngl.Texture, int], ...]:
+        """The weight texture on unit 0 (none on the baked path) and a feature-grid model's grids on theirs."""
+        weights = ((self._weights, 0),) if self.weights_path == "texture" else ()
+        return weights + tuple((grid, _GRID_UNIT + index) for index, grid in enumerate(self._grids))
+
     def program(self, name: str) -> moderngl.Program:
         """Program ``name`` (``brdf_slice``, ``evaluate_keys``, ``display``, or another program of the network
         includes such as ``surface``, whose model uniforms are set likewise), compiled on first use."""
-        if name not in self._programs:
-            if name == "display":
-                program = compile_program(self.ctx, name, {}, self.shader_root)
-                matrix = xyz_to_linear_srgb_matrix()
-                set_uniform(program, "u_xyz_to_linear_srgb", np.ascontiguousarray(matrix.T, dtype=np.float32))
-                set_uniform(program, "u_xyz", 1)
-            else:
-                if self.weights_path == "baked":
-                    _LOG.info("program %r with baked weights (%d MACs per pixel): the first draw JIT-compiles "
-                              "it, which can take ~25 s at 28k MACs on llvmpipe; Mesa's shader cache keeps it",
-                              name, self.model.macs_per_evaluation)
-                program = compile_program(self.ctx, name, self.defines, self.shader_root, self.overrides)
-                self.model_uniforms(program)
-                if name == "evaluate_keys":
-                    set_uniform(program, "u_inputs", 1)
-                    set_uniform(program, "u_inputs2", 2)
-            self._programs[name] = program
-            self._vertex_arrays[name] = self.ctx.vertex_array(program, [])  # full-screen triangle: no buffers
-        return self._programs[name]
+        if name in self.compiled:
+            return self.compiled[name]
+        if name == "display":  # no network in it: no defines, no model uniforms
+            program = compile_program(self.ctx, name, {}, self.shader_root)
+            matrix = xyz_to_linear_srgb_matrix()
+            set_uniform(program, "u_xyz_to_linear_srgb", np.ascontiguousarray(matrix.T, dtype=np.float32))
+            set_uniform(program, "u_xyz", 1)
+            self.compiled[name] = program
+            self.vertex_arrays[name] = self.ctx.vertex_array(program, [])
+            return program
+        if self.weights_path == "baked":
+            _LOG.info("program %r with baked weights (%d MACs per pixel): the first draw JIT-compiles "
+                      "it, which can take ~25 s at 28k MACs on llvmpipe; Mesa's shader cache keeps it",
+                      name, self.model.macs_per_evaluation)
+        return super().program(name)
 
     def use_weights(self, location: int = 0) -> None:
         """Bind the weight texture to texture unit ``location`` (the programs' ``u_weights`` reads unit 0),
-        for callers that draw a :meth:`program` with their own geometry (viewer.scene); nothing to bind
-        on the baked path."""
+        for callers that draw a :meth:`program` with their own geometry; nothing to bind on the baked path."""
         if self.weights_path == "texture":
             self._weights.use(location=location)
         for index, grid in enumerate(self._grids):  # a feature-grid model's grid textures, on their fixed units
             grid.use(location=_GRID_UNIT + index)
-
-    def _draw(self, name: str, framebuffer: moderngl.Framebuffer,
-              textures: tuple[tuple[moderngl.Texture, int], ...] = (),
-              scissor: tuple[int, int, int, int] | None = None) -> None:
-        """One full-screen triangle into ``framebuffer`` (only inside ``scissor`` = x, y, width, height in GL
-        pixels when given), with blending/depth test off and the caller's framebuffer and enable flags
-        restored afterwards (a window may share this context)."""
-        # Textures are bound by hand: moderngl 5.13's scope(textures=...) left the samplers reading 0.
-        scope = self.ctx.scope(framebuffer, enable_only=moderngl.NOTHING)
-        try:
-            with scope:
-                framebuffer.use()  # the scope binds the framebuffer but leaves the viewport as it was
-                weights = ((self._weights, 0),) if self.weights_path == "texture" else ()
-                weights += tuple((grid, _GRID_UNIT + index) for index, grid in enumerate(self._grids))
-                for texture, unit in (*weights, *textures):
-                    texture.use(location=unit)
-                if scissor is not None:
-                    self.ctx.scissor = scissor
-                try:
-                    self._vertex_arrays[name].render(moderngl.TRIANGLES, vertices=3)
-                finally:
-                    if scissor is not None:
-                        self.ctx.scissor = None
-        finally:
-            scope.release()
 
     # ---------------------------------------------------------------------------------------------
     # Skipping work (issue 5: gratnet/bounds.py, shaders/skip.glsl)
@@ -424,131 +365,6 @@ class NetworkRenderer:
         set_uniform(program, "u_skip_matrix", np.ascontiguousarray(matrix.T, dtype=np.float32))  # GLSL: column-major
         return texture, _SKIP_BOUND_UNIT
 
-    def counting_program(self, name: str) -> tuple[str, moderngl.Program]:
-        """``(key, program)``: program ``name`` compiled with ``COUNT_EVALUATIONS`` (atomic counters in an
-        SSBO; shaders/skip.glsl), cached under ``key`` beside :meth:`program`'s. For measurements only: the
-        atomics cost time, so time renders without it."""
-        key = name + _COUNTING_SUFFIX
-        if key not in self._programs:
-            self.program(name)  # compile errors surface from the plain program first
-            defines = {**self.defines, "COUNT_EVALUATIONS": 1, "SKIP_COUNTER_BINDING": _SKIP_COUNTER_BINDING}
-            program = compile_program(self.ctx, name, defines, self.shader_root, self.overrides)
-            self.model_uniforms(program)
-            self._programs[key] = program
-            self._vertex_arrays[key] = self.ctx.vertex_array(program, [])
-        return key, self._programs[key]
-
-    def depth_only_program(self, name: str) -> moderngl.Program:
-        """Program ``name`` compiled with ``DEPTH_ONLY`` (shaders/surface.glsl: the same vertex stage, an
-        empty fragment stage, no MLP) for a depth pre-pass; it reads only the vertex stage's uniforms."""
-        key = name + _DEPTH_ONLY_SUFFIX
-        if key not in self._programs:
-            self._programs[key] = compile_program(self.ctx, name, {**self.defines, "DEPTH_ONLY": 1},
-                                                  self.shader_root, self.overrides)
-        return self._programs[key]
-
-    def reset_counters(self) -> None:
-        if self._skip_counters is None:
-            self._skip_counters = self.ctx.buffer(reserve=4 * _SKIP_COUNTER_SLOTS)
-        self._skip_counters.write(np.zeros(_SKIP_COUNTER_SLOTS, dtype=np.uint32).tobytes())
-        self._skip_counters.bind_to_storage_buffer(_SKIP_COUNTER_BINDING)
-
-    def read_counters(self, statistics: dict[str, int]) -> None:
-        assert self._skip_counters is not None
-        self.ctx.finish()
-        counts = np.frombuffer(self._skip_counters.read(), dtype=np.uint32)
-        statistics.clear()
-        statistics.update({key: int(counts[k]) for k, key in enumerate(STATISTICS_KEYS)})
-
-    # ---------------------------------------------------------------------------------------------
-    # BRDF slices
-
-    def render_brdf_slice_layers(
-        self, theta_deg: float, phi_deg: float, size: int, exposure: float = 1.0, ior: float | None = 1.5,
-        skip_threshold: float | None = None, statistics: dict[str, int] | None = None,
-        rows: tuple[int, int] | None = None,
-    ) -> tuple[np.ndarray, np.ndarray]:
-        """A BRDF slice (docs/physics.md "BRDF slice") and the network's XYZ behind it.
-
-        Args:
-            skip_threshold: exposed linear sRGB below which the display shows 0 (use
-                :data:`DISPLAY_SKIP_THRESHOLD` for 8-bit display output): the MLP is skipped (and the pixel
-                is 0) where the output bound (:attr:`output_bounds`) cannot reach it. ``None`` or 0: off,
-                the exact linear image (EXR, comparisons).
-            statistics: a dict to fill with the work counters (:data:`STATISTICS_KEYS`); renders with a
-                counting variant of the program (slower: time renders without it).
-            rows: ``(first, end)``: compute only these rows (from the top; a scissor box, so the time is the
-                band's); the other rows are not written. The viewer refines a slice in such bands between frames.
-
-        Returns:
-            ``(exposed, network)``, both ``float32`` ``(size, size, 3)`` with row 0 at the top (as
-            ``gratnet.brdf.slice_view_directions``): ``exposed = exposure · A · XYZ`` (CIE XYZ, linear)
-            and ``network`` = XYZ at each pixel's key vector; both 0 outside the unit disc, and ``network``
-            is 0 where the MLP was skipped (A = 0, or by the bound).
-        """
-        if isinstance(size, bool) or not isinstance(size, (int, np.integer)) or not 1 <= size <= 16384:
-            raise GratNetError(f"slice size must be an integer in 1 … 16384, got {size!r}")
-        if rows is not None and not (0 <= rows[0] < rows[1] <= size):
-            raise GratNetError(f"slice rows must satisfy 0 ≤ first < end ≤ {size}, got {rows!r}")
-        if not all(math.isfinite(value) for value in (theta_deg, phi_deg, exposure)):
-            raise GratNetError(
-                f"light angles and exposure must be finite, got {theta_deg!r}, {phi_deg!r}, {exposure!r}"
-            )
-        name = "brdf_slice"
-        program = self.program(name)
-        if statistics is not None:
-            name, program = self.counting_program(name)
-            self.reset_counters()
-        bound, unit = self.skip_uniforms(program, skip_threshold)
-        set_uniform(program, "u_size", int(size))
-        set_uniform(program, "u_light", tuple(float(c) for c in direction(theta_deg, phi_deg)))
-        set_uniform(program, "u_exposure", float(exposure))
-        set_uniform(program, "u_ior", ior_uniform(ior))
-        targets = [self.ctx.texture((size, size), 4, dtype="f4") for _ in range(2)]
-        framebuffer = self.ctx.framebuffer(color_attachments=targets)
-        try:
-            scissor = None if rows is None else (0, size - rows[1], size, rows[1] - rows[0])  # GL rows: bottom up
-            self._draw(name, framebuffer, ((bound, unit),), scissor)
-            if statistics is not None:
-                self.read_counters(statistics)
-            images = [
-                np.frombuffer(framebuffer.read(components=4, dtype="f4", attachment=k), dtype=np.float32)
-                .reshape(size, size, 4)[::-1, :, :3]  # GL rows start at the bottom; ours at the top
-                .copy()
-                for k in range(2)
-            ]
-        finally:
-            framebuffer.release()
-            for target in targets:
-                target.release()
-        return images[0], images[1]
-
-    def render_brdf_slice(
-        self, theta_deg: float, phi_deg: float, size: int, exposure: float = 1.0, ior: float | None = 1.5,
-        skip_threshold: float | None = None, statistics: dict[str, int] | None = None,
-        rows: tuple[int, int] | None = None,
-    ) -> np.ndarray:
-        """Exposed CIE XYZ of a BRDF slice, ``float32`` ``(size, size, 3)``, row 0 at the top.
-
-        The light is at polar angle ``theta_deg`` and azimuth ``phi_deg``; pixel ``(i, j)`` holds
-        ``exposure · A(ωi, ωo) · XYZ(−(ωi + ωo))`` (eq. 5) for its view direction, 0 outside the disc.
-        ``ior`` is the Fresnel refractive index (``None`` or 0: no Fresnel). ``skip_threshold``,
-        ``statistics`` and ``rows``: see :meth:`render_brdf_slice_layers` (default: no skipping, exact linear
-        values, every row).
-        """
-        return self.render_brdf_slice_layers(theta_deg, phi_deg, size, exposure, ior, skip_threshold,
-                                             statistics, rows)[0]
-
-    def render_brdf_slice_srgb8(
-        self, theta_deg: float, phi_deg: float, size: int, exposure: float = 1.0, ior: float | None = 1.5,
-        skip_threshold: float | None = None, statistics: dict[str, int] | None = None,
-    ) -> np.ndarray:
-        """8-bit display sRGB ``(size, size, 3)`` of a BRDF slice (``gratnet.display``); with
-        ``skip_threshold=gratnet.bounds.DISPLAY_SKIP_THRESHOLD`` the MLP is skipped where the display would
-        show 0 (off by default: the first use per model builds its output bound, minutes on a CPU)."""
-        xyz = self.render_brdf_slice(theta_deg, phi_deg, size, exposure, ior, skip_threshold, statistics)
-        return xyz_to_display_srgb8(np.asarray(xyz, dtype=np.float64), 1.0)
-
     # ---------------------------------------------------------------------------------------------
     # Values at arbitrary inputs (program evaluate_keys)
 
@@ -583,7 +399,7 @@ class NetworkRenderer:
         target = self.ctx.texture((width, height), 4, dtype="f4")
         framebuffer = self.ctx.framebuffer(color_attachments=[target])
         try:
-            self._draw("evaluate_keys", framebuffer, ((inputs[0], 1), (inputs[1], 2)))
+            self.draw("evaluate_keys", framebuffer, ((inputs[0], 1), (inputs[1], 2)))
             data = framebuffer.read(components=4, dtype="f4")
         finally:
             framebuffer.release()
@@ -663,7 +479,7 @@ class NetworkRenderer:
         target = self.ctx.texture((width, height), 4, dtype="f4")
         framebuffer = self.ctx.framebuffer(color_attachments=[target])
         try:
-            self._draw("display", framebuffer, ((source, 1),))
+            self.draw("display", framebuffer, ((source, 1),))
             data = framebuffer.read(components=4, dtype="f4")
         finally:
             framebuffer.release()
@@ -679,18 +495,12 @@ class NetworkRenderer:
 
     def release(self) -> None:
         """Free the GL objects (the context itself belongs to the caller)."""
-        for vertex_array in self._vertex_arrays.values():
-            vertex_array.release()
-        for program in self._programs.values():
-            program.release()
+        self.release_programs()
         self._weights.release()
         for grid in self._grids:
             grid.release()
         self._grids.clear()
         self._skip_placeholder.release()
-        for resource in (self._skip_texture, self._skip_counters):
-            if resource is not None:
-                resource.release()
-        self._skip_texture = self._skip_counters = None
-        self._vertex_arrays.clear()
-        self._programs.clear()
+        if self._skip_texture is not None:
+            self._skip_texture.release()
+        self._skip_texture = None

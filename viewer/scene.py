@@ -52,12 +52,15 @@ import numpy as np
 from gratnet.display import xyz_to_display_srgb8, xyz_to_linear_srgb
 from gratnet.errors import GratNetError
 from gratnet.modelfile import ModelFile
+from gratnet.volume import Volume
 from viewer.antialias import check_offsets, sample_range_offsets
 from viewer.camera import Camera, Light
 from viewer.deferred import DeferredRenderer
 from viewer.forward import ForwardRenderer
 from viewer.meshes import Mesh
-from viewer.renderer import NetworkRenderer, skip_threshold_value
+from viewer.reference import ReferenceRenderer
+from viewer.renderer import NetworkRenderer
+from viewer.shading import ShadingPrograms, skip_threshold_value
 from viewer.surface import MeshBuffers, check_size, upload_mesh
 
 __all__ = ["PROBE_SIZE", "RENDER_PATHS", "SceneRenderer", "check_render_path", "choose_render_path",
@@ -101,21 +104,42 @@ class SceneRenderer:
         measure_render_path: ``auto`` may time both paths when nothing is cached (False: ``forward`` then;
             the viewer, whose compile process measures off the window's thread).
 
+        reference_precision: a reference scene's texture storage (:data:`gratnet.reference.PRECISIONS`).
+
+    ``model`` may also be a ground-truth :class:`~gratnet.volume.Volume`: a *reference* scene, the volume looked
+    up where the network would run (:mod:`viewer.reference`), on the forward path only.
+
     Attributes:
-        network: the :class:`~viewer.renderer.NetworkRenderer` (weights, programs, BRDF slices).
+        network: the :class:`~viewer.renderer.NetworkRenderer` (weights, programs, BRDF slices); None in a
+            reference scene.
+        reference: the :class:`~viewer.reference.ReferenceRenderer` of a reference scene, else None.
+        shading: whichever of the two this scene draws with.
+        model: the network's model file (None in a reference scene).
         forward, deferred: the two paths (:class:`~viewer.forward.ForwardRenderer`,
-            :class:`~viewer.deferred.DeferredRenderer`); each compiles nothing until used.
+            :class:`~viewer.deferred.DeferredRenderer`, None in a reference scene); each compiles nothing until used.
     """
 
-    def __init__(self, ctx: moderngl.Context, model: ModelFile, shader_root: str | Path | None = None,
+    def __init__(self, ctx: moderngl.Context, model: ModelFile | Volume, shader_root: str | Path | None = None,
                  weights_path: str = "auto", baked_source: str | None = None, render_path: str = "auto",
-                 deferred_weights: str = "auto", measure_render_path: bool = True) -> None:
+                 deferred_weights: str = "auto", measure_render_path: bool = True,
+                 reference_precision: str = "float16") -> None:
         self._requested_path = check_render_path(render_path)
         self.ctx = ctx
-        self.network = NetworkRenderer(ctx, model, shader_root, weights_path, baked_source)
-        self.model = model
-        self.forward = ForwardRenderer(self.network)
-        self.deferred = DeferredRenderer(self.network, deferred_weights)
+        self.network: NetworkRenderer | None = None
+        self.reference: ReferenceRenderer | None = None
+        self.deferred: DeferredRenderer | None = None
+        self.shading: ShadingPrograms
+        if isinstance(model, Volume):  # the reference: the forward path's programs with the look-up for the MLP
+            self.reference = ReferenceRenderer(ctx, model, shader_root, reference_precision)
+            self.shading = self.reference
+            self._requested_path = "forward"
+            self.model = None
+        else:
+            self.network = NetworkRenderer(ctx, model, shader_root, weights_path, baked_source)
+            self.shading = self.network
+            self.model = model
+            self.deferred = DeferredRenderer(self.network, deferred_weights)
+        self.forward = ForwardRenderer(self.shading)
         self._render_path: tuple[str, str] | None = None
         self._measure_render_path = measure_render_path
 
@@ -131,7 +155,10 @@ class SceneRenderer:
 
     def _resolved_path(self) -> tuple[str, str]:
         if self._render_path is None:
-            self._render_path = choose_render_path(self, self._requested_path, self._measure_render_path)
+            if self.reference is not None:
+                self._render_path = "forward", "reference: the look-up runs on the forward path"
+            else:
+                self._render_path = choose_render_path(self, self._requested_path, self._measure_render_path)
         return self._render_path
 
     @property
@@ -194,6 +221,8 @@ class SceneRenderer:
         path = self.render_path if render_path is None else render_path
         if path not in ("forward", "deferred"):
             raise GratNetError(f"a render takes the forward or the deferred path, got {render_path!r}")
+        if path == "deferred" and self.deferred is None:
+            raise GratNetError("a reference render takes the forward path only")
         return self._render(mesh, camera, light, size, exposure, ior, 1, skip_threshold, depth_prepass,
                             statistics, offsets, path)[0]
 
@@ -213,7 +242,7 @@ class SceneRenderer:
         skip_threshold_value(skip_threshold)
         uploaded = mesh if isinstance(mesh, MeshBuffers) else self.upload(mesh)
         try:
-            if path == "deferred":  # all samples in one list; render_layers stays forward
+            if path == "deferred" and self.deferred is not None:  # all samples in one list; render_layers: forward
                 return [self.deferred.render(uploaded, camera, light, (width, height), exposure, ior, skip_threshold,
                                              statistics, offsets)]
             return self.forward.render(uploaded, camera, light, (width, height), exposure, ior, layers,
@@ -247,8 +276,8 @@ class SceneRenderer:
     def render_brdf_slice(self, theta_deg: float, phi_deg: float, size: int, exposure: float = 1.0,
                           ior: float | None = 1.5, skip_threshold: float | None = None,
                           statistics: dict[str, int] | None = None, rows: tuple[int, int] | None = None) -> np.ndarray:
-        """The network's BRDF slice (``NetworkRenderer.render_brdf_slice``): exposed XYZ ``(size, size, 3)``."""
-        return self.network.render_brdf_slice(theta_deg, phi_deg, size, exposure, ior, skip_threshold, statistics,
+        """The material's BRDF slice (``ShadingPrograms.render_brdf_slice``): exposed XYZ ``(size, size, 3)``."""
+        return self.shading.render_brdf_slice(theta_deg, phi_deg, size, exposure, ior, skip_threshold, statistics,
                                               rows)
 
     # ---------------------------------------------------------------------------------------------
@@ -274,8 +303,9 @@ class SceneRenderer:
     def release(self) -> None:
         """Free the GL objects (the context belongs to the caller)."""
         self.forward.release()
-        self.deferred.release()
-        self.network.release()
+        if self.deferred is not None:
+            self.deferred.release()
+        self.shading.release()
 
 
 # -------------------------------------------------------------------------------------------------
@@ -291,11 +321,13 @@ def render_path_cache_file() -> Path:
 
 def _cache_key(scene: SceneRenderer) -> str:
     """GL_RENDERER, the network's shape and where both paths read the weights: what the verdict depends on."""
-    network = scene.network
+    network, deferred = scene.network, scene.deferred
+    if network is None or deferred is None:
+        raise GratNetError("a reference scene has one render path: nothing to measure")
     model = network.model
     return (f"v{_CACHE_VERSION}|{scene.ctx.info.get('GL_RENDERER', '?')}|{'-'.join(map(str, model.layer_sizes))}|"
             f"{model.activation}|{model.encoding.frequencies},{model.encoding.t_frequencies}|{network.weights_path}|"
-            f"{scene.deferred.weights}|{_grid_signature(model)}")
+            f"{deferred.weights}|{_grid_signature(model)}")
 
 
 def _grid_signature(model: ModelFile) -> str:
