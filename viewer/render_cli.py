@@ -12,6 +12,9 @@
   ``--point-light X,Y,Z`` (metres; irradiance 1 at 1 m, falling as 1/d²).
 - ``--camera DIST,AZIMUTH,ELEVATION``: an orbit camera around the origin (metres, degrees).
 - ``--slice``: instead of a mesh, the network's BRDF slice for the light θ,φ (physics.md "BRDF slice").
+- ``--reference VOLUME.exr``: the ground-truth volume looked up instead of the network (viewer.reference); with
+  ``--material`` it must be that material's surface (source and σs) and the view is the material's; alone, the
+  fallback view and an exposure that puts the brightest 0.5 % of the lit pixels at white.
 - ``--spp N``: N samples per pixel (anti-aliasing: the mean of N renders at sub-pixel offsets, each its own
   key vector; the same flag and meaning as ``gratnet mitsuba-render``); default 1.
 - Output: ``.png`` = display sRGB, 8-bit (``gratnet.display``, like every GratNet PNG); ``.exr`` = linear
@@ -28,10 +31,12 @@ from __future__ import annotations
 import argparse
 import dataclasses
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from gratnet.config import add_arguments, add_quiet_flag, from_arguments
 from gratnet.errors import GratNetError
 from viewer.scene_config import (
+    DEFAULT_MATERIAL,
     MAX_SAMPLES,
     RenderConfig,
     add_scene_arguments,
@@ -39,8 +44,14 @@ from viewer.scene_config import (
     resolve_scene_command,
     scene_fields,
     warn_if_black,
+    with_fallback,
     write_render,
 )
+
+if TYPE_CHECKING:
+    import numpy as np
+
+    from gratnet.volume import Volume
 
 __all__ = ["register", "resolve_config", "run"]
 
@@ -54,13 +65,18 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         "network's BRDF slice. Headless OpenGL (EGL).",
         epilog="typical use:\n"
         "  gratnet render --material blazed --mesh cd --size 512,512 --out cd.png\n"
-        "  gratnet render --material blazed --slice --light 30,0 --size 256,256 --out slice.exr",
+        "  gratnet render --material blazed --slice --light 30,0 --size 256,256 --out slice.exr\n"
+        "  gratnet render --material paper-cd --reference paper-cd.exr --mesh cd --out truth.png",
     )
     parser.add_argument("--out", required=True, metavar="IMAGE.png|IMAGE.exr",
                         help="output: .png (display sRGB, 8-bit) or .exr (linear sRGB float, R G B)")
     add_scene_arguments(parser, point_light="point light position in metres instead of --light (irradiance 1 at 1 m)")
     add_quiet_flag(parser)
-    add_arguments(parser, RenderConfig)
+    actions = add_arguments(parser, RenderConfig)
+    # None when left out: --reference without --material renders the volume alone (no network, no model).
+    actions["material"].default = None
+    actions["material"].help = (f"{actions['material'].help.rsplit(' (default', 1)[0]} (default: "
+                                f"{DEFAULT_MATERIAL}; none with --reference)")
     parser.set_defaults(handler=run)
 
 
@@ -76,7 +92,45 @@ def resolve_config(arguments: argparse.Namespace) -> RenderConfig:
         raise GratNetError(f"--spp (samples per pixel) must be an integer in 1 … {MAX_SAMPLES}, got {config.spp}")
     if config.slice and config.spp != 1:
         raise GratNetError("--spp applies to mesh renders; --slice renders the BRDF slice at one sample per pixel")
+    if config.reference and config.skip_dark:
+        raise GratNetError("--skip-dark skips the network by its output bound; a --reference render looks up every "
+                           "pixel")
     return config
+
+
+def _check_reference(config: RenderConfig, model_path: Path | None) -> Volume:
+    """The --reference volume, checked from its headers (scheme, texture size, and with --material its source
+    and σs against the material's training volume) before its pixels are read (their checksums then)."""
+    from gratnet.modelfile import load_model
+    from gratnet.reference import check_volume_matches
+    from gratnet.volume import read_volume, read_volume_header
+    from viewer.reference import check_reference_limits
+
+    path = Path(config.reference)
+    header = read_volume_header(path)
+    if header.metadata.get("scheme") not in ("regular", "simple", "simple-max"):
+        raise GratNetError(f"--reference {path}: the volume names no sampling scheme (regular, simple, simple-max)")
+    check_reference_limits(header.slices, header.resolution, config.reference_precision, name=f"--reference {path}")
+    if model_path is not None:
+        trained_on = load_model(model_path).metadata.get("volume")
+        check_volume_matches(header.metadata, trained_on if isinstance(trained_on, dict) else {},
+                             f"--reference {path}", f"--material {config.material}")
+    return read_volume(path)
+
+
+def _auto_exposure(xyz: np.ndarray) -> float:
+    """The exposure that puts the brightest 0.5 % of the lit pixels at display white (largest linear sRGB
+    channel), for a picture rendered at exposure 1; 1 when nothing is lit."""
+    import numpy as np
+
+    from gratnet.display import xyz_to_linear_srgb
+
+    peak = np.max(xyz_to_linear_srgb(np.asarray(xyz, dtype=np.float64)), axis=-1)
+    lit = peak[peak > 0.0]
+    if lit.size == 0:
+        return 1.0
+    exposure = 1.0 / float(np.percentile(lit, 99.5))
+    return float(f"{exposure:.3g}") if np.isfinite(exposure) and exposure > 0.0 else 1.0
 
 
 def run(arguments: argparse.Namespace) -> int:
@@ -88,6 +142,14 @@ def run(arguments: argparse.Namespace) -> int:
     from viewer.catalog import build_mesh, resolve_material
 
     out = Path(arguments.out)
+    reference_only = bool(arguments.reference) and arguments.material is None
+    if arguments.material is None:
+        arguments.material = DEFAULT_MATERIAL
+    auto_exposure = reference_only and arguments.exposure is None
+    if reference_only:  # no material to derive the defaults from: the fallback view, exposure from the picture
+        probe = with_fallback(arguments)
+        arguments.light_text, arguments.camera_text, arguments.exposure = (probe.light_text, probe.camera_text,
+                                                                            probe.exposure)
     config = resolve_scene_command(arguments, resolve_config)
     if config.skip_dark and out.suffix.lower() != ".png":
         raise GratNetError("--skip-dark applies to .png output only: an EXR keeps values below the display's step")
@@ -95,8 +157,9 @@ def run(arguments: argparse.Namespace) -> int:
                     fov_deg=config.fov_degrees)
     light = (Light.point(config.point_light) if config.point_light is not None
              else Light.directional(config.light_theta_degrees, config.light_phi_degrees))
-    model_path = resolve_material(config.material)
-    model = load_model(model_path)
+    model_path = None if reference_only else resolve_material(config.material)
+    volume = _check_reference(config, model_path) if config.reference else None
+    model = volume if volume is not None else load_model(model_path)
     mesh = None if config.slice else build_mesh(config.mesh)
 
     from gratnet.bounds import DISPLAY_SKIP_THRESHOLD
@@ -107,12 +170,13 @@ def run(arguments: argparse.Namespace) -> int:
     skip_threshold = DISPLAY_SKIP_THRESHOLD if config.skip_dark else None
     ctx = create_headless_context()
     try:
-        with SceneRenderer(ctx, model, weights_path=config.weights_path, render_path=config.render_path) as renderer:
+        with SceneRenderer(ctx, model, weights_path=config.weights_path, render_path=config.render_path,
+                           reference_precision=config.reference_precision) as renderer:
             # A BRDF slice has one path (a full-screen fragment pass); a mesh takes the one chosen.
             resolved = ({"path": "forward", "reason": "BRDF slices are rendered by the fragment pass only"}
                         if config.slice else {"path": renderer.render_path, "reason": renderer.render_path_reason})
             if config.slice:
-                xyz = renderer.network.render_brdf_slice(config.light_theta_degrees, config.light_phi_degrees,
+                xyz = renderer.shading.render_brdf_slice(config.light_theta_degrees, config.light_phi_degrees,
                                                          config.width, config.exposure, config.effective_ior,
                                                          skip_threshold=skip_threshold)
             else:
@@ -122,12 +186,29 @@ def run(arguments: argparse.Namespace) -> int:
         ctx.release()
     if not np.all(np.isfinite(xyz)):
         raise GratNetError("the render contains NaN or inf; nothing was written (please report this)")
+    if auto_exposure:  # rendered at exposure 1; the picture is linear in it
+        exposure = _auto_exposure(xyz)
+        xyz = xyz * exposure
+        config = dataclasses.replace(config, exposure=exposure)
+    if reference_only:
+        config = dataclasses.replace(config, material="")
 
-    write_render(out, xyz, render=config, model_file=str(model_path), render_path=resolved)
+    documents: dict[str, object] = {"render": config, "render_path": resolved}
+    if model_path is not None:
+        documents["model_file"] = str(model_path)
+    if volume is not None:
+        documents["reference"] = {"file": str(Path(config.reference).resolve()), "slices": volume.slices,
+                                  "resolution": volume.resolution, "scheme": volume.metadata.get("scheme"),
+                                  "source": volume.metadata.get("source"), "precision": config.reference_precision}
+    write_render(out, xyz, **documents)
     what = (f"BRDF slice, light θ={config.light_theta_degrees:g}° φ={config.light_phi_degrees:g}°" if config.slice
             else f"mesh {config.mesh}")
     samples = "" if config.slice else f", {config.spp} spp"
-    print(f"wrote {out}: {Path(model_path).parent.name if model_path.name == 'model.npz' else model_path.name}, "
-          f"{what}, {config.width}×{config.height}{samples}, exposure {config.exposure:g}")
+    if model_path is None:
+        source = f"reference {Path(config.reference).name}"
+    else:
+        source = model_path.parent.name if model_path.name == "model.npz" else model_path.name
+        source += f" (reference {Path(config.reference).name})" if volume is not None else ""
+    print(f"wrote {out}: {source}, {what}, {config.width}×{config.height}{samples}, exposure {config.exposure:g}")
     warn_if_black(xyz, config.exposure)
     return 0

@@ -33,8 +33,9 @@ from viewer.defaults import FALLBACK, FOV_DEGREES, SceneDefaults, resolve_defaul
 
 ConfigT = TypeVar("ConfigT")
 
-__all__ = ["MAX_SAMPLES", "RENDER_PATHS", "RENDER_PATH_HELP", "WEIGHT_PATHS", "RenderConfig", "SceneConfig",
-           "add_scene_arguments", "check_scene", "check_scene_numbers", "fill_scene_defaults", "parse_size",
+__all__ = ["DEFAULT_MATERIAL", "MAX_SAMPLES", "RENDER_PATHS", "RENDER_PATH_HELP", "WEIGHT_PATHS", "RenderConfig",
+           "SceneConfig", "add_scene_arguments", "check_scene", "check_scene_numbers", "fill_scene_defaults",
+           "parse_size",
            "resolve_scene_command", "scene_fields", "warn_if_black", "with_fallback", "write_render"]
 _OUTPUT_SUFFIXES = (".png", ".exr")
 #: Largest --spp of ``gratnet render``: viewer.antialias.MAX_SAMPLES (repeated: this module defers numpy).
@@ -51,11 +52,15 @@ RENDER_PATH_HELP = ("mesh renders: forward (the network in the fragment shader),
 _SRGB_CHROMATICITIES = (0.64, 0.33, 0.30, 0.60, 0.15, 0.06, 0.3127, 0.3290)
 
 
+#: The material of a render or view whose --material is left out.
+DEFAULT_MATERIAL = "blazed"
+
+
 @dataclasses.dataclass
 class SceneConfig:
     """One light, an orbit camera, a material on a mesh: what every rendering command shares."""
 
-    material: str = config_field("blazed", "shipped material name (assets/NAME/model.npz) or a model-file path")
+    material: str = config_field(DEFAULT_MATERIAL, "shipped material name (assets/NAME/model.npz) or a model-file path")
     mesh: str = config_field("cd", "cd, sphere, plane, or the path of a Wavefront .obj file (metres, +z up)")
     light_theta_degrees: float = config_field(FALLBACK.light_theta_degrees,
                                               "directional light: polar angle from +z, degrees", cli=False)
@@ -98,6 +103,15 @@ class RenderConfig(SceneConfig):
     skip_dark: bool = config_field(
         False, "PNG only: skip the network where exposure · A · (the model's cached output bound) cannot reach the "
         "display's smallest step; the first use per model builds the bound (minutes on a CPU)")
+    reference: str = config_field(
+        "", "a ground-truth volume (gratnet groundtruth's EXR) to render instead of the network: the volume looked "
+        "up per pixel (trilinear, exact at its samples) with the same A-term, Fresnel and exposure; with --material "
+        "the volume must come from the material's surface; without it, an unset --exposure puts the picture's "
+        "brightest 0.5 %% at white", metavar="VOLUME.exr")
+    reference_precision: str = config_field(
+        "float16", "storage of the --reference texture: float16 (XYZ·2^15: 11 significant bits for values down to "
+        "2e-9 of a mirror's peak; 66 MB for 11 slices of 1001²) or float32 (exact, twice the memory)",
+        choices=("float16", "float32"))
     spp: int = config_field(
         1, f"samples per pixel (anti-aliasing; 1 … {MAX_SAMPLES}, typical: 1, 4, 16, 64): the mean of renders at "
         "sub-pixel offsets (Halton 2,3; the first at the pixel centre); costs about spp × one render. As "
