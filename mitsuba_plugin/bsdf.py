@@ -3,7 +3,10 @@
 
 Plugin properties (XML / ``mi.load_dict``):
 
-- ``filename`` (string): the model file (``assets/NAME/model.npz`` or any ``gratnet train`` output);
+- ``filename`` (string): the material, as ``gratnet render --material`` takes it: a shipped name (``cd``,
+  ``paper-cd``: ``assets/NAME/model.npz``) or a model file (any ``gratnet train`` output). A relative path is
+  looked up as Mitsuba looks up its own files (``mi.file_resolver()``: the scene file's folder first while
+  ``mi.load_file`` reads it), then in the current directory;
 - ``ior`` (float, default 1.5): the A-term's Fresnel refractive index; 0 turns Fresnel off (R/R0 = 1);
 - ``tangent_attribute`` (string, default ``""``): name of a per-vertex 3-vector mesh attribute holding the
   tangent (the height field's x on the surface), interpolated like the GL runtime's ``in_tangent``;
@@ -12,6 +15,15 @@ Plugin properties (XML / ``mi.load_dict``):
 - ``specular_probability`` (float in [0, 1], default 0.5) and ``lobe_degrees`` (float > 0, default 2):
   the sampling mixture (``mitsuba_plugin.shading``): that share of samples from a vMF lobe of that angular
   standard deviation around the mirror direction, the rest cosine-weighted.
+
+Tangent: the height field's x follows ``tangent_attribute`` where the mesh has it, else ∂p/∂u of the mesh's
+UVs; a mesh with neither gets an arbitrary tangent, so an arbitrary diffraction direction: the plugin warns
+once per mesh (the ``gratnet.mitsuba`` logger: ``gratnet mitsuba-render`` prints it on one line; a script
+without logging set up gets it on stderr).
+
+Errors: bad properties, an unknown material or a missing file raise one GratNetError line starting with
+:data:`ERROR_PREFIX`; Mitsuba wraps it ("failed to instantiate ... plugin of type gratnet", and a short Python
+traceback), and :func:`plugin_message` takes the plugin's line back out (``mitsuba_plugin.runtime.plugin_errors``).
 
 Values: ``eval`` = BSDF × cos θ of the light-side direction = ``A · XYZ → linear sRGB`` in radiance
 transport (what the GL runtime shades per unit light). The implied BSDF, ``A · XYZ / cos θ_light``, is not
@@ -22,7 +34,10 @@ Only RGB variants (the colour is linear sRGB).
 from __future__ import annotations
 
 import functools
+import logging
 import math
+import threading
+from collections.abc import Callable
 from pathlib import Path
 from types import ModuleType
 from typing import Any
@@ -39,9 +54,16 @@ from mitsuba_plugin.shading import (
     xyz_to_linear_srgb_matrix,
 )
 
-__all__ = ["PLUGIN_NAME", "bsdf_class", "check_ior", "register"]
+__all__ = ["ERROR_PREFIX", "LOGGER", "PLUGIN_NAME", "PROPERTIES", "bsdf_class", "check_ior", "file_resolver",
+           "no_tangent_warning", "plugin_message", "register", "resolve_model", "search_folders"]
 
 PLUGIN_NAME = "gratnet"
+#: The properties the plugin takes (any other is refused, with this list).
+PROPERTIES = ("filename", "ior", "tangent_attribute", "specular_probability", "lobe_degrees")
+#: Start of every error message of the plugin (what :func:`plugin_message` looks for in Mitsuba's wrapping).
+ERROR_PREFIX = "gratnet BSDF: "
+#: Where the plugin's warnings go (``gratnet`` commands print the ``gratnet`` loggers on stderr, one line each).
+LOGGER = logging.getLogger("gratnet.mitsuba")
 
 
 @functools.lru_cache(maxsize=8)
@@ -49,10 +71,45 @@ def _cached_model(path: str, modified_ns: int) -> ModelFile:
     return load_model(path)
 
 
-def _model(filename: str) -> ModelFile:
-    path = Path(filename).expanduser()
-    if not path.is_file():
-        raise GratNetError(f"gratnet BSDF: model file {filename!r} does not exist")
+def search_folders(resolver: Any = None) -> list[str]:
+    """The folders a relative ``filename`` is looked up in: the file resolver's (the scene file's folder first
+    while Mitsuba loads it), then the current directory, without repeats."""
+    folders = [str(folder) for folder in resolver] if resolver is not None else []
+    folders.append(str(Path.cwd()))
+    return list(dict.fromkeys(folders))
+
+
+def resolve_model(name: str, resolver: Any = None) -> Path:
+    """The model file that the ``filename`` property names: a shipped material (``cd``, ``paper-cd``), else a
+    file, relative ones looked up through ``resolver`` (a ``mi.FileResolver``, or None) and then the current
+    directory (viewer.catalog.resolve_material, as ``gratnet render --material``). One GratNetError line
+    otherwise: an unknown name lists the shipped materials, a missing file the folders searched."""
+    from viewer.catalog import resolve_material, shipped_materials
+
+    text = name.strip()
+    shipped = shipped_materials()
+    if not text:
+        raise GratNetError(f"give the material as the 'filename' property: a shipped name ({', '.join(shipped)}) "
+                           "or a model file")
+    if text in shipped:
+        return resolve_material(text)
+    path = Path(text).expanduser()
+    if resolver is not None and not path.is_absolute():
+        found = Path(str(resolver.resolve(str(path))))
+        if found.is_file():
+            path = found
+    if path.is_file():
+        return resolve_material(str(path))
+    where = "" if path.is_absolute() else f" (looked in {', '.join(search_folders(resolver))})"
+    if path.is_dir():
+        raise GratNetError(f"model file {text!r} is a folder, not a file{where}")
+    if any(mark in text for mark in ("/", "\\")) or path.suffix:
+        raise GratNetError(f"model file {text!r} not found{where}")
+    raise GratNetError(f"unknown material {text!r}: neither a shipped material (choose {', '.join(shipped)}) nor a "
+                       f"model file{where}")
+
+
+def _model(path: Path) -> ModelFile:
     return _cached_model(str(path.resolve()), path.stat().st_mtime_ns)
 
 
@@ -65,17 +122,64 @@ def check_ior(ior: float) -> float | None:
 
 
 def _checked(value: float, name: str, low: float, high: float, low_open: bool = False) -> float:
-    value = float(value)
     if not (math.isfinite(value) and (low < value if low_open else low <= value) and value <= high):
-        raise GratNetError(f"gratnet BSDF: {name} must be in {'(' if low_open else '['}{low:g}, {high:g}], "
+        raise GratNetError(f"{name} must be in {'(' if low_open else '['}{low:g}, {high:g}], got {value!r}")
+    return value
+
+
+def _number(props: Any, name: str, default: float) -> float:
+    value = props.get(name, default)
+    if isinstance(value, bool) or not isinstance(value, (int, float)):
+        raise GratNetError(f"property {name!r} must be a number (<float name=\"{name}\" value=\"...\"/>), "
+                           f"got {value!r}")
+    return float(value)
+
+
+def _string(props: Any, name: str, default: str) -> str:
+    value = props.get(name, default)
+    if not isinstance(value, str):
+        raise GratNetError(f"property {name!r} must be a string (<string name=\"{name}\" value=\"...\"/>), "
                            f"got {value!r}")
     return value
+
+
+def plugin_message(error: BaseException) -> str | None:
+    """The plugin's own one-line message inside an error Mitsuba raised while instantiating it (Mitsuba
+    wraps it in "failed to instantiate ... plugin of type gratnet" and a Python traceback), or None when the
+    error is not the plugin's."""
+    text = str(error)
+    start = text.rfind(ERROR_PREFIX)
+    if start < 0:
+        return None
+    return text[start:].splitlines()[0].strip()
+
+
+def file_resolver(mi: ModuleType) -> Any:
+    """Mitsuba's file resolver for this thread (``mi.file_resolver()``; ``mi.Thread.thread().file_resolver()``
+    before Mitsuba 3.6), or None."""
+    if hasattr(mi, "file_resolver"):
+        return mi.file_resolver()
+    thread = mi.Thread.thread()
+    return thread.file_resolver() if thread is not None else None
+
+
+def no_tangent_warning(mesh: str, reason: str) -> str:
+    """The warning for a mesh whose tangent is arbitrary (``reason``: why, e.g. "has no UV coordinates")."""
+    return (f"mesh {mesh!r} {reason}: its tangent, and so the direction of the diffraction, is arbitrary there; "
+            "give it UV coordinates (the tangent follows ∂p/∂u) or a per-vertex tangent attribute")
 
 
 def register(mi: ModuleType) -> None:
     """Register the ``gratnet`` BSDF for Mitsuba's current variant (idempotent)."""
     cls = bsdf_class(mi.variant())
-    mi.register_bsdf(PLUGIN_NAME, lambda props: cls(props))
+
+    def create(props: Any) -> Any:
+        try:
+            return cls(props)
+        except GratNetError as error:  # one line, and the shortest traceback Mitsuba's wrapping can show
+            raise GratNetError(ERROR_PREFIX + " ".join(str(error).split())) from None
+
+    mi.register_bsdf(PLUGIN_NAME, create)
 
 
 @functools.cache
@@ -112,31 +216,81 @@ def bsdf_class(variant: str) -> type:
     def to_colour(values: np.ndarray) -> Any:
         return mi.Color3f(*(to_float(values[:, k]) for k in range(3)))
 
+    def has_uvs(shape: Any) -> bool:
+        """False for a mesh without texture coordinates (its ∂p/∂u, so Mitsuba's tangent, is arbitrary)."""
+        if not shape.is_mesh():
+            return True  # Mitsuba's analytic shapes have their own parameterisation
+        method = getattr(shape, "has_vertex_texcoords", None)
+        if method is not None:
+            return bool(method())
+        # JIT variants hand a lane's shape over as mi.Shape, without the Mesh methods: read its parameters.
+        params = mi.traverse(shape)
+        return "vertex_texcoords" not in params or dr.width(params["vertex_texcoords"]) > 0
+
     class GratNetBSDF(mi.BSDF):
         """A GratNet network as a Mitsuba BSDF (see the module docstring)."""
 
         def __init__(self, props: Any) -> None:
             mi.BSDF.__init__(self, props)
-            self.filename = str(props.get("filename", ""))
-            if not self.filename:
-                raise GratNetError("gratnet BSDF: give the model file as the 'filename' property")
-            self.model = _model(self.filename)
-            self.ior = check_ior(props.get("ior", 1.5))
-            self.tangent_attribute = str(props.get("tangent_attribute", ""))
-            self.specular_probability = _checked(props.get("specular_probability", 0.5), "specular_probability",
-                                                 0.0, 1.0)
-            self.lobe_degrees = _checked(props.get("lobe_degrees", 2.0), "lobe_degrees", 0.0, 90.0, low_open=True)
+            self.filename = _string(props, "filename", "")
+            self.model_path = resolve_model(self.filename, file_resolver(mi))
+            self.model = _model(self.model_path)
+            self.ior = check_ior(_number(props, "ior", 1.5))
+            self.tangent_attribute = _string(props, "tangent_attribute", "")
+            self.specular_probability = _checked(_number(props, "specular_probability", 0.5),
+                                                 "specular_probability", 0.0, 1.0)
+            self.lobe_degrees = _checked(_number(props, "lobe_degrees", 2.0), "lobe_degrees", 0.0, 90.0,
+                                         low_open=True)
+            unknown = [name for name in props.unqueried() if name not in PROPERTIES]
+            if unknown:
+                raise GratNetError(f"unknown propert{'ies' if len(unknown) > 1 else 'y'} "
+                                   f"{', '.join(map(repr, unknown))}; the gratnet BSDF takes {', '.join(PROPERTIES)}")
             self.kappa = kappa_for_lobe(self.lobe_degrees)
             self.matrix = xyz_to_linear_srgb_matrix()
             self.m_flags = flags
             self.m_components = [flags]
+            # Shapes seen so far (registry id, or the object's address in scalar variants) → whether they carry
+            # the tangent attribute; a lock because scalar variants call from Mitsuba's render threads.
+            self.shapes_seen: dict[int, bool] = {}
+            self.shapes_lock = threading.Lock()
 
         # -- frames -------------------------------------------------------------------------------
-        def _rotation(self, si: Any, active: Any, count: int) -> np.ndarray | None:
+        def _distinct_shapes(self, si: Any) -> dict[int, Callable[[], Any]]:
+            """Key (registry id; the object's address in scalar variants) → getter of each shape behind ``si``'s
+            lanes (none for interactions without a shape)."""
+            if scalar:
+                shape = si.shape
+                return {} if shape is None else {int(shape.ptr): lambda: shape}
+            ids = np.asarray(dr.reinterpret_array(mi.UInt32, si.shape)).reshape(-1)
+            if ids.size == 0:
+                return {}
+            distinct = [int(ids[0])] if np.all(ids == ids[0]) else [int(key) for key in np.unique(ids)]
+            return {key: functools.partial(lambda key: si.shape[int(np.flatnonzero(ids == key)[0])], key)
+                    for key in distinct if key != 0}
+
+        def _with_tangents(self, si: Any) -> bool:
+            """Whether a shape behind ``si`` has the tangent attribute; the first time a mesh with neither it nor
+            UVs shows up, one warning: its tangent, so the diffraction's direction, is Mitsuba's arbitrary one."""
+            shapes = self._distinct_shapes(si)
+            for key, get in shapes.items():
+                if key in self.shapes_seen:
+                    continue
+                shape = get()
+                has = bool(self.tangent_attribute) and bool(shape.has_attribute(self.tangent_attribute))
+                with self.shapes_lock:
+                    first = key not in self.shapes_seen
+                    self.shapes_seen[key] = has
+                if first and not has and not has_uvs(shape):
+                    reason = "has no UV coordinates" + (f" and no {self.tangent_attribute!r} attribute"
+                                                        if self.tangent_attribute else "")
+                    LOGGER.warning(ERROR_PREFIX + no_tangent_warning(shape.id() or type(shape).__name__, reason))
+            return any(self.shapes_seen[key] for key in shapes)
+
+        def _rotation(self, si: Any, count: int) -> np.ndarray | None:
             """(cos α, sin α) per lane: the mesh tangent in Mitsuba's shading frame, or None (use it as is)."""
-            if not self.tangent_attribute:
+            if not self._with_tangents(si) or not self.tangent_attribute:
                 return None
-            tangent = si.shape.eval_attribute_3(self.tangent_attribute, si, active)
+            tangent = si.shape.eval_attribute_3(self.tangent_attribute, si, True)  # 0 on shapes without it
             world = vectors(tangent, count)
             along_s = np.sum(world * vectors(si.sh_frame.s, count), axis=-1)
             along_t = np.sum(world * vectors(si.sh_frame.t, count), axis=-1)
@@ -161,7 +315,7 @@ def bsdf_class(variant: str) -> type:
             result = np.zeros((count, 3))
             if not ctx.is_enabled(mi.BSDFFlags.GlossyReflection) or not np.any(active):
                 return result
-            rotation = self._rotation(si, True, count)
+            rotation = self._rotation(si, count)
             wi_t, wo_t = self._to_tangent_frame(wi, rotation), self._to_tangent_frame(wo, rotation)
             lanes_on = np.flatnonzero(active)
             if ctx.mode == mi.TransportMode.Importance:  # si.wi is the light side
@@ -218,7 +372,7 @@ def bsdf_class(variant: str) -> type:
             pass
 
         def to_string(self) -> str:
-            return (f"GratNetBSDF[filename={self.filename!r}, ior={self.ior}, tangent_attribute="
+            return (f"GratNetBSDF[filename={self.filename!r} ({self.model_path}), ior={self.ior}, tangent_attribute="
                     f"{self.tangent_attribute!r}, specular_probability={self.specular_probability}, "
                     f"lobe_degrees={self.lobe_degrees}]")
 

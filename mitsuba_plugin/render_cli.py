@@ -14,6 +14,8 @@ picture that is 99 % black on the display draws the same warning. With one light
 Output: ``.png`` = display sRGB, 8-bit (``gratnet.display``); ``.exr`` = linear sRGB float32 R, G, B,
 exposure applied, unclipped. The resolved config is saved beside it (``NAME.config.json``); the two land
 together (gratnet.atomic), and both are checked before any work.
+Progress: a bar (stderr; off with --quiet) advancing after each pass of a few samples per pixel. Ctrl-C
+stops within a fraction of a second (the next BSDF call), writes nothing and exits 130 with one line.
 Needs the ``mitsuba`` extra (``pip install -e '.[mitsuba]'``).
 """
 
@@ -174,13 +176,17 @@ def run(arguments: argparse.Namespace) -> int:
                                 lobe_degrees=config.lobe_degrees),
         mitsuba_scene.sensor(mi, camera, config.width, config.height, config.spp),
         mitsuba_scene.emitters(light, environment, config.environment_scale),
-        integrator=config.integrator, max_depth=config.max_depth)
+        integrator=config.integrator, max_depth=config.max_depth, mesh_name=Path(config.mesh).name)
     from tqdm import tqdm
 
     with tqdm(total=config.spp, desc=f"mitsuba-render ({variant})", unit="spp", file=sys.stderr,
               disable=arguments.quiet) as bar:
-        image = mitsuba_scene.render_passes(mi, scene, config.spp, config.seed,
-                                            progress=lambda done: bar.update(done - bar.n))
+        try:
+            image = mitsuba_scene.render_passes(mi, scene, config.spp, config.seed,
+                                                progress=lambda done: bar.update(done - bar.n))
+        except KeyboardInterrupt:
+            bar.leave = False  # the bar goes; gratnet.cli's one "interrupted" line stays (exit 130)
+            raise
     seconds = time.perf_counter() - started
     linear = image.astype(np.float64) * config.exposure
     if not np.all(np.isfinite(linear)):

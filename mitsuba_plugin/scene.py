@@ -3,7 +3,9 @@
 - **Mesh**: positions, normals, UVs and faces go to a ``mi.Mesh`` as they are; the per-vertex tangents go
   along as the mesh attribute ``vertex_tangent``, which the BSDF interpolates (barycentrically, like the
   GL rasterizer's ``in_tangent``) and Gram–Schmidts against the shading normal, as shaders/surface.glsl
-  does. So the CD's tangents run along its tracks exactly, not along each triangle's ∂p/∂u chord.
+  does. So the CD's tangents run along its tracks exactly, not along each triangle's ∂p/∂u chord. A mesh with
+  triangles whose UVs are missing or degenerate (an .obj without ``vt``) has arbitrary tangents there
+  (viewer.meshes.load_obj): one warning on the ``gratnet.mitsuba`` logger says so.
 - **Camera**: ``viewer.camera.Camera`` as Mitsuba's ``perspective`` sensor (same eye, target, up, vertical
   field of view, clip range), or an ``orthographic`` one looking along the same axis.
 - **Lights**: ``viewer.camera.Light``: directional → ``directional`` with ``irradiance`` = its intensity
@@ -12,6 +14,8 @@
 - **Environment**: a constant radiance (linear sRGB) or a lat-long EXR (``envmap``), rotated so that its
   up (Mitsuba's +y) is GratNet's +z.
 - **Film**: ``hdrfilm`` with a box filter (each pixel the mean over its area), linear sRGB float.
+- **Rendering** (:func:`render_passes`): passes of a few samples per pixel, with progress between them; a
+  Ctrl-C inside one comes out as a plain KeyboardInterrupt (not Dr.Jit's RuntimeError around it).
 """
 
 from __future__ import annotations
@@ -24,10 +28,13 @@ from typing import Any
 import numpy as np
 
 from gratnet.errors import GratNetError
+from mitsuba_plugin.bsdf import LOGGER, no_tangent_warning
+from mitsuba_plugin.runtime import interrupted, plugin_errors
 from viewer.camera import Camera, Light
 from viewer.meshes import Mesh
 
-__all__ = ["TANGENT_ATTRIBUTE", "bsdf_dict", "build_scene", "emitters", "mitsuba_mesh", "sensor"]
+__all__ = ["TANGENT_ATTRIBUTE", "bsdf_dict", "build_scene", "emitters", "mitsuba_mesh", "render_passes", "sensor",
+           "unmapped_triangles"]
 
 #: Name of the per-vertex tangent attribute of exported meshes.
 TANGENT_ATTRIBUTE = "vertex_tangent"
@@ -41,10 +48,26 @@ def bsdf_dict(model_path: str | Path, ior: float | None, *, tangent_attribute: s
             "lobe_degrees": float(lobe_degrees)}
 
 
+def unmapped_triangles(mesh: Mesh) -> int:
+    """How many triangles have no usable UVs (missing, stored as 0, or not spanning a triangle): where
+    viewer.meshes.load_obj gives an .obj arbitrary tangents (its test, on the same numbers)."""
+    uv = mesh.uvs[mesh.indices].astype(np.float64)
+    first, second = uv[:, 1] - uv[:, 0], uv[:, 2] - uv[:, 0]
+    det = first[:, 0] * second[:, 1] - second[:, 0] * first[:, 1]
+    mapped = np.abs(det) > 1e-12 * (np.sum(first**2, axis=1) + np.sum(second**2, axis=1))
+    return int(np.count_nonzero(~mapped))
+
+
 def mitsuba_mesh(mi: ModuleType, mesh: Mesh, bsdf: Any, name: str = "gratnet_mesh") -> Any:
-    """``mesh`` as a ``mi.Mesh`` with ``bsdf`` (a loaded BSDF) and the ``vertex_tangent`` attribute."""
+    """``mesh`` as a ``mi.Mesh`` with ``bsdf`` (a loaded BSDF) and the ``vertex_tangent`` attribute; warns
+    (``gratnet.mitsuba`` logger) when some of its triangles have no usable UVs, so arbitrary tangents."""
     if mesh.triangle_count == 0:
         raise GratNetError("the mesh has no triangles")
+    unmapped = unmapped_triangles(mesh)
+    if unmapped:
+        reason = ("has no UV coordinates" if unmapped == mesh.triangle_count else
+                  f"has no usable UV coordinates on {unmapped} of its {mesh.triangle_count} triangles")
+        LOGGER.warning(no_tangent_warning(name, reason))
     props = mi.Properties()
     props["bsdf"] = bsdf
     result = mi.Mesh(name, mesh.vertex_count, mesh.triangle_count, props=props, has_vertex_normals=True,
@@ -110,15 +133,19 @@ def emitters(light: Light | None, environment: float | tuple[float, float, float
 
 
 def build_scene(mi: ModuleType, mesh: Mesh, bsdf: dict[str, Any], sensor_dict: dict[str, Any],
-                emitter_dicts: dict[str, dict[str, Any]], integrator: str = "path", max_depth: int = 8) -> Any:
-    """A loaded ``mi.Scene``: the mesh with the BSDF, the sensor, the emitters and the integrator
-    (``direct``: emitter and BSDF sampling with MIS, one bounce; ``path``: up to ``max_depth`` bounces)."""
+                emitter_dicts: dict[str, dict[str, Any]], integrator: str = "path", max_depth: int = 8,
+                mesh_name: str = "gratnet_mesh") -> Any:
+    """A loaded ``mi.Scene``: the mesh (called ``mesh_name``) with the BSDF, the sensor, the emitters and the
+    integrator (``direct``: emitter and BSDF sampling with MIS, one bounce; ``path``: up to ``max_depth``
+    bounces). The BSDF's own errors come out as its one line (``runtime.plugin_errors``)."""
     if integrator not in ("direct", "path"):
         raise GratNetError(f"unknown integrator {integrator!r}; choose direct or path")
     integrator_dict: dict[str, Any] = {"type": integrator}
     if integrator == "path":
         integrator_dict["max_depth"] = int(max_depth)
-    shape = mitsuba_mesh(mi, mesh, mi.load_dict(bsdf))
+    with plugin_errors():
+        loaded = mi.load_dict(bsdf)
+    shape = mitsuba_mesh(mi, mesh, loaded, mesh_name)
     return mi.load_dict({"type": "scene", "integrator": integrator_dict, "sensor": sensor_dict, "mesh": shape,
                          **emitter_dicts})
 
@@ -127,22 +154,31 @@ def render_passes(mi: ModuleType, scene: Any, spp: int, seed: int = 0, samples_p
                   progress: Any = None) -> np.ndarray:
     """Render ``spp`` samples per pixel in passes of at most ``samples_per_pass`` samples (bounded memory,
     and progress between passes); returns the mean, linear sRGB ``float32`` ``(H, W, 3)``, row 0 at the top.
-    ``progress``: called with the number of samples per pixel done so far after each pass."""
+    ``progress``: called with the number of samples per pixel done so far after each pass.
+
+    Ctrl-C: Mitsuba's handler cancels the render and hands the signal on to Python, whose KeyboardInterrupt
+    then rises in the next BSDF call (within a fraction of a second: the plugin runs per bounce) and reaches
+    here wrapped in Dr.Jit's RuntimeError; it leaves as a plain KeyboardInterrupt. Mitsuba's log is held at
+    Error level meanwhile: its "Received interrupt signal" warning (on stdout) would be a second report, and the
+    scalar image block would warn once per out-of-gamut sample (negative linear sRGB, kept as gratnet render's
+    EXR keeps it)."""
     width, height = (int(v) for v in scene.sensors()[0].film().size())
     per_pass = max(1, min(int(spp), samples_per_pass // max(width * height, 1)))
     total = np.zeros((height, width, 3), dtype=np.float64)
     done = 0
     pass_index = 0
     previous_level = mi.log_level()
-    if not mi.variant().startswith(("llvm", "cuda")):
-        # Out-of-gamut XYZ gives negative linear sRGB, kept as gratnet render's EXR keeps it; the scalar image
-        # block would warn once per such sample.
-        mi.set_log_level(mi.LogLevel.Error)
+    mi.set_log_level(mi.LogLevel.Error)
     try:
         while done < spp:
             count = min(per_pass, spp - done)
-            image = np.asarray(mi.render(scene, seed=int(seed) * 1_000_003 + pass_index, spp=count),
-                               dtype=np.float64)
+            try:
+                rendered = mi.render(scene, seed=int(seed) * 1_000_003 + pass_index, spp=count)
+            except RuntimeError as error:
+                if interrupted(error):
+                    raise KeyboardInterrupt from None
+                raise
+            image = np.asarray(rendered, dtype=np.float64)
             total += image[..., :3] * count
             done += count
             pass_index += 1
