@@ -227,3 +227,29 @@ def test_reference_header_is_read_without_pixels(tmp_path):
     path = cd_volume(tmp_path / "v.exr")
     header = read_volume_header(path)
     assert (header.slices, header.resolution, header.metadata["scheme"]) == (3, 33, "simple-max")
+
+
+# --------------------------------------------------------------------------------------------------
+# gratnet compare
+
+
+def test_compare_scores_the_network_against_the_reference(tmp_path):
+    import json
+
+    volume = cd_volume(tmp_path / "cd.exr")
+    out = tmp_path / "compare"
+    assert main(["compare", "cd", "--reference", str(volume), "--meshes", "plane", "--width", "24", "--height", "20",
+                 "--spp", "1", "--weights-path", "texture", "--quiet", "--out", str(out)]) == 0
+    assert sorted(p.name for p in out.iterdir()) == ["compare.config.json", "compare.json", "compare.md", "compare.png"]
+    rows = json.loads((out / "compare.json").read_text())["views"]
+    assert [row["name"] for row in rows][0] == "default" and len(rows) == 3
+    # A random volume is not the cd network's truth: the scores must see that (a test that can fail).
+    assert all(0.0 < row["flip_covered"] <= 1.0 for row in rows)
+    assert "| **mean** |" in (out / "compare.md").read_text()
+
+
+def test_compare_refuses_a_foreign_volume_before_rendering(tmp_path, capsys):
+    volume = cd_volume(tmp_path / "cd.exr", sigma_s_um=3.0)
+    assert main(["compare", "cd", "--reference", str(volume), "--out", str(tmp_path / "c")]) == 2
+    assert "sigma_s_um 3.0 against" in capsys.readouterr().err
+    assert not (tmp_path / "c").exists()
