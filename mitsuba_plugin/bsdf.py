@@ -36,6 +36,7 @@ from __future__ import annotations
 import functools
 import logging
 import math
+import re
 import threading
 from collections.abc import Callable
 from pathlib import Path
@@ -55,7 +56,8 @@ from mitsuba_plugin.shading import (
 )
 
 __all__ = ["ERROR_PREFIX", "LOGGER", "PLUGIN_NAME", "PROPERTIES", "bsdf_class", "check_ior", "file_resolver",
-           "no_tangent_warning", "plugin_message", "register", "resolve_model", "search_folders"]
+           "no_tangent_warning", "plugin_message", "register", "resolve_model", "search_folders",
+           "shape_label"]
 
 PLUGIN_NAME = "gratnet"
 #: The properties the plugin takes (any other is refused, with this list).
@@ -161,6 +163,12 @@ def file_resolver(mi: ModuleType) -> Any:
         return mi.file_resolver()
     thread = mi.Thread.thread()
     return thread.file_resolver() if thread is not None else None
+
+
+def shape_label(shape: Any) -> str:
+    """What to call a Mitsuba shape in a message: its id, else a mesh's name (an .obj's file name), else its class."""
+    found = re.search(r'\bname = "([^"]*)"', str(shape)) if not shape.id() else None
+    return shape.id() or (found.group(1) if found else shape.class_name())
 
 
 def no_tangent_warning(mesh: str, reason: str) -> str:
@@ -283,7 +291,7 @@ def bsdf_class(variant: str) -> type:
                 if first and not has and not has_uvs(shape):
                     reason = "has no UV coordinates" + (f" and no {self.tangent_attribute!r} attribute"
                                                         if self.tangent_attribute else "")
-                    LOGGER.warning(ERROR_PREFIX + no_tangent_warning(shape.id() or type(shape).__name__, reason))
+                    LOGGER.warning(ERROR_PREFIX + no_tangent_warning(shape_label(shape), reason))
             return any(self.shapes_seen[key] for key in shapes)
 
         def _rotation(self, si: Any, count: int) -> np.ndarray | None:
