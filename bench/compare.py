@@ -106,7 +106,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 def _check(config: CompareConfig, material: str) -> tuple[Path, list[str]]:
     """Every input checked before any rendering: sizes, samples, meshes, the volume against the material."""
     from gratnet.modelfile import load_model
-    from gratnet.reference import check_precision, check_volume_matches
+    from gratnet.reference import check_precision, check_uniform_slices, check_volume_matches
     from gratnet.volume import read_volume_header
     from viewer.catalog import check_mesh_spec, resolve_material
     from viewer.reference import check_reference_limits
@@ -125,6 +125,7 @@ def _check(config: CompareConfig, material: str) -> tuple[Path, list[str]]:
         check_mesh_spec(mesh)
     model_path = resolve_material(material)
     header = read_volume_header(config.reference)
+    check_uniform_slices(header.metadata, header.slices, f"--reference {config.reference}")
     check_reference_limits(header.slices, header.resolution, config.reference_precision,
                            name=f"--reference {config.reference}")
     trained_on = load_model(model_path).metadata.get("volume")

@@ -32,6 +32,7 @@ __all__ = [
     "FLOAT16_SCALE",
     "PRECISIONS",
     "check_precision",
+    "check_uniform_slices",
     "check_volume_matches",
     "reference_xyz",
     "stored_values",
@@ -53,6 +54,19 @@ def check_precision(precision: object) -> str:
     if precision not in PRECISIONS:
         raise GratNetError(f"reference precision must be one of {', '.join(PRECISIONS)}, got {precision!r}")
     return str(precision)
+
+
+def check_uniform_slices(metadata: Mapping[str, Any], slices: int, name: str = "volume") -> None:
+    """One clear error unless the volume's slices sit at ``t_s = s/(S − 1)`` (docs/formats.md): the look-up places
+    slice ``s`` there. A volume without ``slice_t`` is taken to follow the format."""
+    recorded = metadata.get("slice_t")
+    if recorded is None:
+        return
+    expected = np.linspace(0.0, 1.0, slices) if slices > 1 else np.zeros(1)
+    values = np.asarray(recorded, dtype=np.float64) if isinstance(recorded, (list, tuple)) else None
+    if values is None or values.shape != expected.shape or not np.allclose(values, expected, rtol=0.0, atol=1e-9):
+        raise GratNetError(f"{name}: its slices are not at t = s/(S − 1) (slice_t {recorded!r}); the reference "
+                           "look-up needs uniform slices")
 
 
 def texture_bytes(slices: int, resolution: int, precision: str = "float16") -> int:

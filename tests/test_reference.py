@@ -253,3 +253,32 @@ def test_compare_refuses_a_foreign_volume_before_rendering(tmp_path, capsys):
     assert main(["compare", "cd", "--reference", str(volume), "--out", str(tmp_path / "c")]) == 2
     assert "sigma_s_um 3.0 against" in capsys.readouterr().err
     assert not (tmp_path / "c").exists()
+
+
+def test_the_lookup_is_the_interpolation_oracle():
+    """trainer.diagnostics.VolumeOracle (scipy, the oracle of every slice figure) and the reference look-up are
+    the same trilinear interpolation in (u*, v*, t): one truth between samples for slices and meshes alike."""
+    from trainer.diagnostics import VolumeOracle
+
+    rng = np.random.default_rng(8)
+    for scheme in SCHEMES:
+        values = random_values(6, 21, seed=9)
+        volume = Volume(values, {"scheme": scheme, "slice_t": list(np.linspace(0.0, 1.0, 6))})
+        light = rng.normal(size=(500, 3))
+        view = rng.normal(size=(500, 3))
+        light[:, 2], view[:, 2] = np.abs(light[:, 2]), np.abs(view[:, 2])
+        light /= np.linalg.norm(light, axis=1, keepdims=True)
+        view /= np.linalg.norm(view, axis=1, keepdims=True)
+        key = -(light + view)
+        expected = VolumeOracle(volume)(key[:, 0], key[:, 1], key[:, 2])
+        np.testing.assert_allclose(reference_xyz(values, scheme, key[:, 0], key[:, 1], key[:, 2]), expected,
+                                   rtol=1e-9, atol=1e-15)
+
+
+def test_non_uniform_slices_are_refused():
+    from gratnet.reference import check_uniform_slices
+
+    check_uniform_slices({"slice_t": [0.0, 0.5, 1.0]}, 3)
+    check_uniform_slices({}, 3)
+    with pytest.raises(GratNetError, match="not at t = s/"):
+        check_uniform_slices({"slice_t": [0.0, 0.2, 1.0]}, 3)

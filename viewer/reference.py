@@ -26,7 +26,7 @@ import moderngl
 import numpy as np
 
 from gratnet.errors import GratNetError
-from gratnet.reference import FLOAT16_SCALE, check_precision, stored_values, texture_bytes
+from gratnet.reference import FLOAT16_SCALE, check_precision, check_uniform_slices, stored_values, texture_bytes
 from gratnet.volume import Volume
 from viewer.shading import ShadingPrograms, set_uniform, skip_threshold_value
 
@@ -81,6 +81,7 @@ class ReferenceRenderer(ShadingPrograms):
         if scheme not in _SCHEMES:
             raise GratNetError(f"the volume's metadata names no sampling scheme ({', '.join(_SCHEMES)}), got "
                                f"{scheme!r}")
+        check_uniform_slices(volume.metadata, volume.slices)
         check_reference_limits(volume.slices, volume.resolution, precision, ctx.info)
         super().__init__(ctx, _DEFINES, shader_root)
         self.volume = volume

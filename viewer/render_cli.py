@@ -102,7 +102,7 @@ def _check_reference(config: RenderConfig, model_path: Path | None) -> Volume:
     """The --reference volume, checked from its headers (scheme, texture size, and with --material its source
     and σs against the material's training volume) before its pixels are read (their checksums then)."""
     from gratnet.modelfile import load_model
-    from gratnet.reference import check_volume_matches
+    from gratnet.reference import check_uniform_slices, check_volume_matches
     from gratnet.volume import read_volume, read_volume_header
     from viewer.reference import check_reference_limits
 
@@ -110,6 +110,7 @@ def _check_reference(config: RenderConfig, model_path: Path | None) -> Volume:
     header = read_volume_header(path)
     if header.metadata.get("scheme") not in ("regular", "simple", "simple-max"):
         raise GratNetError(f"--reference {path}: the volume names no sampling scheme (regular, simple, simple-max)")
+    check_uniform_slices(header.metadata, header.slices, f"--reference {path}")
     check_reference_limits(header.slices, header.resolution, config.reference_precision, name=f"--reference {path}")
     if model_path is not None:
         trained_on = load_model(model_path).metadata.get("volume")
