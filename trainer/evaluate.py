@@ -33,6 +33,9 @@ from trainer.metrics import image_metrics
 from trainer.report import comparison_figure, write_report
 from trainer.sampling import grid_to_key, slice_w
 
+#: Largest BRDF-slice size of the evaluation (pixels; each one is a network evaluation and a ground truth).
+MAX_EVALUATION_SIZE = 4096
+
 
 @dataclasses.dataclass(frozen=True)
 class EvaluateConfig:
@@ -50,8 +53,13 @@ class EvaluateConfig:
     )
     progress: bool = config_field(True, "progress bars while computing ground-truth slices", cli=False)
 
-    def __post_init__(self) -> None:
-        self.extra_views()  # checked before any work
+    def __post_init__(self) -> None:  # checked when made: before any work
+        from gratnet.brdf import check_ior
+
+        if not 2 <= self.size <= MAX_EVALUATION_SIZE:
+            raise GratNetError(f"--size must be from 2 to {MAX_EVALUATION_SIZE} pixels (typical: 256), got {self.size}")
+        check_ior(self.ior)
+        self.extra_views()
 
     def extra_views(self) -> tuple[tuple[float, float, float], ...]:
         """The ``views`` as (θi degrees, φi degrees, exposure) triples."""

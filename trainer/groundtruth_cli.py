@@ -12,12 +12,6 @@ from pathlib import Path
 from gratnet.config import add_arguments, from_arguments, parse_float, parse_int
 from gratnet.volume import write_volume
 
-#: Largest --res and --slices: R² · S samples, each a spectral integral (2001² · 101 ≈ 4e8 would take days).
-MAX_RESOLUTION = 4001
-MAX_SLICES = 1001
-#: Largest volume held in memory (float32 XYZ): 8 GB.
-MAX_VOLUME_BYTES = 8e9
-
 
 def register(subparsers: argparse._SubParsersAction) -> None:
     """Add the ``groundtruth`` subcommand."""
@@ -54,7 +48,7 @@ def run(arguments: argparse.Namespace) -> int:
     from gratnet.atomic import atomic_paths, check_output_file
     from gratnet.config import config_path_for, config_text
     from gratnet.errors import GratNetError
-    from trainer.cli_support import read_heightfield_input, reporter, require_suffix
+    from trainer.cli_support import check_volume_limits, read_heightfield_input, reporter, require_suffix
     from trainer.groundtruth import ComputeConfig, VolumeConfig, compute_volume
     from trainer.preview import save_slice_preview
 
@@ -68,15 +62,7 @@ def run(arguments: argparse.Namespace) -> int:
     for output in outputs:
         check_output_file(output, "--preview" if output is arguments.preview else "--out")
     volume_config = from_arguments(VolumeConfig, arguments)
-    if volume_config.resolution > MAX_RESOLUTION:
-        raise GratNetError(f"--res must be at most {MAX_RESOLUTION} (typical: 101 to 1001), "
-                           f"got {volume_config.resolution}")
-    if volume_config.slices > MAX_SLICES:
-        raise GratNetError(f"--slices must be at most {MAX_SLICES} (typical: 11), got {volume_config.slices}")
-    volume_bytes = volume_config.resolution**2 * volume_config.slices * 3 * 4
-    if volume_bytes > MAX_VOLUME_BYTES:
-        raise GratNetError(f"--res {volume_config.resolution} with --slices {volume_config.slices} makes a "
-                           f"{volume_bytes / 1e9:.0f} GB volume (at most {MAX_VOLUME_BYTES / 1e9:.0f} GB)")
+    check_volume_limits(volume_config)
     if arguments.preview and not -volume_config.slices <= arguments.preview_slice < volume_config.slices:
         raise GratNetError(f"--preview-slice {arguments.preview_slice} is out of range: the volume will have "
                            f"{volume_config.slices} slices")

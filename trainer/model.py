@@ -56,8 +56,24 @@ def parse_hidden(preset: str, hidden: str = "") -> list[int]:
             raise GratNetError(f"--hidden widths must be positive, got {hidden!r}")
         return sizes
     if preset not in PRESETS:
-        raise GratNetError(f"unknown preset {preset!r}; choose one of {', '.join(PRESETS)}")
+        raise GratNetError(f"--preset {preset!r} is unknown; choose one of {', '.join(PRESETS)}")
     return list(PRESETS[preset])
+
+
+#: The hidden activations the trainer builds, and the output activations (what the runtime applies last).
+ACTIVATIONS = ("silu", "relu", "leaky_relu")
+OUTPUT_ACTIVATIONS = ("clamp", "sigmoid", "none")
+
+
+def check_network(preset: str, hidden: str, activation: str, output_activation: str) -> list[int]:
+    """The hidden widths of a training's network; its options checked first (one GratNetError naming the flag),
+    so that a bad one is refused before any work, not when the network is built."""
+    if activation not in ACTIVATIONS:
+        raise GratNetError(f"--activation must be one of {', '.join(ACTIVATIONS)}; got {activation!r}")
+    if output_activation not in OUTPUT_ACTIVATIONS:
+        raise GratNetError(f"--output-activation must be one of {', '.join(OUTPUT_ACTIVATIONS)}; "
+                           f"got {output_activation!r}")
+    return parse_hidden(preset, hidden)
 
 
 def _activation(name: str) -> nn.Module:
@@ -67,7 +83,7 @@ def _activation(name: str) -> nn.Module:
         return nn.LeakyReLU(0.01)
     if name == "silu":
         return nn.SiLU()
-    raise GratNetError(f"unknown activation {name!r}; choose relu, leaky_relu or silu")
+    raise GratNetError(f"unknown activation {name!r}; choose {', '.join(ACTIVATIONS)}")
 
 
 class FunnelMLP(nn.Module):
@@ -90,8 +106,9 @@ class FunnelMLP(nn.Module):
         self.network = nn.Sequential(*layers)
         self.sizes = sizes
         self.activation = activation
-        if output_activation not in ("clamp", "sigmoid", "none"):
-            raise GratNetError(f"unknown output activation {output_activation!r}; choose clamp, sigmoid or none")
+        if output_activation not in OUTPUT_ACTIVATIONS:
+            raise GratNetError(f"unknown output activation {output_activation!r}; choose "
+                               f"{', '.join(OUTPUT_ACTIVATIONS)}")
         self.output_activation = output_activation
 
     def forward(self, encoded: torch.Tensor) -> torch.Tensor:

@@ -83,16 +83,8 @@ def split_samples(volume: Volume, config: TrainConfig) -> tuple[Samples, Samples
     coordinates, targets, slice_index = volume_samples(volume, config.range_spec())
     rng = np.random.default_rng(config.seed)
     if config.split == "slices":
-        try:
-            held_out = sorted({int(part) for part in config.test_slices.split(",") if part.strip()})
-        except ValueError:
-            raise GratNetError(f"--test-slices must be comma-separated integers, got {config.test_slices!r}") from None
-        if not held_out or min(held_out) < 0 or max(held_out) >= volume.slices:
-            raise GratNetError(f"--test-slices {config.test_slices} out of range for a {volume.slices}-slice volume")
-        test_mask = np.isin(slice_index, held_out)
-    elif config.split == "random":
-        if not 0 < config.test_fraction < 1:
-            raise GratNetError(f"--test-fraction must lie in (0, 1), got {config.test_fraction}")
+        test_mask = np.isin(slice_index, config.held_out_slices(volume.slices))
+    elif config.split == "random":  # test_fraction in (0, 1): checked by TrainConfig
         test_mask = rng.random(len(targets)) < config.test_fraction
     else:
         test_mask = np.zeros(len(targets), dtype=bool)

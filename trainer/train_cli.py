@@ -89,23 +89,14 @@ def _slice_list(text: str, what: str) -> list[int]:
     return slices
 
 
-#: Largest BRDF-slice --size of the evaluation (pixels; each one is a network evaluation and a ground truth).
-MAX_EVALUATION_SIZE = 4096
-
-
 def _check_before_work(arguments: argparse.Namespace, evaluating: bool) -> None:
-    """The output folder, the cache folder and the evaluation numbers, before any loading or training."""
+    """The output folder and the cache folder, before any loading or training (the evaluation's numbers are
+    checked by EvaluateConfig)."""
     from gratnet.atomic import check_output_folder
-    from gratnet.brdf import check_ior
 
     check_output_folder(arguments.out)
-    if evaluating:
-        if not 2 <= arguments.size <= MAX_EVALUATION_SIZE:
-            raise GratNetError(f"--size must be from 2 to {MAX_EVALUATION_SIZE} pixels (typical: 256), "
-                               f"got {arguments.size}")
-        check_ior(arguments.ior)
-        if arguments.brdf_slices:
-            check_output_folder(arguments.cache_dir, "--cache-dir")
+    if evaluating and arguments.brdf_slices:
+        check_output_folder(arguments.cache_dir, "--cache-dir")
 
 
 #: The slice scored after each epoch by --epoch-flip-size: the paper's headline view, (0°, 0°) at 2000 RU.
@@ -140,11 +131,12 @@ def run_train(arguments: argparse.Namespace) -> int:
     from trainer.train_config import TrainConfig
 
     config = from_arguments(TrainConfig, arguments)
+    evaluate_config = dataclasses.replace(from_arguments(EvaluateConfig, arguments), progress=not arguments.quiet)
     _check_before_work(arguments, evaluating=not arguments.no_evaluate)
     checkpoint = Path(arguments.out) / "checkpoint.pt"
     if arguments.resume and not checkpoint.is_file():  # training afresh would silently ignore --resume
         raise GratNetError(f"--resume: there is no {checkpoint} to continue from; leave out --resume to start afresh")
-    held_out = _slice_list(config.test_slices, "--test-slices") if config.split == "slices" else []
+    held_out = config.held_out_slices() if config.split == "slices" else []
     volume = read_volume(arguments.volume)
     out = Path(arguments.out)
     per_epoch = _epoch_flip(arguments, config, volume.metadata) if config.epoch_flip_size else None
@@ -156,7 +148,6 @@ def run_train(arguments: argparse.Namespace) -> int:
         f"{history['train_seconds']:.0f} s of training"
     )
     if not arguments.no_evaluate:
-        evaluate_config = dataclasses.replace(from_arguments(EvaluateConfig, arguments), progress=not arguments.quiet)
         field, optics = (
             ground_truth_inputs(arguments, volume.metadata) if evaluate_config.brdf_slices else (None, None)
         )

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
+import re
 from typing import Literal
 
 import numpy as np
@@ -129,6 +130,48 @@ class TrainConfig:
             raise GratNetError("--cuda-graph on needs a CUDA device; --device cpu was asked for")
         if self.split not in ("slices", "random", "all"):
             raise GratNetError(f"--split must be slices, random or all, got {self.split!r}")
+        self.check_before_work()
+
+    def check_before_work(self) -> None:
+        """The options that used to be checked only when training began (the network, the range transform, the
+        split, the device): refused here, when the config is made, so that nothing is loaded or computed first."""
+        from trainer.model import check_network  # torch: when a config is made, never to list the flags
+
+        check_network(self.preset, self.hidden, self.activation, self.output_activation)
+        try:
+            self.range_spec()  # RangeSpec checks its kind, B and n
+        except GratNetError as error:
+            raise GratNetError(f"{error} (--range-kind {self.range_kind}, --range-bits {self.range_bits:g}, "
+                               f"--range-power {self.range_power:g})") from None
+        if self.frequencies < 1 or self.t_frequencies < 0:
+            raise GratNetError(f"--frequencies must be ≥ 1 and --t-frequencies ≥ 0, got {self.frequencies}, "
+                               f"{self.t_frequencies}")
+        if self.split == "slices":
+            self.held_out_slices()
+        if self.split == "random" and not 0 < self.test_fraction < 1:
+            raise GratNetError(f"--test-fraction must lie in (0, 1), got {self.test_fraction}")
+        if self.max_train_samples < 0:
+            raise GratNetError(f"--max-train-samples must be ≥ 0 (0: all), got {self.max_train_samples}")
+        if not (math.isfinite(self.final_learning_rate_ratio) and self.final_learning_rate_ratio >= 0):
+            raise GratNetError(f"--final-learning-rate-ratio must be a number ≥ 0, "
+                               f"got {self.final_learning_rate_ratio}")
+        if self.seed < 0:
+            raise GratNetError(f"--seed must be ≥ 0, got {self.seed}")
+        if not re.fullmatch(r"auto|cpu|cuda(:[0-9]+)?", self.device):
+            raise GratNetError(f"--device must be auto, cpu, cuda or cuda:N, got {self.device!r}")
+
+    def held_out_slices(self, slices: int | None = None) -> list[int]:
+        """The slice indices of ``test_slices`` (for ``split`` slices), sorted; with ``slices``, the volume's slice
+        count, each is checked to be one of its slices."""
+        try:
+            held_out = sorted({int(part) for part in self.test_slices.split(",") if part.strip()})
+        except ValueError:
+            raise GratNetError(f"--test-slices must be comma-separated integers, got {self.test_slices!r}") from None
+        if not held_out or min(held_out) < 0:
+            raise GratNetError(f"--test-slices must name slices, indices from 0, got {self.test_slices!r}")
+        if slices is not None and max(held_out) >= slices:
+            raise GratNetError(f"--test-slices {self.test_slices} out of range for a {slices}-slice volume")
+        return held_out
 
     def encoding_for(self, volume: Volume) -> EncodingSpec:
         """Encoding scales for this volume's grid (top frequency at its Nyquist rate)."""
