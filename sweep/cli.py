@@ -40,6 +40,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 
 def run(arguments: argparse.Namespace) -> int:
     """Check everything up front, then run the sweep; exit 1 when tasks failed (the others' results are kept)."""
+    from gratnet.atomic import check_output_folder
     from gratnet.errors import GratNetError
     from sweep.runner import import_ray, plan_sweep, run_sweep
     from sweep.spec import load_sweep
@@ -49,6 +50,7 @@ def run(arguments: argparse.Namespace) -> int:
     if arguments.workers is not None and arguments.address:
         raise GratNetError("--workers sizes a local Ray instance; a cluster's size is set where it is started")
     spec = load_sweep(arguments.sweep, arguments.out)
+    check_output_folder(spec.out, "--out" if arguments.out is not None else f"{arguments.sweep}: out")
     if arguments.dry_run:
         plan = plan_sweep(spec)
         print(f"{spec.source}: {plan.summary()}; results in {spec.out}")

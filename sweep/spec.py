@@ -1,8 +1,11 @@
 """The sweep file (TOML): a declarative grid of datasets × presets × seeds × training variants.
 
-Everything is checked here, before Ray starts or any work is done: unknown tables and keys, wrong types,
-unknown generators, presets and generator parameters, missing height-field files each give one
-GratNetError (the CLI prints one line and exits 2). The resolved grid is a list of :class:`DatasetSpec`
+Everything is checked here, before Ray starts or any work is done, by the same checks as the subcommands'
+flags (the configs' own, and the command line's limits of numbers, volumes and optics): unknown tables and
+keys, wrong types, refused values, unknown generators, presets and generator parameters, missing height-field
+files each give one GratNetError that starts with the file's path and names the table and key, e.g.
+``sweep.toml: [evaluate] size must be from 2 to 4096 pixels (typical: 256), got 0`` (the CLI prints one line
+and exits 2). The resolved grid is a list of :class:`DatasetSpec`
 (one ground-truth volume each) and :class:`RunSpec` (one training + evaluation each); their
 ``to_dict()`` is what the results folder records to recognise finished and interrupted work.
 
@@ -43,12 +46,16 @@ GratNetError (the CLI prints one line and exits 2). The resolved grid is a list 
 
 from __future__ import annotations
 
+import argparse
 import dataclasses
+import functools
 import json
 import math
 import re
 import sys
+import types
 import typing
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any, Literal, get_args, get_origin
 
@@ -159,28 +166,92 @@ class SweepSpec:
                 "runs": [run.to_dict() for run in self.runs], "document": self.document}
 
 
+@dataclasses.dataclass(frozen=True)
+class Table:
+    """A table of the sweep file as its reader names it in messages: ``[train]``, ``[[datasets]] #2 groundtruth``
+    (an inline table of the second ``[[datasets]]`` entry), or the top level (no header)."""
+
+    header: str = ""
+    path: str = ""
+
+    def key(self, name: str) -> str:
+        """How the file names key ``name`` of this table: ``[train] epochs``, ``[[datasets]] #2 groundtruth.res``."""
+        inner = f"{self.path}.{name}" if self.path else name
+        return f"{self.header} {inner}" if self.header else inner
+
+    def inner(self, path: str) -> Table:
+        """The inline table ``path`` of this table."""
+        return Table(self.header, path)
+
+    def __str__(self) -> str:
+        return " ".join(filter(None, (self.header, self.path))) or "the top level"
+
+
+SHARED_GROUNDTRUTH = Table("[groundtruth]")
+TRAIN = Table("[train]")
+
+
+@functools.cache
+def _flag_fields(config_class: type) -> dict[str, str]:
+    """Command-line flag → field name of ``config_class``, as ``gratnet.config.add_arguments`` makes the flags."""
+    from gratnet.config import add_arguments
+
+    actions = add_arguments(argparse.ArgumentParser(add_help=False), config_class)
+    return {flag: field for field, action in actions.items() for flag in action.option_strings}
+
+
+def in_toml_words(message: str, config_class: type, name_of: Callable[[str], str], table: Table) -> str:
+    """A config's own check ``message`` (which names its command-line flags) reworded for the sweep file: each
+    flag of ``config_class`` replaced by ``name_of(field)`` (e.g. ``--epochs`` → ``[train] epochs``); a message
+    that names no flag is prefixed with ``table``."""
+    flags = _flag_fields(config_class)
+    named = False
+
+    def reword(match: re.Match[str]) -> str:
+        nonlocal named
+        field = flags.get(match.group())
+        if field is None:
+            return match.group()
+        named = True
+        return name_of(field)
+
+    text = re.sub(r"--[a-z][a-z0-9-]*", reword, message)
+    return text if named or text.startswith(str(table)) else f"{table}: {text}"
+
+
+def checked(config_class: type, name_of: Callable[[str], str], table: Table, check: Callable[[], Any]) -> Any:
+    """``check()``'s result; its GratNetError reworded by :func:`in_toml_words`."""
+    try:
+        return check()
+    except GratNetError as error:
+        raise GratNetError(in_toml_words(str(error), config_class, name_of, table)) from None
+
+
 def _check_value(where: str, value: Any, kind: Any) -> Any:
-    """``value`` converted to the dataclass field type ``kind``, or one GratNetError naming ``where``."""
+    """``value`` converted to the dataclass field type ``kind``, or one GratNetError naming ``where``. Numbers get
+    the command line's own limits (:func:`gratnet.config.parse_int`, :func:`gratnet.config.parse_float`)."""
+    from gratnet.config import parse_float, parse_int
+
     origin = get_origin(kind)
     if origin is Literal:
         if value not in get_args(kind):
             raise GratNetError(f"{where} must be one of {', '.join(map(repr, get_args(kind)))}; got {value!r}")
         return value
-    if origin in (typing.Union, getattr(__import__("types"), "UnionType", None)):
+    if origin in (typing.Union, types.UnionType):
         options = [arg for arg in get_args(kind) if arg is not type(None)]
         return _check_value(where, value, options[0])
     if kind is bool:
         if not isinstance(value, bool):
             raise GratNetError(f"{where} must be true or false, got {value!r}")
         return value
-    if kind is int:
-        if isinstance(value, bool) or not isinstance(value, int):
-            raise GratNetError(f"{where} must be a whole number, got {value!r}")
-        return value
-    if kind is float:
-        if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
-            raise GratNetError(f"{where} must be a finite number, got {value!r}")
-        return float(value)
+    if kind in (int, float):
+        if isinstance(value, bool) or not isinstance(value, (int, float)) or (kind is int and isinstance(value, float)):
+            raise GratNetError(f"{where} must be {'a whole number' if kind is int else 'a number'}, got {value!r}")
+        try:
+            return parse_int(str(value)) if kind is int else parse_float(repr(float(value)))
+        except argparse.ArgumentTypeError as error:
+            raise GratNetError(f"{where} must be a {'whole ' if kind is int else ''}number the command line "
+                               f"accepts: {error}") from None
     if kind is str:
         if not isinstance(value, str):
             raise GratNetError(f"{where} must be a string, got {value!r}")
@@ -188,41 +259,42 @@ def _check_value(where: str, value: Any, kind: Any) -> Any:
     return value
 
 
-def _table(document: dict[str, Any], key: str, where: str) -> dict[str, Any]:
+def _table(document: dict[str, Any], key: str, table: Table) -> dict[str, Any]:
+    """The inline table or table ``key`` of ``document`` (empty when absent)."""
     value = document.get(key, {})
     if not isinstance(value, dict):
-        raise GratNetError(f"{where}{key} must be a table, got {value!r}")
+        raise GratNetError(f"{table.key(key)} must be a table, got {value!r}")
     return value
 
 
-def build_config(config_class: type, values: dict[str, Any], where: str, exclude: tuple[str, ...] = (),
-                 base: Any = None) -> Any:
-    """``config_class`` from a TOML table: unknown keys and wrong types refused, one line naming ``where``."""
+def build_config(config_class: type, values: dict[str, Any], table: Table, exclude: tuple[str, ...] = (),
+                 base: Any = None, name_of: Callable[[str], str] | None = None) -> Any:
+    """``config_class`` from the TOML ``values`` of ``table`` (over ``base``, when given), checked by the class
+    itself as the command line is: unknown keys, wrong types and every refused value give one GratNetError that
+    names the key (``name_of(field)``: where a field's value came from; default: ``table``)."""
     hints = typing.get_type_hints(config_class)
     fields = {field.name for field in dataclasses.fields(config_class)
               if field.init and field.name not in exclude and field.metadata.get("cli") is not False}
     unknown = sorted(set(values) - fields)
     if unknown:
-        raise GratNetError(f"{where}: unknown key {unknown[0]!r}; known keys: {', '.join(sorted(fields))}")
-    checked = {key: _check_value(f"{where}.{key}", value, hints[key]) for key, value in values.items()}
-    if base is not None:
-        return dataclasses.replace(base, **checked)
-    return config_class(**checked)
+        raise GratNetError(f"{table}: unknown key {unknown[0]!r}; known keys: {', '.join(sorted(fields))}")
+    values = {key: _check_value(table.key(key), value, hints[key]) for key, value in values.items()}
+    made = (lambda: dataclasses.replace(base, **values)) if base is not None else (lambda: config_class(**values))
+    return checked(config_class, name_of or table.key, table, made)
 
 
 def _name_list(document: dict[str, Any], key: str, default: list[Any], kind: type) -> list[Any]:
     value = document.get(key, default)
     if not isinstance(value, list) or not value:
         raise GratNetError(f"{key} must be a non-empty list, got {value!r}")
-    for item in value:
-        _check_value(f"{key} entry", item, kind)
+    value = [_check_value(f"{key} entry {item!r}", item, kind) for item in value]
     if len(set(value)) != len(value):
         raise GratNetError(f"{key} lists an entry twice: {value!r}")
     return value
 
 
-def _split_groundtruth(values: dict[str, Any], where: str) -> tuple[dict[str, Any], dict[str, Any], int | None]:
-    """A [groundtruth] table split into VolumeConfig fields, OpticsConfig fields and ``parts``."""
+def _split_groundtruth(values: dict[str, Any], table: Table) -> tuple[dict[str, Any], dict[str, Any], int | None]:
+    """A ground-truth table split into VolumeConfig fields, OpticsConfig fields and ``parts``."""
     from trainer.fourier import OpticsConfig
     from trainer.groundtruth import VolumeConfig
 
@@ -231,69 +303,177 @@ def _split_groundtruth(values: dict[str, Any], where: str) -> tuple[dict[str, An
     unknown = sorted(set(values) - volume_fields - optics_fields - {"parts"})
     if unknown:
         known = ", ".join(sorted(volume_fields | optics_fields | {"parts"}))
-        raise GratNetError(f"{where}: unknown key {unknown[0]!r}; known keys: {known}")
+        raise GratNetError(f"{table}: unknown key {unknown[0]!r}; known keys: {known}")
     parts = values.get("parts")
     if parts is not None:
-        _check_value(f"{where}.parts", parts, int)
+        _check_value(table.key("parts"), parts, int)
     return ({k: v for k, v in values.items() if k in volume_fields},
             {k: v for k, v in values.items() if k in optics_fields}, parts)
 
 
-def _dataset(entry: Any, index: int, shared: dict[str, Any], base: Path) -> DatasetSpec:
+@dataclasses.dataclass(frozen=True)
+class GroundTruth:
+    """The ground-truth settings of a table (the shared ``[groundtruth]``, or a dataset's over it), checked."""
+
+    volume: Any  # trainer.groundtruth.VolumeConfig
+    optics: Any  # trainer.fourier.OpticsConfig
+    parts: int
+
+
+def _ground_truth(values: dict[str, Any], table: Table, shared: GroundTruth | None = None) -> GroundTruth:
+    """``values`` of ground-truth ``table`` over ``shared`` (None: over the defaults), with the command line's
+    limits of ``gratnet groundtruth``; each error names the table a value came from."""
+    from trainer.cli_support import check_optics_limits, check_volume_limits
     from trainer.fourier import OpticsConfig
-    from trainer.generators import GENERATORS, parameters_for
     from trainer.groundtruth import VolumeConfig, wavelength_blocks
+
+    volume_values, optics_values, parts = _split_groundtruth(values, table)
+
+    def name_of(field: str) -> str:
+        return (table if field in values or shared is None else SHARED_GROUNDTRUTH).key(field)
+
+    volume = build_config(VolumeConfig, volume_values, table, base=shared and shared.volume, name_of=name_of)
+    optics = build_config(OpticsConfig, optics_values, table, base=shared and shared.optics, name_of=name_of)
+    checked(VolumeConfig, name_of, table, lambda: check_volume_limits(volume))
+    checked(OpticsConfig, name_of, table, lambda: check_optics_limits(optics))
+    parts = parts if parts is not None else (shared.parts if shared is not None else 1)
+    try:
+        wavelength_blocks(optics, parts)  # a part count the spectrum cannot hold: refused now
+    except GratNetError as error:
+        raise GratNetError(f"{name_of('parts')}: {error}") from None
+    return GroundTruth(volume, optics, parts)
+
+
+def _dataset(entry: Any, index: int, shared: GroundTruth, base: Path) -> DatasetSpec:
+    from trainer.generators import GENERATORS
     from trainer.heightfile import LoadOptions
 
-    where = f"datasets[{index}]"
+    table = Table(f"[[datasets]] #{index + 1}")
     if not isinstance(entry, dict):
-        raise GratNetError(f"{where} must be a table, got {entry!r}")
+        raise GratNetError(f"{table} must be a table, got {entry!r}")
     unknown = sorted(set(entry) - {"name", "generator", "params", "file", "load", "groundtruth"})
     if unknown:
-        raise GratNetError(f"{where}: unknown key {unknown[0]!r}; known keys: file, generator, groundtruth, load, "
+        raise GratNetError(f"{table}: unknown key {unknown[0]!r}; known keys: file, generator, groundtruth, load, "
                            f"name, params")
     generator, file = entry.get("generator"), entry.get("file")
     if (generator is None) == (file is None):
-        raise GratNetError(f"{where} needs exactly one of generator = \"NAME\" or file = \"PATH\"")
-    params = _table(entry, "params", f"{where}.")
+        raise GratNetError(f"{table} needs exactly one of generator = \"NAME\" or file = \"PATH\"")
+    params = _table(entry, "params", table)
     if generator is not None:
-        _check_value(f"{where}.generator", generator, str)
+        _check_value(table.key("generator"), generator, str)
         if generator not in GENERATORS:
-            raise GratNetError(f"{where}: unknown generator {generator!r}; built-in generators: "
+            raise GratNetError(f"{table.key('generator')}: unknown generator {generator!r}; built-in generators: "
                                f"{', '.join(GENERATORS)}")
-        parameters_for(generator, **params)  # unknown or out-of-range parameters: refused now
+        # The generator's own parameter checks, as `gratnet heightfield generate NAME` makes them.
+        build_config(GENERATORS[generator][0], params, table.inner("params"))
         if "load" in entry:
-            raise GratNetError(f"{where}: load options apply to files only")
+            raise GratNetError(f"{table.key('load')}: load options apply to files only")
     else:
-        _check_value(f"{where}.file", file, str)
+        _check_value(table.key("file"), file, str)
         if params:
-            raise GratNetError(f"{where}: params apply to generators only (a file has no parameters)")
+            raise GratNetError(f"{table.key('params')}: params apply to generators only (a file has no parameters)")
         path = (base / file).resolve()
         if not path.is_file():
-            raise GratNetError(f"{where}: height-field file {path} does not exist")
+            raise GratNetError(f"{table.key('file')}: height-field file {path} does not exist")
         file = str(path)
-    load = build_config(LoadOptions, _table(entry, "load", f"{where}."), f"{where}.load")
+    load = build_config(LoadOptions, _table(entry, "load", table), table.inner("load"))
     name = entry.get("name", generator if generator is not None else Path(file).stem)
-    _check_value(f"{where}.name", name, str)
+    _check_value(table.key("name"), name, str)
     if not _NAME.fullmatch(name):
-        raise GratNetError(f"{where}: name {name!r} must be letters, digits and . _ + - (it names folders)")
-    volume_values, optics_values, parts = _split_groundtruth(shared, "[groundtruth]")
-    own_volume, own_optics, own_parts = _split_groundtruth(_table(entry, "groundtruth", f"{where}."),
-                                                           f"{where}.groundtruth")
-    volume = build_config(VolumeConfig, {**volume_values, **own_volume}, f"{where} ground truth")
-    optics = build_config(OpticsConfig, {**optics_values, **own_optics}, f"{where} ground truth")
-    parts = own_parts if own_parts is not None else (parts if parts is not None else 1)
-    wavelength_blocks(optics, parts)  # a part count the spectrum cannot hold: refused now
-    return DatasetSpec(name, generator, dict(params), file, load, volume, optics, parts)
+        raise GratNetError(f"{table.key('name')} {name!r} must be letters, digits and . _ + - (it names folders)")
+    own = _ground_truth(_table(entry, "groundtruth", table), table.inner("groundtruth"), shared)
+    return DatasetSpec(name, generator, dict(params), file, load, own.volume, own.optics, own.parts)
+
+
+@dataclasses.dataclass(frozen=True)
+class Variant:
+    """One entry of the ``[[variants]]`` axis: its name, its TrainConfig (over ``[train]``), and where each of
+    its values came from (``name_of(field)``: the entry's key, else ``[train]``'s)."""
+
+    name: str
+    train: Any  # trainer.train_config.TrainConfig
+    name_of: Callable[[str], str]
+
+
+def _variants(document: dict[str, Any], base_train: Any) -> list[Variant]:
+    """The ``[[variants]]`` axis; by default one variant, "base" (``[train]`` as it is)."""
+    from trainer.train_config import TrainConfig
+
+    entries = document.get("variants", [{"name": "base"}])
+    if not isinstance(entries, list) or not entries:
+        raise GratNetError(f"[[variants]] must be a non-empty list of tables, got {entries!r}")
+    variants: list[Variant] = []
+    for index, entry in enumerate(entries):
+        table = Table(f"[[variants]] #{index + 1}")
+        if not isinstance(entry, dict):
+            raise GratNetError(f"{table} must be a table, got {entry!r}")
+        name = entry.get("name", f"v{index}")
+        _check_value(table.key("name"), name, str)
+        if not _NAME.fullmatch(name):
+            raise GratNetError(f"{table.key('name')} {name!r} must be letters, digits and . _ + -")
+        options = {key: value for key, value in entry.items() if key != "name"}
+
+        def name_of(field: str, table: Table = table, options: dict[str, Any] = options) -> str:
+            return (table if field in options else TRAIN).key(field)
+
+        train = build_config(TrainConfig, options, table, exclude=("preset", "seed"), base=base_train, name_of=name_of)
+        variants.append(Variant(name, train, name_of))
+    if len({variant.name for variant in variants}) != len(variants):
+        raise GratNetError("[[variants]]: two variants share a name")
+    return variants
+
+
+def _check_axes(base_train: Any, presets: list[str], seeds: list[int]) -> None:
+    """Each entry of ``presets`` and ``seeds`` checked by TrainConfig, as ``--preset`` and ``--seed`` are."""
+    from trainer.train_config import TrainConfig
+
+    for key, field, values in (("presets", "preset", presets), ("seeds", "seed", seeds)):
+        for value in values:
+            def name_of(name: str, key: str = key, field: str = field) -> str:
+                return f"{key} entry" if name == field else TRAIN.key(name)
+
+            checked(TrainConfig, name_of, TRAIN, functools.partial(dataclasses.replace, base_train, **{field: value}))
+
+
+def _check_held_out(datasets: list[DatasetSpec], variants: list[Variant]) -> None:
+    """Held-out slices beyond a dataset's volume: refused now, not after its ground truth."""
+    from trainer.train_config import TrainConfig
+
+    for index, dataset in enumerate(datasets):
+        for variant in variants:
+            if variant.train.split != "slices":
+                continue
+            try:
+                variant.train.held_out_slices(dataset.volume.slices)
+            except GratNetError as error:
+                message = in_toml_words(str(error), TrainConfig, variant.name_of, TRAIN)
+                raise GratNetError(f"{message} ([[datasets]] #{index + 1}, {dataset.name!r}): hold out fewer "
+                                   f"slices, or split = \"all\"") from None
+
+
+def _bench(document: dict[str, Any]) -> Any:
+    """The ``[bench]`` table as a BenchConfig, checked as ``gratnet bench`` checks its flags; None when absent."""
+    from bench.slices import BenchConfig
+    from gratnet.brdf import check_exposure
+    from viewer.catalog import check_mesh_spec
+
+    if "bench" not in document:
+        return None
+    table = Table("[bench]")
+    bench = build_config(BenchConfig, _table(document, "bench", Table()), table)
+    checks = (bench.size_list, bench.path_list, bench.scene_size_list, bench.render_path_list, bench.spp_list,
+              lambda: check_mesh_spec(bench.scene_mesh), lambda: check_exposure(bench.exposure))
+    for check in checks:
+        checked(BenchConfig, table.key, table, check)
+    return bench
 
 
 def load_sweep(path: str | Path, out: str | Path | None = None) -> SweepSpec:
-    """Read and check the sweep file ``path``; ``out`` overrides its ``out`` key (default ``out/sweep``)."""
-    from bench.slices import BenchConfig
-    from trainer.evaluate import EvaluateConfig
-    from trainer.model import PRESETS
-    from trainer.train_config import TrainConfig
+    """Read and check the sweep file ``path``; ``out`` overrides its ``out`` key (default ``out/sweep``).
 
+    Every value of every table is checked here, by the configs' own checks (those of the subcommands), before any
+    work; an error is one GratNetError that starts with the file's path and names the table and key.
+    """
     path = Path(path)
     try:
         text = path.read_text(encoding="utf-8")
@@ -303,73 +483,54 @@ def load_sweep(path: str | Path, out: str | Path | None = None) -> SweepSpec:
         document = tomllib.loads(text)
     except tomllib.TOMLDecodeError as error:
         raise GratNetError(f"{path} is not valid TOML: {error}") from None
+    try:
+        return _resolve(path, document, out)
+    except GratNetError as error:
+        raise GratNetError(f"{path}: {error}") from None
+
+
+def _resolve(path: Path, document: dict[str, Any], out: str | Path | None) -> SweepSpec:
+    """The checked sweep of the TOML ``document`` read from ``path``."""
+    from trainer.evaluate import EvaluateConfig
+    from trainer.train_config import TrainConfig
+
     known = {"out", "presets", "seeds", "groundtruth", "train", "evaluate", "resources", "datasets", "variants",
              "bench"}
     unknown = sorted(set(document) - known)
     if unknown:
-        raise GratNetError(f"{path}: unknown key {unknown[0]!r}; known keys: {', '.join(sorted(known))}")
-    base = path.resolve().parent
+        raise GratNetError(f"unknown key {unknown[0]!r}; known keys: {', '.join(sorted(known))}")
     out_value = out if out is not None else document.get("out", "out/sweep")
-    _check_value("out", out_value, str) if not isinstance(out_value, Path) else None
-
+    if not isinstance(out_value, Path):
+        _check_value("out", out_value, str)
     presets = _name_list(document, "presets", ["small"], str)
-    for preset in presets:
-        if preset not in PRESETS:
-            raise GratNetError(f"unknown preset {preset!r}; choose from {', '.join(PRESETS)}")
     seeds = _name_list(document, "seeds", [0], int)
-    if min(seeds) < 0:
-        raise GratNetError(f"seeds must be ≥ 0, got {seeds!r}")
 
-    shared_groundtruth = _table(document, "groundtruth", "")
-    _split_groundtruth(shared_groundtruth, "[groundtruth]")
+    shared = _ground_truth(_table(document, "groundtruth", Table()), SHARED_GROUNDTRUTH)
+    base_train = build_config(TrainConfig, _table(document, "train", Table()), TRAIN, exclude=("preset", "seed"))
+    variants = _variants(document, base_train)
+    _check_axes(base_train, presets, seeds)
+    evaluate = build_config(EvaluateConfig, _table(document, "evaluate", Table()), Table("[evaluate]"),
+                            exclude=("cache_dir",))
+    resources = build_config(Resources, _table(document, "resources", Table()), Table("[resources]"))
+    bench = _bench(document)
+
     entries = document.get("datasets")
     if not isinstance(entries, list) or not entries:
-        raise GratNetError(f"{path}: no [[datasets]]: give at least one generator or file")
-    datasets = [_dataset(entry, index, shared_groundtruth, base) for index, entry in enumerate(entries)]
+        raise GratNetError("no [[datasets]]: give at least one generator or file")
+    base = path.resolve().parent
+    datasets = [_dataset(entry, index, shared, base) for index, entry in enumerate(entries)]
     names = [dataset.name for dataset in datasets]
     if len(set(names)) != len(names):
-        raise GratNetError(f"two datasets share the name {next(n for n in names if names.count(n) > 1)!r}; "
+        raise GratNetError(f"two [[datasets]] share the name {next(n for n in names if names.count(n) > 1)!r}; "
                            f"give them distinct name = \"…\"")
+    _check_held_out(datasets, variants)
 
     out_path = Path(out_value)
-    base_train = build_config(TrainConfig, _table(document, "train", ""), "[train]", exclude=("preset", "seed"))
-    evaluate = build_config(EvaluateConfig, _table(document, "evaluate", ""), "[evaluate]", exclude=("cache_dir",))
     evaluate = dataclasses.replace(evaluate, cache_dir=str(out_path / "cache"), progress=False)
-    variants_value = document.get("variants", [{"name": "base"}])
-    if not isinstance(variants_value, list) or not variants_value:
-        raise GratNetError(f"variants must be a non-empty list of tables, got {variants_value!r}")
-    variants: list[tuple[str, Any]] = []
-    for index, entry in enumerate(variants_value):
-        if not isinstance(entry, dict):
-            raise GratNetError(f"variants[{index}] must be a table, got {entry!r}")
-        name = entry.get("name", f"v{index}")
-        _check_value(f"variants[{index}].name", name, str)
-        if not _NAME.fullmatch(name):
-            raise GratNetError(f"variants[{index}]: name {name!r} must be letters, digits and . _ + -")
-        options = {key: value for key, value in entry.items() if key != "name"}
-        variants.append((name, build_config(TrainConfig, options, f"variants[{index}]", exclude=("preset", "seed"),
-                                            base=base_train)))
-    if len({name for name, _ in variants}) != len(variants):
-        raise GratNetError("two variants share a name")
     runs = [
-        RunSpec(dataset, preset, variant, seed, dataclasses.replace(train, preset=preset, seed=seed), evaluate)
-        for dataset in datasets for preset in presets for variant, train in variants for seed in seeds
+        RunSpec(dataset, preset, variant.name, seed, dataclasses.replace(variant.train, preset=preset, seed=seed),
+                evaluate)
+        for dataset in datasets for preset in presets for variant in variants for seed in seeds
     ]
-    for run in runs:
-        if run.train.split == "slices":  # held-out slices beyond the volume: refused now, not after ground truth
-            slices = run.dataset.volume.slices
-            try:
-                held_out = [int(part) for part in run.train.test_slices.split(",") if part.strip()]
-            except ValueError:
-                raise GratNetError(f"test_slices must be comma-separated integers, got {run.train.test_slices!r}") \
-                    from None
-            if not held_out or min(held_out) < 0 or max(held_out) >= slices:
-                raise GratNetError(f"run {run.name}: test_slices {run.train.test_slices!r} out of range for "
-                                   f"{slices} slices (set [train] test_slices or split = \"all\")")
-    resources = build_config(Resources, _table(document, "resources", ""), "[resources]")
-    bench = None
-    if "bench" in document:
-        bench = build_config(BenchConfig, _table(document, "bench", ""), "[bench]")
-        bench.size_list(), bench.path_list()
     as_json = json.loads(json.dumps(document, default=str))  # TOML dates as text
     return SweepSpec(str(path), out_path, datasets, runs, resources, bench, as_json)

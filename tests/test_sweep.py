@@ -193,38 +193,123 @@ def _write(tmp_path: Path, text: str) -> str:
 
 
 DATASET = '[[datasets]]\ngenerator = "blazed"\n'
+#: case -> (sweep file, what the one line must say: the table and key of the bad value, in the file's words).
 BAD_FILES = {
     "not TOML": ("presets = [tiny", "not valid TOML"),
     "unknown top-level key": ("epochs = 3\n" + DATASET, "unknown key 'epochs'"),
     "unknown train key": ("[train]\nepoch = 3\n" + DATASET, "[train]: unknown key 'epoch'"),
-    "preset in train": ("[train]\npreset = \"tiny\"\n" + DATASET, "unknown key 'preset'"),
-    "unknown preset": ('presets = ["huge"]\n' + DATASET, "unknown preset 'huge'"),
-    "unknown generator": ('[[datasets]]\ngenerator = "zebra"\n', "unknown generator 'zebra'"),
-    "unknown generator parameter": (DATASET + "params = { pitch = 2 }\n", "has no parameter 'pitch'"),
-    "bad generator parameter": (DATASET + "params = { size_um = -1.0 }\n", "size_um must be > 0"),
-    "wrong type": ('[groundtruth]\nresolution = "big"\n' + DATASET, "resolution must be a whole number"),
-    "unknown ground-truth key": (DATASET + "groundtruth = { res = 65 }\n", "unknown key 'res'"),
+    "preset in train": ("[train]\npreset = \"tiny\"\n" + DATASET, "[train]: unknown key 'preset'"),
+    "train not a table": ("train = 3\n" + DATASET, "train must be a table, got 3"),
+    "unknown preset": ('presets = ["huge"]\n' + DATASET, "presets entry 'huge' is unknown"),
+    "presets not a list": ('presets = "tiny"\n' + DATASET, "presets must be a non-empty list, got 'tiny'"),
+    "presets empty": ("presets = []\n" + DATASET, "presets must be a non-empty list, got []"),
+    "preset not a string": ("presets = [3]\n" + DATASET, "presets entry 3 must be a string"),
+    "seed a fraction": ("seeds = [0, 1.5]\n" + DATASET, "seeds entry 1.5 must be a whole number"),
+    "seed twice": ("seeds = [1, 1]\n" + DATASET, "seeds lists an entry twice"),
+    "negative seed": ("seeds = [-1]\n" + DATASET, "seeds entry must be ≥ 0, got -1"),
+    "seed beyond int32": ("seeds = [3000000000]\n" + DATASET, "seeds entry 3000000000 must be a whole number the "
+                          "command line accepts"),
+    "unknown generator": ('[[datasets]]\ngenerator = "zebra"\n',
+                          "[[datasets]] #1 generator: unknown generator 'zebra'"),
+    "unknown generator parameter": (DATASET + "params = { pitch = 2 }\n",
+                                    "[[datasets]] #1 params: unknown key 'pitch'"),
+    "bad generator parameter": (DATASET + "params = { size_um = -1.0 }\n",
+                                "[[datasets]] #1 params: blazed parameter size_um must be > 0"),
+    "generator parameter a string": (DATASET + 'params = { size_um = "big" }\n',
+                                     "[[datasets]] #1 params.size_um must be a number, got 'big'"),
+    "wrong type": ('[groundtruth]\nresolution = "big"\n' + DATASET, "[groundtruth] resolution must be a whole number"),
+    "resolution too small": ("[groundtruth]\nresolution = 1\n" + DATASET,
+                             "[groundtruth] resolution must be at least 2"),
+    "resolution beyond the CLI's limit": ("[groundtruth]\nresolution = 5000\n" + DATASET,
+                                          "[groundtruth] resolution must be at most 4001"),
+    "wavelength step below the CLI's limit": ("[groundtruth]\nwavelength_step_nm = 0.01\n" + DATASET,
+                                              "[groundtruth] wavelength_step_nm must be at least 0.1 nm"),
+    "dataset's own bad resolution": (DATASET + "groundtruth = { resolution = 1 }\n",
+                                     "[[datasets]] #1 groundtruth.resolution must be at least 2"),
+    "unknown ground-truth key": (DATASET + "groundtruth = { res = 65 }\n",
+                                 "[[datasets]] #1 groundtruth: unknown key 'res'"),
     "no datasets": ('presets = ["tiny"]\n', "no [[datasets]]"),
-    "missing file": ('[[datasets]]\nfile = "nowhere.gsf"\n', "does not exist"),
-    "generator and file": (DATASET + 'file = "x.gsf"\n', "exactly one of"),
-    "too many parts": ('[groundtruth]\nparts = 500\n' + DATASET, "cannot split 81 wavelengths into 500"),
-    "held-out slice out of range": ('[groundtruth]\nslices = 3\n' + DATASET, "out of range for 3 slices"),
-    "same name twice": (DATASET + DATASET, "share the name 'blazed'"),
-    "negative seed": ("seeds = [-1]\n" + DATASET, "seeds must be ≥ 0"),
-    "negative resources": ("[resources]\ntrain_gpus = -0.5\n" + DATASET, "train_gpus must be a number ≥ 0"),
-    "unknown variant key": (DATASET + '[[variants]]\nname = "x"\nlearnrate = 1\n', "variants[0]: unknown key"),
+    "missing file": ('[[datasets]]\nfile = "nowhere.gsf"\n', "[[datasets]] #1 file: height-field file"),
+    "generator and file": (DATASET + 'file = "x.gsf"\n', "[[datasets]] #1 needs exactly one of"),
+    "too many parts": ('[groundtruth]\nparts = 500\n' + DATASET,
+                       "[groundtruth] parts: cannot split 81 wavelengths into 500"),
+    "held-out slice out of range": ('[groundtruth]\nslices = 3\n' + DATASET,
+                                    "[train] test_slices 4,7,10 out of range for a 3-slice volume"),
+    "held-out slices not numbers": ('[train]\ntest_slices = "a,b"\n' + DATASET,
+                                    "[train] test_slices must be comma-separated integers"),
+    "same name twice": (DATASET + DATASET, "two [[datasets]] share the name 'blazed'"),
+    "negative resources": ("[resources]\ntrain_gpus = -0.5\n" + DATASET, "[resources] train_gpus must be a number ≥ 0"),
+    "epochs negative": ("[train]\nepochs = -1\n" + DATASET,
+                        "[train] epochs and [train] batch_size must be ≥ 1, got -1"),
+    "epochs a string": ('[train]\nepochs = "6"\n' + DATASET, "[train] epochs must be a whole number, got '6'"),
+    "unknown activation": ('[train]\nactivation = "tanh"\n' + DATASET, "[train] activation must be one of"),
+    "range bits negative": ("[train]\nrange_bits = -1.0\n" + DATASET, "[train] range_bits -1"),
+    "unknown train device": ('[train]\ndevice = "tpu"\n' + DATASET, "[train] device must be auto, cpu, cuda"),
+    "off-lattice out of range": ("[train]\noff_lattice = 1.0\n" + DATASET, "[train] off_lattice must be a fraction"),
+    "learning rate beyond float32": ("[train]\nlearning_rate = 1e39\n" + DATASET,
+                                     "[train] learning_rate must be a number the command line accepts"),
+    "evaluation size 0": ("[evaluate]\nsize = 0\n" + DATASET, "[evaluate] size must be from 2 to 4096 pixels"),
+    "evaluation ior out of range": ("[evaluate]\nior = -1.5\n" + DATASET, "[evaluate] ior must be 0 (no Fresnel)"),
+    "evaluation views": ('[evaluate]\nviews = "1,2"\n' + DATASET, "[evaluate] views: each view is 'θ,φ,RU'"),
+    "evaluation cache_dir": ('[evaluate]\ncache_dir = "x"\n' + DATASET, "[evaluate]: unknown key 'cache_dir'"),
+    "unknown variant key": (DATASET + '[[variants]]\nname = "x"\nlearnrate = 1\n', "[[variants]] #1: unknown key"),
+    "bad variant value": (DATASET + '[[variants]]\nname = "x"\n[[variants]]\nname = "y"\nbatch_size = 0\n',
+                          "[train] epochs and [[variants]] #2 batch_size must be ≥ 1, got 6, 0"),
+    "variants not tables": ("variants = [1, 2]\n" + DATASET, "[[variants]] #1 must be a table, got 1"),
+    "variant name twice": (DATASET + '[[variants]]\nname = "x"\n[[variants]]\nname = "x"\n', "two variants share"),
+    "variant's held-out slices": ('[groundtruth]\nslices = 5\n[train]\ntest_slices = "2"\n' + DATASET
+                                  + '[[variants]]\nname = "x"\ntest_slices = "7"\n',
+                                  "[[variants]] #1 test_slices 7 out of range for a 5-slice volume"),
+    "bench sizes": (DATASET + '[bench]\nsizes = "1"\n', "[bench] sizes must lie in 2 … 16384"),
+    "bench exposure": (DATASET + "[bench]\nexposure = -1.0\n", "[bench] exposure must be a positive number"),
 }
 
 
 @pytest.mark.parametrize("case", sorted(BAD_FILES))
 def test_bad_sweep_file_is_one_line_exit_2_before_any_work(tmp_path, capsys, case):
+    """Exit status 2, one line that starts with the file's path and names the table and key, nothing written
+    (no results folder, so no volume), and Ray never started."""
     text, message = BAD_FILES[case]
-    code = main(["sweep", _write(tmp_path, text), "--out", str(tmp_path / "out"), "--quiet"])
+    path = _write(tmp_path, text)
+    code = main(["sweep", path, "--out", str(tmp_path / "out"), "--quiet"])
     stderr = capsys.readouterr().err
     assert code == 2
     assert message in stderr
     assert len(stderr.strip().splitlines()) == 1, stderr
+    assert stderr.startswith(f"gratnet sweep: error: {path}") or case == "not TOML", stderr
     assert not (tmp_path / "out").exists()
+    assert sorted(item.name for item in tmp_path.iterdir()) == ["bad.toml"]
+
+
+def test_the_reported_files_fail_before_the_ground_truth(tmp_path, capsys, monkeypatch):
+    """Issue 36's files: a sweep that is valid but for [evaluate] size = 0 (or [train] epochs = -1) is refused
+    before any task is submitted, with the TOML key, not the command-line flag, in its message."""
+    from sweep import tasks
+
+    def no_work(*_arguments: object) -> None:
+        raise AssertionError("a ground truth was started")
+
+    monkeypatch.setattr(tasks, "ground_truth", no_work)
+    for bad, key in (("size = 32", "[evaluate] size"), ("epochs = 1", "[train] epochs")):
+        broken = TINY.replace(bad, bad.split("=")[0] + ("= 0" if "size" in bad else "= -1"))
+        assert broken != TINY
+        code = main(["sweep", _write(tmp_path, broken), "--out", str(tmp_path / "out"), "--quiet"])
+        stderr = capsys.readouterr().err
+        assert code == 2 and key in stderr and "--" not in stderr.split(": error: ", 1)[1], stderr
+        assert not (tmp_path / "out").exists()
+
+
+def test_a_good_sweep_file_is_accepted_with_every_table(tmp_path):
+    """The checks refuse bad values only: a file that sets every table loads, and its values arrive."""
+    from sweep.spec import load_sweep
+
+    text = TINY + '[bench]\nsizes = "64"\n[[variants]]\nname = "lr"\nlearning_rate = 1e-3\n'
+    spec = load_sweep(_write(tmp_path, text), tmp_path / "out")
+    assert [run.name for run in spec.runs][:2] == ["blazed-tiny-lr-s0", "blazed-tiny-lr-s1"]
+    assert {run.train.learning_rate for run in spec.runs} == {1e-3}
+    assert {run.evaluate.size for run in spec.runs} == {32}
+    assert spec.bench.size_list() == [64]
+    assert [dataset.parts for dataset in spec.datasets] == [1, 3]
 
 
 def test_a_folder_of_another_configuration_is_refused(swept, tmp_path, capsys):
