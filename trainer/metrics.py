@@ -19,11 +19,8 @@ import math
 
 import numpy as np
 
-from gratnet.display import xyz_to_linear_srgb
+from gratnet.display import ldr_flip, xyz_to_linear_srgb
 from gratnet.errors import GratNetError
-
-#: FLIP's default pixels per degree (0.7 m viewing distance, 3840 px over 0.7 m); used unless overridden.
-FLIP_DEFAULT_PPD = 67.02064514160156
 
 #: SSIM window side used by scikit-image by default; reduced (odd, ≥ 3) for smaller images.
 _SSIM_WINDOW = 7
@@ -113,26 +110,6 @@ def _check_mask(mask: np.ndarray | None, shape: tuple[int, ...]) -> np.ndarray |
     return array
 
 
-def _flip(reference_srgb: np.ndarray, test_srgb: np.ndarray, ppd: float | None) -> tuple[float, np.ndarray]:
-    import flip_evaluator
-
-    used_ppd = FLIP_DEFAULT_PPD if ppd is None else float(ppd)
-    if not (math.isfinite(used_ppd) and used_ppd > 0.0):
-        # flip_evaluator would call sys.exit() on a bad PPD: check here instead.
-        raise GratNetError(f"FLIP pixels per degree must be a positive number, got {ppd}")
-    error_map, mean_error, _ = flip_evaluator.evaluate(
-        np.ascontiguousarray(reference_srgb, dtype=np.float32),
-        np.ascontiguousarray(test_srgb, dtype=np.float32),
-        "LDR",
-        inputsRGB=True,
-        applyMagma=False,
-        computeMeanError=True,
-        parameters={"ppd": used_ppd},
-    )
-    error = np.asarray(error_map, dtype=np.float64).reshape(reference_srgb.shape[:2])
-    return float(mean_error), error
-
-
 def psnr_xyz(reference_xyz: np.ndarray, test_xyz: np.ndarray, mask: np.ndarray | None = None) -> float:
     """PSNR (dB) of the exposed XYZ images clipped to [0, 1], peak 1, MSE over all pixels and channels.
 
@@ -163,10 +140,10 @@ def flip(reference_xyz: np.ndarray, test_xyz: np.ndarray, ppd: float | None = No
 
     Both images go through the display pipeline and are handed to ``flip_evaluator.evaluate`` as
     float32 display sRGB in [0, 1] (``"LDR"``, ``inputsRGB=True``). ``ppd`` defaults to FLIP's own
-    default, 67.02 pixels per degree (:data:`FLIP_DEFAULT_PPD`).
+    default, 67.02 pixels per degree (:data:`gratnet.display.FLIP_DEFAULT_PPD`).
     """
     reference, test = _check_pair(reference_xyz, test_xyz)
-    return _flip(_display_srgb(reference), _display_srgb(test), ppd)
+    return ldr_flip(_display_srgb(reference), _display_srgb(test), ppd)
 
 
 @dataclasses.dataclass(frozen=True)
@@ -186,7 +163,7 @@ def show_pair(reference_xyz: np.ndarray, test_xyz: np.ndarray) -> ShownPair:
     :func:`flip` and :func:`psnr_xyz` (no mask), which would each convert both images again."""
     reference, test = _check_pair(reference_xyz, test_xyz)
     reference_srgb, test_srgb = _display_srgb(reference), _display_srgb(test)
-    mean_flip, flip_map = _flip(reference_srgb, test_srgb, None)
+    mean_flip, flip_map = ldr_flip(reference_srgb, test_srgb, None)
     return ShownPair(reference_srgb, test_srgb, flip_map, mean_flip, _psnr(reference, test, None))
 
 
@@ -200,7 +177,7 @@ def image_metrics(reference_xyz: np.ndarray, test_xyz: np.ndarray, mask: np.ndar
     selected = _check_mask(mask, reference.shape)
     reference_srgb = _display_srgb(reference)
     test_srgb = _display_srgb(test)
-    mean_flip, _ = _flip(reference_srgb, test_srgb, None)
+    mean_flip, _ = ldr_flip(reference_srgb, test_srgb, None)
     return {
         "psnr_xyz": _psnr(reference, test, selected),
         "ssim_srgb": _ssim(reference_srgb, test_srgb),
