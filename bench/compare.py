@@ -104,12 +104,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 
 
 def _check(config: CompareConfig, material: str) -> tuple[Path, list[str]]:
-    """Every input checked before any rendering: sizes, samples, meshes, the volume against the material."""
-    from gratnet.modelfile import load_model
-    from gratnet.reference import check_precision, check_uniform_slices, check_volume_matches
-    from gratnet.volume import read_volume_header
+    """The flags checked before any reading or rendering: sizes, samples, precision, meshes; the material's path."""
+    from gratnet.reference import check_precision
     from viewer.catalog import check_mesh_spec, resolve_material
-    from viewer.reference import check_reference_limits
     from viewer.surface import check_size
 
     if not config.reference:
@@ -123,15 +120,7 @@ def _check(config: CompareConfig, material: str) -> tuple[Path, list[str]]:
         raise GratNetError("--meshes names no mesh")
     for mesh in meshes:
         check_mesh_spec(mesh)
-    model_path = resolve_material(material)
-    header = read_volume_header(config.reference)
-    check_uniform_slices(header.metadata, header.slices, f"--reference {config.reference}")
-    check_reference_limits(header.slices, header.resolution, config.reference_precision,
-                           name=f"--reference {config.reference}")
-    trained_on = load_model(model_path).metadata.get("volume")
-    check_volume_matches(header.metadata, trained_on if isinstance(trained_on, dict) else {},
-                         f"--reference {config.reference}", material)
-    return model_path, meshes
+    return resolve_material(material), meshes
 
 
 def run(arguments: argparse.Namespace) -> int:
@@ -140,18 +129,18 @@ def run(arguments: argparse.Namespace) -> int:
 
     from gratnet.atomic import check_output_folder
     from gratnet.modelfile import load_model
-    from gratnet.volume import read_volume
     from trainer.metrics import show_pair
     from viewer.camera import Camera, Light
     from viewer.catalog import build_mesh
     from viewer.context import create_headless_context
     from viewer.scene import SceneRenderer
+    from viewer.scene_config import load_reference
 
     config = from_arguments(CompareConfig, arguments)
     model_path, meshes = _check(config, arguments.material)
     out = check_output_folder(arguments.out)
+    volume = load_reference(config.reference, config.reference_precision, arguments.material)
     scenes = [view for mesh in meshes for view in views(arguments.material, mesh)]
-    volume = read_volume(config.reference)
     model = load_model(model_path)
     rows: list[dict[str, Any]] = []
     panels = []

@@ -41,6 +41,7 @@ from viewer.scene_config import (
     RenderConfig,
     add_scene_arguments,
     check_scene,
+    load_reference,
     resolve_scene_command,
     scene_fields,
     warn_if_black,
@@ -50,8 +51,6 @@ from viewer.scene_config import (
 
 if TYPE_CHECKING:
     import numpy as np
-
-    from gratnet.volume import Volume
 
 __all__ = ["register", "resolve_config", "run"]
 
@@ -98,27 +97,6 @@ def resolve_config(arguments: argparse.Namespace) -> RenderConfig:
     return config
 
 
-def _check_reference(config: RenderConfig, model_path: Path | None) -> Volume:
-    """The --reference volume, checked from its headers (scheme, texture size, and with --material its source
-    and σs against the material's training volume) before its pixels are read (their checksums then)."""
-    from gratnet.modelfile import load_model
-    from gratnet.reference import check_uniform_slices, check_volume_matches
-    from gratnet.volume import read_volume, read_volume_header
-    from viewer.reference import check_reference_limits
-
-    path = Path(config.reference)
-    header = read_volume_header(path)
-    if header.metadata.get("scheme") not in ("regular", "simple", "simple-max"):
-        raise GratNetError(f"--reference {path}: the volume names no sampling scheme (regular, simple, simple-max)")
-    check_uniform_slices(header.metadata, header.slices, f"--reference {path}")
-    check_reference_limits(header.slices, header.resolution, config.reference_precision, name=f"--reference {path}")
-    if model_path is not None:
-        trained_on = load_model(model_path).metadata.get("volume")
-        check_volume_matches(header.metadata, trained_on if isinstance(trained_on, dict) else {},
-                             f"--reference {path}", f"--material {config.material}")
-    return read_volume(path)
-
-
 def _auto_exposure(xyz: np.ndarray) -> float:
     """The exposure that puts the brightest 0.5 % of the lit pixels at display white (largest linear sRGB
     channel), for a picture rendered at exposure 1; 1 when nothing is lit."""
@@ -159,7 +137,8 @@ def run(arguments: argparse.Namespace) -> int:
     light = (Light.point(config.point_light) if config.point_light is not None
              else Light.directional(config.light_theta_degrees, config.light_phi_degrees))
     model_path = None if reference_only else resolve_material(config.material)
-    volume = _check_reference(config, model_path) if config.reference else None
+    volume = (load_reference(config.reference, config.reference_precision,
+                             None if reference_only else config.material) if config.reference else None)
     model = volume if volume is not None else load_model(model_path)
     mesh = None if config.slice else build_mesh(config.mesh)
 

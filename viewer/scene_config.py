@@ -35,7 +35,7 @@ ConfigT = TypeVar("ConfigT")
 
 __all__ = ["DEFAULT_MATERIAL", "MAX_SAMPLES", "RENDER_PATHS", "RENDER_PATH_HELP", "WEIGHT_PATHS", "RenderConfig",
            "SceneConfig", "add_scene_arguments", "check_scene", "check_scene_numbers", "fill_scene_defaults",
-           "parse_size",
+           "load_reference", "parse_size",
            "resolve_scene_command", "scene_fields", "warn_if_black", "with_fallback", "write_render"]
 _OUTPUT_SUFFIXES = (".png", ".exr")
 #: Largest --spp of ``gratnet render``: viewer.antialias.MAX_SAMPLES (repeated: this module defers numpy).
@@ -227,6 +227,28 @@ def resolve_scene_command(arguments: argparse.Namespace, resolve: Callable[[argp
     resolve(with_fallback(arguments))  # the flags given are checked before the defaults read the model
     fill_scene_defaults(arguments)  # the unset --light, --camera, --exposure, from the material and mesh
     return resolve(arguments)
+
+
+def load_reference(path: str | Path, precision: str, material: str | None = None) -> Any:
+    """The ``--reference`` volume (a :class:`~gratnet.volume.Volume`), checked from its headers first — its scheme,
+    uniform slices, texture size and, with ``material``, its source and σs against the material's training
+    volume — then read (pixel checksums). Every problem is one GratNetError, before any GL work."""
+    from gratnet.modelfile import load_model
+    from gratnet.reference import check_uniform_slices, check_volume_matches
+    from gratnet.volume import read_volume, read_volume_header
+    from viewer.catalog import resolve_material
+    from viewer.reference import check_reference_limits
+
+    name = f"--reference {path}"
+    header = read_volume_header(path)
+    if header.metadata.get("scheme") not in ("regular", "simple", "simple-max"):
+        raise GratNetError(f"{name}: the volume names no sampling scheme (regular, simple, simple-max)")
+    check_uniform_slices(header.metadata, header.slices, name)
+    check_reference_limits(header.slices, header.resolution, precision, name=name)
+    if material is not None:
+        trained_on = load_model(resolve_material(material)).metadata.get("volume")
+        check_volume_matches(header.metadata, trained_on if isinstance(trained_on, dict) else {}, name, material)
+    return read_volume(path)
 
 
 def write_render(out: Path, xyz: Any, *, linear_srgb: Any = None, **documents: Any) -> None:
