@@ -22,7 +22,7 @@ once per mesh (the ``gratnet.mitsuba`` logger: ``gratnet mitsuba-render`` prints
 without logging set up gets it on stderr).
 
 Errors: bad properties, an unknown material or a missing file raise one GratNetError line starting with
-:data:`ERROR_PREFIX`; Mitsuba wraps it ("failed to instantiate ... plugin of type gratnet", and a short Python
+:data:`MESSAGE_PREFIX`; Mitsuba wraps it ("failed to instantiate ... plugin of type gratnet", and a short Python
 traceback), and :func:`plugin_message` takes the plugin's line back out (``mitsuba_plugin.runtime.plugin_errors``).
 
 Values: ``eval`` = BSDF × cos θ of the light-side direction = ``A · XYZ → linear sRGB`` in radiance
@@ -38,7 +38,6 @@ import logging
 import math
 import re
 import threading
-from collections.abc import Callable
 from pathlib import Path
 from types import ModuleType
 from typing import Any
@@ -55,15 +54,15 @@ from mitsuba_plugin.shading import (
     xyz_to_linear_srgb_matrix,
 )
 
-__all__ = ["ERROR_PREFIX", "LOGGER", "PLUGIN_NAME", "PROPERTIES", "bsdf_class", "check_ior", "file_resolver",
+__all__ = ["MESSAGE_PREFIX", "LOGGER", "PLUGIN_NAME", "PROPERTIES", "bsdf_class", "check_ior", "file_resolver",
            "no_tangent_warning", "plugin_message", "register", "resolve_model", "search_folders",
            "shape_label"]
 
 PLUGIN_NAME = "gratnet"
 #: The properties the plugin takes (any other is refused, with this list).
 PROPERTIES = ("filename", "ior", "tangent_attribute", "specular_probability", "lobe_degrees")
-#: Start of every error message of the plugin (what :func:`plugin_message` looks for in Mitsuba's wrapping).
-ERROR_PREFIX = "gratnet BSDF: "
+#: Start of the plugin's errors and warnings (what :func:`plugin_message` looks for in Mitsuba's wrapping).
+MESSAGE_PREFIX = "gratnet BSDF: "
 #: Where the plugin's warnings go (``gratnet`` commands print the ``gratnet`` loggers on stderr, one line each).
 LOGGER = logging.getLogger("gratnet.mitsuba")
 
@@ -150,7 +149,7 @@ def plugin_message(error: BaseException) -> str | None:
     wraps it in "failed to instantiate ... plugin of type gratnet" and a Python traceback), or None when the
     error is not the plugin's."""
     text = str(error)
-    start = text.rfind(ERROR_PREFIX)
+    start = text.rfind(MESSAGE_PREFIX)
     if start < 0:
         return None
     return text[start:].splitlines()[0].strip()
@@ -158,7 +157,7 @@ def plugin_message(error: BaseException) -> str | None:
 
 def file_resolver(mi: ModuleType) -> Any:
     """Mitsuba's file resolver for this thread (``mi.file_resolver()``; ``mi.Thread.thread().file_resolver()``
-    before Mitsuba 3.6), or None."""
+    in older Mitsuba 3 releases, deprecated in 3.9), or None."""
     if hasattr(mi, "file_resolver"):
         return mi.file_resolver()
     thread = mi.Thread.thread()
@@ -185,7 +184,7 @@ def register(mi: ModuleType) -> None:
         try:
             return cls(props)
         except GratNetError as error:  # one line, and the shortest traceback Mitsuba's wrapping can show
-            raise GratNetError(ERROR_PREFIX + " ".join(str(error).split())) from None
+            raise GratNetError(MESSAGE_PREFIX + " ".join(str(error).split())) from None
 
     mi.register_bsdf(PLUGIN_NAME, create)
 
@@ -263,27 +262,26 @@ def bsdf_class(variant: str) -> type:
             self.shapes_lock = threading.Lock()
 
         # -- frames -------------------------------------------------------------------------------
-        def _distinct_shapes(self, si: Any) -> dict[int, Callable[[], Any]]:
-            """Key (registry id; the object's address in scalar variants) → getter of each shape behind ``si``'s
-            lanes (none for interactions without a shape)."""
+        def _distinct_shapes(self, si: Any) -> dict[int, int]:
+            """Key (registry id; the object's address in scalar variants) → one lane, for each shape behind
+            ``si``'s lanes (none for interactions without a shape)."""
             if scalar:
-                shape = si.shape
-                return {} if shape is None else {int(shape.ptr): lambda: shape}
+                return {} if si.shape is None else {int(si.shape.ptr): 0}
             ids = np.asarray(dr.reinterpret_array(mi.UInt32, si.shape)).reshape(-1)
             if ids.size == 0:
                 return {}
-            distinct = [int(ids[0])] if np.all(ids == ids[0]) else [int(key) for key in np.unique(ids)]
-            return {key: functools.partial(lambda key: si.shape[int(np.flatnonzero(ids == key)[0])], key)
-                    for key in distinct if key != 0}
+            keys, lanes = ([ids[:1], np.zeros(1, dtype=np.int64)] if np.all(ids == ids[0]) else
+                           np.unique(ids, return_index=True))
+            return {int(key): int(lane) for key, lane in zip(keys, lanes, strict=True) if key != 0}
 
         def _with_tangents(self, si: Any) -> bool:
             """Whether a shape behind ``si`` has the tangent attribute; the first time a mesh with neither it nor
             UVs shows up, one warning: its tangent, so the diffraction's direction, is Mitsuba's arbitrary one."""
             shapes = self._distinct_shapes(si)
-            for key, get in shapes.items():
+            for key, lane in shapes.items():
                 if key in self.shapes_seen:
                     continue
-                shape = get()
+                shape = si.shape if scalar else si.shape[lane]
                 has = bool(self.tangent_attribute) and bool(shape.has_attribute(self.tangent_attribute))
                 with self.shapes_lock:
                     first = key not in self.shapes_seen
@@ -291,7 +289,7 @@ def bsdf_class(variant: str) -> type:
                 if first and not has and not has_uvs(shape):
                     reason = "has no UV coordinates" + (f" and no {self.tangent_attribute!r} attribute"
                                                         if self.tangent_attribute else "")
-                    LOGGER.warning(ERROR_PREFIX + no_tangent_warning(shape_label(shape), reason))
+                    LOGGER.warning(MESSAGE_PREFIX + no_tangent_warning(shape_label(shape), reason))
             return any(self.shapes_seen[key] for key in shapes)
 
         def _rotation(self, si: Any, count: int) -> np.ndarray | None:

@@ -98,32 +98,42 @@ def test_a_path_relative_to_the_current_directory_still_works(monkeypatch: pytes
 # a mesh without UVs
 
 
-def _render_quad(mi: object, obj: Path, tangent_attribute: str = "") -> object:
+def _render_quads(mi: object, objs: dict[str, Path], tangent_attribute: str = "") -> None:
+    """The quads side by side (x = 0, 0.12, …), all with one shared gratnet BSDF, rendered twice."""
+    shapes = {name: {"type": "obj", "filename": str(obj), "bsdf": {"type": "ref", "id": "material"},
+                     "to_world": mi.ScalarTransform4f().translate([0.12 * index, 0.0, 0.0])}
+              for index, (name, obj) in enumerate(objs.items())}
+    middle = 0.06 * (len(objs) - 1)
     scene = mi.load_dict({
         "type": "scene", "integrator": {"type": "direct"}, "light": {"type": "constant"},
-        "sensor": {"type": "perspective", "to_world": mi.ScalarTransform4f().look_at(origin=[0, 0, 0.3],
-                                                                                     target=[0, 0, 0], up=[0, 1, 0]),
-                   "film": {"type": "hdrfilm", "width": 4, "height": 4}},
-        "quad": {"type": "obj", "filename": str(obj),
-                 "bsdf": {"type": "gratnet", "filename": "cd", "tangent_attribute": tangent_attribute}}})
-    for _ in range(2):  # two renders: still one warning
-        mi.render(scene, spp=1)
-    return scene
+        "material": {"type": "gratnet", "filename": "cd", "tangent_attribute": tangent_attribute},
+        "sensor": {"type": "perspective", "to_world": mi.ScalarTransform4f().look_at(
+            origin=[middle, 0, 0.3], target=[middle, 0, 0], up=[0, 1, 0]), "fov": 60,
+                   "film": {"type": "hdrfilm", "width": 8, "height": 4}}, **shapes})
+    for _ in range(2):  # two renders: still one warning per mesh
+        image = mi.render(scene, spp=1)
+    import numpy as np
+
+    columns = np.any(np.asarray(image) != 0, axis=(0, 2))
+    assert columns[:3].any() and columns[-3:].any()  # each quad was hit
 
 
 @pytest.mark.parametrize("variant", ["scalar_rgb", pytest.param("llvm_ad_rgb", marks=pytest.mark.skipif(
     not llvm_usable(), reason="Dr.Jit finds no LLVM ≥ 18"))])
 def test_a_mesh_without_uvs_warns_once(tmp_path: Path, caplog: pytest.LogCaptureFixture, variant: str) -> None:
+    """Two quads share one BSDF (so in llvm_ad_rgb one call sees lanes of both): only the one without UVs warns,
+    once over two renders."""
     mi = set_variant(variant)
     (tmp_path / "bare.obj").write_text(QUAD_WITHOUT_UVS)
     (tmp_path / "mapped.obj").write_text(QUAD_WITH_UVS)
     with caplog.at_level(logging.WARNING, logger="gratnet.mitsuba"):
-        _render_quad(mi, tmp_path / "mapped.obj")
+        _render_quads(mi, {"mapped": tmp_path / "mapped.obj"})
         assert not caplog.records  # UVs: Mitsuba's tangent is ∂p/∂u, no warning
-        _render_quad(mi, tmp_path / "bare.obj", tangent_attribute="vertex_tangent")
+        _render_quads(mi, {"mapped": tmp_path / "mapped.obj", "bare": tmp_path / "bare.obj"},
+                      tangent_attribute="vertex_tangent")
     warnings = [record.getMessage() for record in caplog.records]
     assert len(warnings) == 1, warnings
-    assert "'quad' has no UV coordinates and no 'vertex_tangent' attribute" in warnings[0]
+    assert "mesh 'bare' has no UV coordinates and no 'vertex_tangent' attribute" in warnings[0]
     assert "direction of the diffraction, is arbitrary" in warnings[0]
 
 
