@@ -1,10 +1,10 @@
 """``gratnet train --resume`` continues exactly (issue 36): a run interrupted after epoch k and resumed ends with
 the weights and the per-epoch metrics of the run that was never interrupted, bit for bit, on the CPU.
 
-Interrupts are made three ways: an exception raised between two epochs (the ``per_epoch`` hook: after epoch k's
+Interrupts are made four ways: an exception raised between two epochs (the ``per_epoch`` hook: after epoch k's
 checkpoint, before epoch k + 1's), a checkpoint write that fails half-way (the disk fills up), and a real
-``gratnet train`` process killed with SIGKILL as soon as its first checkpoint is on disk. Old checkpoints (no
-saved shuffling state) still resume, with a warning.
+``gratnet train`` process stopped with SIGKILL or SIGINT (Ctrl-C) as soon as its first checkpoint is on disk.
+Old checkpoints (no saved shuffling state) still resume, with a warning.
 """
 
 from __future__ import annotations
@@ -165,30 +165,45 @@ def _finish(process: subprocess.Popen) -> None:
     assert process.returncode == 0, stderr
 
 
-def test_a_killed_training_resumed_is_the_uninterrupted_one(tiny_volume, tmp_path):
-    """SIGKILL as soon as the first checkpoint is on disk (no handler runs, nothing is cleaned up), then
-    ``gratnet train --resume``: model, history and metrics equal the uninterrupted command's."""
+@pytest.fixture(scope="module")
+def uninterrupted(tiny_volume: tuple[object, Path], tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """The folder of the command that was never interrupted."""
     _, volume_path = tiny_volume
-    killed, whole = tmp_path / "killed", tmp_path / "whole"
-    process = _cli(["train", str(volume_path), "--out", str(killed), *TRAIN_FLAGS])
-    reference = _cli(["train", str(volume_path), "--out", str(whole), *TRAIN_FLAGS])
-    deadline = time.monotonic() + 120
-    while not (killed / "checkpoint.pt").exists() and process.poll() is None and time.monotonic() < deadline:
-        time.sleep(0.002)
-    process.send_signal(signal.SIGKILL)
-    process.communicate(timeout=60)
-    assert process.returncode == -signal.SIGKILL, "the training ended before it could be killed"
-    epoch = read_checkpoint(killed / "checkpoint.pt")["epoch"]
-    assert 1 <= epoch < 30
-    assert not (killed / "model.npz").exists() and not (killed / "metrics.json").exists()
-    _finish(reference)
-    _finish(_cli(["train", str(volume_path), "--out", str(killed), *TRAIN_FLAGS, "--resume"]))
+    folder = tmp_path_factory.mktemp("whole")
+    _finish(_cli(["train", str(volume_path), "--out", str(folder), *TRAIN_FLAGS]))
+    return folder
 
-    mine, theirs = load_model(killed / "model.npz"), load_model(whole / "model.npz")
+
+@pytest.mark.parametrize("stop", [signal.SIGKILL, signal.SIGINT], ids=["SIGKILL", "SIGINT"])
+def test_a_stopped_training_resumed_is_the_uninterrupted_one(tiny_volume, tmp_path, uninterrupted, stop):
+    """The signal as soon as the first checkpoint is on disk, then ``gratnet train --resume``: model, history and
+    metrics equal the uninterrupted command's. SIGKILL: no handler runs, nothing is cleaned up. SIGINT (Ctrl-C):
+    exit status 130 and one line that says which epoch the checkpoint holds and how to continue."""
+    _, volume_path = tiny_volume
+    stopped = tmp_path / "stopped"
+    process = _cli(["train", str(volume_path), "--out", str(stopped), *TRAIN_FLAGS])
+    deadline = time.monotonic() + 120
+    while not (stopped / "checkpoint.pt").exists() and process.poll() is None and time.monotonic() < deadline:
+        time.sleep(0.002)
+    process.send_signal(stop)
+    _, stderr = process.communicate(timeout=60)
+    epoch = read_checkpoint(stopped / "checkpoint.pt")["epoch"]
+    assert 1 <= epoch < 30, "the training ended before it could be stopped"
+    if stop == signal.SIGKILL:
+        assert process.returncode == -signal.SIGKILL
+    else:
+        assert process.returncode == 130, stderr
+        assert stderr.strip().splitlines() == [f"gratnet train: interrupted; {stopped / 'checkpoint.pt'} holds epoch "
+                                               f"{epoch} of 30: the same command with --resume continues from "
+                                               f"there, as the uninterrupted run would have"]
+    assert not (stopped / "model.npz").exists() and not (stopped / "metrics.json").exists()
+    _finish(_cli(["train", str(volume_path), "--out", str(stopped), *TRAIN_FLAGS, "--resume"]))
+
+    mine, theirs = load_model(stopped / "model.npz"), load_model(uninterrupted / "model.npz")
     assert all(np.array_equal(a, b) for a, b in zip(mine.weights, theirs.weights, strict=True))
-    histories = [json.loads((folder / "history.json").read_text()) for folder in (killed, whole)]
+    histories = [json.loads((folder / "history.json").read_text()) for folder in (stopped, uninterrupted)]
     assert _records(histories[0]) == _records(histories[1]) and len(histories[0]["epochs"]) == 30
-    metrics = [json.loads((folder / "metrics.json").read_text()) for folder in (killed, whole)]
+    metrics = [json.loads((folder / "metrics.json").read_text()) for folder in (stopped, uninterrupted)]
     assert _without_timings(metrics[0]) == _without_timings(metrics[1])
 
 

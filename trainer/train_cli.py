@@ -123,6 +123,20 @@ def _epoch_flip(arguments: argparse.Namespace, config: Any, volume_metadata: dic
     return score
 
 
+def interrupted_state(checkpoint: Path, epochs: int) -> str:
+    """What an interrupted training leaves, in words: the checkpoint's epoch and how to continue from it."""
+    from trainer.train import read_checkpoint
+
+    if not checkpoint.is_file():
+        return "no epoch was finished, so there is no checkpoint to resume from"
+    try:
+        done = int(read_checkpoint(checkpoint)["epoch"])
+    except (GratNetError, KeyError, TypeError, ValueError):
+        return f"{checkpoint} is unreadable; start afresh without --resume"
+    return (f"{checkpoint} holds epoch {done} of {epochs}: the same command with --resume continues from there, "
+            f"as the uninterrupted run would have")
+
+
 def run_train(arguments: argparse.Namespace) -> int:
     """Train, save, evaluate."""
     from gratnet.volume import read_volume
@@ -140,8 +154,12 @@ def run_train(arguments: argparse.Namespace) -> int:
     volume = read_volume(arguments.volume)
     out = Path(arguments.out)
     per_epoch = _epoch_flip(arguments, config, volume.metadata) if config.epoch_flip_size else None
-    model, model_file, history = train(volume, config, out, resume=arguments.resume, progress=not arguments.quiet,
-                                       per_epoch=per_epoch)
+    try:
+        model, model_file, history = train(volume, config, out, resume=arguments.resume,
+                                           progress=not arguments.quiet, per_epoch=per_epoch)
+    except KeyboardInterrupt:
+        print(f"gratnet train: interrupted; {interrupted_state(checkpoint, config.epochs)}", file=sys.stderr)
+        return 130
     save_config(out / "model.npz", train=config, volume=arguments.volume)
     print(
         f"wrote {out / 'model.npz'}: {model.parameter_count} parameters, layers {model.sizes}, "
