@@ -282,3 +282,40 @@ def test_non_uniform_slices_are_refused():
     check_uniform_slices({}, 3)
     with pytest.raises(GratNetError, match="not at t = s/"):
         check_uniform_slices({"slice_t": [0.0, 0.2, 1.0]}, 3)
+
+
+# --------------------------------------------------------------------------------------------------
+# The viewer: network / reference / FLIP
+
+
+def test_viewer_shows_the_reference_and_the_flip_heat_map(ctx, tmp_path):
+    from viewer.app import ViewerApp
+    from viewer.reference_view import LoadedReference
+    from viewer.scene_config import load_reference
+    from viewer.state import ViewerState
+
+    path = cd_volume(tmp_path / "cd.exr")
+    loaded = LoadedReference(load_reference(path, "float16", "cd"), str(path), "cd")
+    state = ViewerState(material="cd", mesh="plane", camera_distance=0.15, camera_elevation=50.0, light_theta=30.0,
+                        light_phi=90.0, exposure=3.0)
+    viewer = ViewerApp(ctx, state, size=(40, 32), weights_path="texture", reference=loaded)
+    try:
+        network = viewer.render_full().copy()
+        assert viewer.flip_mean is None
+        assert viewer.set(shading="reference")
+        shown = viewer.render_full().copy()
+        renderer, buffers = viewer.supply.scene(viewer.state, preview=False)
+        truth = viewer.reference.scene().render_srgb8(buffers, state.camera(), state.light(), (40, 32), 3.0, 1.5)
+        assert np.array_equal(shown, truth) and not np.array_equal(shown, network)
+        assert viewer.set(shading="flip")
+        heat = viewer.render_full().copy()
+        assert heat.shape == (32, 40, 3) and not np.array_equal(heat, shown)
+        assert 0.0 < viewer.flip_mean <= 1.0  # a random volume is not the network's truth
+        screenshot = viewer.save_screenshot(tmp_path / "flip.png")
+        assert '"shading": "flip"' in screenshot.with_suffix(".config.json").read_text()
+        with pytest.raises(GratNetError, match="shading must be one of"):
+            viewer.set(shading="truth")
+        assert viewer.set(material="blazed") and viewer.state.shading == "network"  # the volume is cd's only
+        assert not viewer.set(shading="reference") and "cd's, not blazed's" in viewer.message
+    finally:
+        viewer.release()

@@ -70,6 +70,7 @@ from gratnet.errors import GratNetError
 from viewer.camera import Camera
 from viewer.catalog import MESHES, resolve_material, shipped_materials
 from viewer.default_view import DefaultViewRequests
+from viewer.reference_view import SHADINGS, LoadedReference, ReferenceView, flip_heat_map
 from viewer.scheduling import (
     UNCOVERED_COST,
     Accumulation,
@@ -88,6 +89,9 @@ from viewer.scheduling import (
 from viewer.state import SLIDERS, ViewerState
 
 __all__ = ["ViewerApp", "drive_slider"]
+
+
+_FLIP_CHANNELS = 7  # FLIP mode's picture data: network XYZ, reference XYZ, coverage
 
 
 class ViewerApp:
@@ -109,6 +113,8 @@ class ViewerApp:
         worker: a compile child started earlier for ``state`` (:meth:`SceneSupply.start_worker`), adopted.
         max_samples: samples per pixel accumulated while a mesh view stands still (progressive
             anti-aliasing, see the module docstring; 1: off, the default here; the window's default is 16).
+        reference: a material's checked ground-truth volume: ``state.shading`` may then show it, or the FLIP
+            heat map between it and the network, while that material is on show (:mod:`viewer.reference_view`).
 
     Raises:
         GratNetError: the initial material or mesh cannot be loaded.
@@ -117,7 +123,8 @@ class ViewerApp:
     def __init__(self, ctx: Any, state: ViewerState | None = None, size: tuple[int, int] = (512, 512),
                  policy: ResolutionPolicy | None = None, clock: Callable[[], float] = time.perf_counter,
                  extra_meshes: Iterable[str] = (), weights_path: str = "auto", background: bool = False,
-                 worker: Any = None, max_samples: int = 1, render_path: str = "auto") -> None:
+                 worker: Any = None, max_samples: int = 1, render_path: str = "auto",
+                 reference: LoadedReference | None = None) -> None:
         from viewer.antialias import check_samples
         from viewer.scene_supply import SceneSupply
         from viewer.surface import check_size
@@ -146,6 +153,9 @@ class ViewerApp:
         self._accumulation: Accumulation | None = None
         #: Progressive anti-aliasing: samples per pixel accumulated while the view stands still (1: off).
         self.max_samples = check_samples(max_samples)
+        self.reference = ReferenceView(ctx, reference) if reference is not None else None
+        self._flip_picture: np.ndarray | None = None  # the last complete FLIP-mode picture's data
+        self._flip_mean: float | None = None
         self._version = 0
         self._released = False
         #: Whether the state changed less than ``policy.idle_seconds`` before the last :meth:`frame`.
@@ -179,7 +189,16 @@ class ViewerApp:
                 value = SLIDERS[name].clamp(value)
             elif name in ("fresnel", "slice_mode"):
                 value = bool(value)
+            elif name == "shading" and value not in SHADINGS:
+                raise GratNetError(f"shading must be one of {', '.join(SHADINGS)}, got {value!r}")
             setattr(new, name, value)
+        if new.shading != "network" and not self.reference_available(new.material):
+            if "shading" in changes:
+                self.message = (f"no ground-truth volume for {new.material}: start gratnet view with --reference"
+                                if self.reference is None else
+                                f"the ground-truth volume is {self.reference.loaded.material}'s, not {new.material}'s")
+                return False
+            new.shading = "network"  # another material: its network only
         if new == self.state:
             return False
         try:
@@ -274,6 +293,33 @@ class ViewerApp:
         return self.set(camera_distance=self.state.camera_distance * 0.9 ** float(steps))
 
     # -- rendering ---------------------------------------------------------------------------------
+
+    def reference_available(self, material: str | None = None) -> bool:
+        """Whether a ground-truth volume is loaded for ``material`` (default: the one on show)."""
+        return self.reference is not None and self.reference.available(material or self.state.material)
+
+    @property
+    def flip_mean(self) -> float | None:
+        """FLIP mode: mean LDR-FLIP between network and reference over the covered pixels of the last complete
+        picture (``None`` in the other modes or before one is complete)."""
+        if self._flip_mean is None and self._flip_picture is not None and self.state.shading == "flip":
+            data = self._flip_picture
+            self._flip_mean = flip_heat_map(data[..., :3], data[..., 3:6], data[..., 6] > 0.0)[1]
+        return self._flip_mean if self.state.shading == "flip" else None
+
+    def _picture_complete(self, xyz: np.ndarray) -> None:
+        """A complete picture's data: kept for :attr:`flip_mean` in FLIP mode."""
+        self._flip_picture, self._flip_mean = (xyz, None) if xyz.shape[-1] == _FLIP_CHANNELS else (None, None)
+
+    @staticmethod
+    def _display(xyz: np.ndarray) -> np.ndarray:
+        """8-bit display sRGB of exposed XYZ (``gratnet.display``); FLIP-mode data (network XYZ, reference XYZ,
+        coverage) shows as the FLIP heat map."""
+        if xyz.shape[-1] == _FLIP_CHANNELS:
+            return flip_heat_map(xyz[..., :3], xyz[..., 3:6])[0]
+        from viewer.scene import SceneRenderer
+
+        return SceneRenderer.display_srgb8(xyz)
 
     def render_key(self) -> tuple[Any, ...]:
         return (*self.state.key(), *self.full_size())
@@ -375,7 +421,8 @@ class ViewerApp:
             self.message = worker
 
     def _scene_key(self, state: ViewerState) -> tuple[Any, ...]:
-        return (state.material, "slice" if state.slice_mode else state.mesh, self.supply.weights_path_in_use(state))
+        return (state.material, "slice" if state.slice_mode else state.mesh, self.supply.weights_path_in_use(state),
+                state.shading)
 
     def _timed_render(self, state: ViewerState, size: tuple[int, int], camera: Camera | None = None,
                       preview: bool = False, rows: tuple[int, int] | None = None,
@@ -389,16 +436,24 @@ class ViewerApp:
             raise GratNetError(f"the shader for {state.material} is still compiling; try again in a moment")
         renderer, buffers = supplied
         started = time.perf_counter()
-        if state.slice_mode:
-            xyz = renderer.render_brdf_slice(state.light_theta, state.light_phi, size[0], state.exposure,
-                                             state.effective_ior, rows=rows)
-            coverage = disc_coverage(size[0], rows)  # the network runs inside the unit disc only
-            if rows is not None:
-                xyz = xyz[rows[0]:rows[1]]
-        else:
-            rgba = renderer.render_rgba(buffers, camera or state.camera(), state.light(), size, state.exposure,
-                                        state.effective_ior, first_sample=sample)
-            xyz, coverage = rgba[..., :3], rgba[..., 3]
+        shading = state.shading if self.reference_available(state.material) else "network"
+        pictures = []
+        for scene in ((renderer,) if shading == "network" else
+                      (self.reference.scene(),) if shading == "reference" else  # type: ignore[union-attr]
+                      (renderer, self.reference.scene())):  # type: ignore[union-attr]
+            if state.slice_mode:
+                xyz = scene.render_brdf_slice(state.light_theta, state.light_phi, size[0], state.exposure,
+                                              state.effective_ior, rows=rows)
+                coverage = disc_coverage(size[0], rows)  # the network runs inside the unit disc only
+                if rows is not None:
+                    xyz = xyz[rows[0]:rows[1]]
+            else:  # the reference draws the network's mesh buffers: the same geometry, preview or full
+                rgba = scene.render_rgba(buffers, camera or state.camera(), state.light(), size, state.exposure,
+                                         state.effective_ior, first_sample=sample)
+                xyz, coverage = rgba[..., :3], rgba[..., 3]
+            pictures.append(xyz)
+        if shading == "flip":  # network XYZ, reference XYZ, coverage: _display shows the FLIP heat map
+            xyz = np.concatenate([*pictures, np.broadcast_to(coverage, xyz.shape[:2])[..., None]], axis=-1)
         seconds = time.perf_counter() - started
         scene = self._scene_key(state)
         sample = seconds / max(1.0, effective_pixels(coverage))
@@ -418,8 +473,6 @@ class ViewerApp:
         self.image = Frame(key, pixels, self.full_size(), rendered_size, complete, progress, self._version, samples)
 
     def _preview(self, key: tuple[Any, ...]) -> None:
-        from viewer.scene import SceneRenderer
-
         full = self.full_size()
         seconds_per_pixel = self._seconds_per_pixel.get(self._scene_key(self.state))
         predicted = None
@@ -436,11 +489,11 @@ class ViewerApp:
         self.stats.last_preview_s = self.stats.last_render_s
         self.stats.last_preview_size = size
         complete = size == full
-        self._publish(key, SceneRenderer.display_srgb8(xyz), size, complete, 1.0 if complete else 0.0)
+        if complete:
+            self._picture_complete(xyz)
+        self._publish(key, self._display(xyz), size, complete, 1.0 if complete else 0.0)
 
     def _refine(self, key: tuple[Any, ...]) -> None:
-        from viewer.scene import SceneRenderer
-
         state, (width, height) = self.state, self.full_size()
         refinement = self._refinement
         if refinement is None or refinement.key != key:
@@ -460,7 +513,7 @@ class ViewerApp:
             row_pixels = effective_pixels_per_row(disc_coverage(side, (row0, side)))
             row1 = min(side, row0 + self.policy.band_rows(seconds_per_pixel * row_pixels * first_band_margin(row0)))
             xyz = self._timed_render(state, (side, side), rows=(row0, row1))[0]
-            refinement.pixels[row0:row1] = SceneRenderer.display_srgb8(xyz)
+            refinement.pixels[row0:row1] = self._display(xyz)
             refinement.next_row = row1
             level_done = row1 == side
             if level_done:
@@ -474,14 +527,15 @@ class ViewerApp:
             row1 = min(height, row0 + rows)
             band = self._band_camera(state, width, height, row0, row1)
             xyz = self._timed_render(state, (width, row1 - row0), band)[0]
-            refinement.pixels[row0:row1] = SceneRenderer.display_srgb8(xyz)
+            refinement.pixels[row0:row1] = self._display(xyz)
             if refinement.xyz is None:
-                refinement.xyz = np.zeros((height, width, 3), dtype=np.float32)
+                refinement.xyz = np.zeros((height, width, xyz.shape[-1]), dtype=np.float32)
             refinement.xyz[row0:row1] = xyz
             refinement.next_row = row1
             done, rendered, progress = row1 == height, (width, height), row1 / height
             if done:  # sample 0 of the progressive anti-aliasing
                 self._accumulation = Accumulation(key, refinement.xyz)
+                self._picture_complete(refinement.xyz)
             self.stats.last_kind = f"refine rows {row0}-{row1}"
         refinement.seconds += time.perf_counter() - started
         self.stats.refine_renders += 1
@@ -499,8 +553,6 @@ class ViewerApp:
         """Progressive anti-aliasing: the next band of rows of the next sample (one sub-pixel offset) of the
         still mesh view, sized to ``refine_budget_s`` like a refinement band; the rows done show the mean
         over one more sample than the rest."""
-        from viewer.scene import SceneRenderer
-
         accumulation = self._accumulation
         assert accumulation is not None and self.image is not None
         state, (width, height) = self.state, self.full_size()
@@ -518,10 +570,11 @@ class ViewerApp:
             accumulation.samples += 1
             accumulation.next_row, accumulation.partial = 0, None
             mean = accumulation.sums[row0:row1] / np.float32(accumulation.samples)
+            self._picture_complete(accumulation.sums / np.float32(accumulation.samples))
         else:
             mean = (accumulation.sums[row0:row1] + xyz) / np.float32(accumulation.samples + 1)
         pixels = self.image.pixels.copy()
-        pixels[row0:row1] = SceneRenderer.display_srgb8(mean)
+        pixels[row0:row1] = self._display(mean)
         self.stats.refine_renders += 1
         self.stats.last_kind = f"sample {accumulation.samples + (row1 < height)} rows {row0}-{row1}"
         self.stats.last_sample_s = time.perf_counter() - started
@@ -537,13 +590,12 @@ class ViewerApp:
     def render_full(self) -> np.ndarray:
         """The current state's picture at full resolution in one render (display sRGB ``uint8``); the
         cached picture when it is complete and current."""
-        from viewer.scene import SceneRenderer
-
         key = self.render_key()
         if self.image is not None and self.image.key == key and self.image.complete:
             return self.image.pixels
         xyz = self._timed_render(self.state, self.full_size())[0]
-        pixels = SceneRenderer.display_srgb8(xyz)
+        self._picture_complete(xyz)
+        pixels = self._display(xyz)
         self.stats.last_kind = "full"
         self._refinement = None
         self._accumulation = None if self.state.slice_mode else Accumulation(key, np.array(xyz, dtype=np.float32))
@@ -564,14 +616,17 @@ class ViewerApp:
         pixels = self.render_full()
         samples = self.samples
         if samples > 1:  # the complete samples only (a sample being added band by band is left out)
-            from viewer.scene import SceneRenderer
-
-            pixels = SceneRenderer.display_srgb8(self.accumulated_xyz())
+            pixels = self._display(self.accumulated_xyz())
         with atomic_path(path) as temporary:
             Image.fromarray(pixels).save(temporary, format="PNG")
         width, height = self.full_size()
-        save_config(path, render=self.state.render_config(width, height, samples),
-                    model_file=str(resolve_material(self.state.material)))
+        config = self.state.render_config(width, height, samples)
+        shading = self.state.shading if self.reference_available() else "network"
+        if shading != "network" and self.reference is not None:  # gratnet render --reference draws the truth
+            config = dataclasses.replace(config, reference=self.reference.loaded.path,
+                                         reference_precision=self.reference.loaded.precision)
+        save_config(path, render=config, model_file=str(resolve_material(self.state.material)),
+                    view={"shading": shading, "flip_mean_covered": self.flip_mean})
         return path
 
     def next_screenshot_path(self, folder: str | Path) -> Path:
@@ -594,6 +649,8 @@ class ViewerApp:
     def release(self) -> None:
         """Free the GL objects and stop background work (the context belongs to the caller)."""
         if not self._released:
+            if self.reference is not None:
+                self.reference.release()
             self._defaults.release()
             self.supply.release()
             self._released = True

@@ -35,6 +35,11 @@ _ACCUMULATE = "accumulate"  # shaders/accumulate.glsl: adds a sample image into 
 _SAMPLE_UNIT = 1  # texture unit of accumulate.glsl's u_sample (the weights use 0, the skip bound 3)
 
 
+def _bound_to(vertex_array: moderngl.VertexArray, program: moderngl.Program) -> bool:
+    """Whether ``vertex_array`` binds its buffers to ``program`` (attribute locations differ between programs)."""
+    return vertex_array.program.glo == program.glo
+
+
 def _color_masks(enabled: bool, attachments: int) -> object:
     """moderngl 5's ``Framebuffer.color_mask`` value: one RGBA tuple, or a list of them for several attachments."""
     mask = (enabled,) * 4
@@ -69,7 +74,9 @@ class ForwardRenderer:
         set_surface_uniforms(program, camera, light, width, height, float(exposure), ior)
         bound, unit = self.shading.skip_uniforms(program, skip_threshold)
         vertex_array = uploaded.vertex_array
-        if vertex_array is not None and program is not self.program:  # the counting variant: its own binding
+        if vertex_array is not None and not _bound_to(vertex_array, program):
+            # The counting variant, or buffers uploaded for another material's program (the viewer draws the
+            # network's mesh buffers with the reference look-up too): a binding of its own for this render.
             vertex_array = uploaded.vertex_array_for(program)
         count = len(offsets)
         targets = [self.ctx.texture((width, height), 4, dtype="f4") for _ in range(layers)]
@@ -135,11 +142,16 @@ class ForwardRenderer:
             set_uniform(depth_program, "u_view_projection", view_projection)
             if uploaded.depth_vertex_array is None:
                 uploaded.depth_vertex_array = uploaded.vertex_array_for(depth_program)
+            depth_array = uploaded.depth_vertex_array
+            if not _bound_to(depth_array, depth_program):  # another material's depth program made it
+                depth_array = uploaded.vertex_array_for(depth_program)
             framebuffer.color_mask = _color_masks(False, layers)
             try:
-                uploaded.depth_vertex_array.render(moderngl.TRIANGLES)
+                depth_array.render(moderngl.TRIANGLES)
             finally:
                 framebuffer.color_mask = _color_masks(True, layers)
+                if depth_array is not uploaded.depth_vertex_array:
+                    depth_array.release()
             self.ctx.depth_func = "<="
         try:
             vertex_array.render(moderngl.TRIANGLES)

@@ -36,6 +36,7 @@ class ViewerState:
     fresnel: bool = True
     ior: float = 1.5
     slice_mode: bool = False
+    shading: str = "network"  # viewer.reference_view.SHADINGS: network, reference (a loaded volume) or flip
 
     def key(self) -> tuple[Any, ...]:
         """The values that decide the pixels (two states with equal keys render the same picture)."""

@@ -79,6 +79,11 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                         "as gratnet render --spp; 1: off; typical: 4 to 64; the panel changes it; default: 16)")
     parser.add_argument("--render-path", choices=RENDER_PATHS, default="auto", help=f"{RENDER_PATH_HELP}; "
                         "default: auto")
+    parser.add_argument("--reference", metavar="VOLUME.exr",
+                        help="the material's ground-truth volume (gratnet groundtruth's EXR): the panel then shows "
+                        "the network, the volume looked up per pixel, or the FLIP heat map between them")
+    parser.add_argument("--reference-precision", choices=("float16", "float32"), default="float16",
+                        help="storage of the --reference texture (as gratnet render; default: float16)")
     parser.add_argument("--screenshot-dir", default=".", metavar="DIR",
                         help="folder for the Screenshot button's PNGs (default: the working folder)")
     parser.add_argument("--max-frames", type=parse_int, default=0, metavar="N",
@@ -139,10 +144,18 @@ def run(arguments: argparse.Namespace) -> int:
 
     size = parse_size(arguments.size_text)
     state = starting_state(arguments)
+    reference = None
+    if arguments.reference:  # checked and read before a window opens
+        from viewer.reference_view import LoadedReference
+        from viewer.scene_config import load_reference
+
+        volume = load_reference(arguments.reference, arguments.reference_precision, arguments.material)
+        reference = LoadedReference(volume, str(arguments.reference), arguments.material,
+                                    arguments.reference_precision)
     extra = [] if state.mesh in ("cd", "sphere", "plane") else [state.mesh]
     with ViewerWindow(state, size, screenshot_dir=arguments.screenshot_dir, extra_meshes=extra,
                       weights_path=arguments.weights_path, max_samples=arguments.spp,
-                      render_path=arguments.render_path) as window:
+                      render_path=arguments.render_path, reference=reference) as window:
         window.run(arguments.max_frames)
         if window.gl_errors:
             raise GratNetError(f"OpenGL reported errors: {'; '.join(window.gl_errors[:3])} (please report this)")

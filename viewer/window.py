@@ -24,6 +24,7 @@ import numpy as np
 
 from gratnet.errors import GratNetError
 from viewer.app import ViewerApp
+from viewer.reference_view import SHADINGS
 from viewer.scheduling import ResolutionPolicy
 from viewer.state import SLIDERS, ViewerState
 
@@ -64,7 +65,7 @@ class ViewerWindow:
                  screenshot_dir: str | Path = ".", idle_wait_s: float = 0.25, extra_meshes: Iterable[str] = (),
                  weights_path: str = "auto", background: bool = True,
                  visible: bool = True, title: str = "GratNet viewer", max_samples: int = 16,
-                 render_path: str = "auto") -> None:
+                 render_path: str = "auto", reference: Any = None) -> None:
         from viewer.context import context_from_current
         from viewer.scene_supply import SceneSupply, start_display_import
         from viewer.surface import check_size
@@ -137,7 +138,7 @@ class ViewerWindow:
             self._gl = _GLFunctions(glfw)
             self._texture = self._picture_texture(1, 1)  # drawn by the first frame: see there
             self._app = ViewerApp(self.ctx, state, self._area_pixels(), policy, clock, extra_meshes, weights_path,
-                                  background, worker, max_samples, render_path)
+                                  background, worker, max_samples, render_path, reference)
             worker = None  # the app owns it now
             # The first frame compiles imgui's own shaders and, drawing the 1×1 picture texture, their variant
             # for its format (0.3–0.5 s on llvmpipe with an empty shader cache): drawn while the window is
@@ -355,6 +356,17 @@ class ViewerWindow:
         imgui.same_line()
         if imgui.button("default view"):  # the light, camera and exposure that show this material's diffraction
             app.switch()
+        if app.reference is not None:  # gratnet view --reference: network, its ground truth, or FLIP between them
+            imgui.begin_disabled(not app.reference_available())
+            for shading in SHADINGS:
+                if imgui.radio_button(shading, state.shading == shading):
+                    app.set(shading=shading)
+                imgui.same_line()
+            imgui.new_line()
+            imgui.end_disabled()
+            flip = app.flip_mean
+            imgui.text(f"mean FLIP {flip:.4f} (covered pixels)" if flip is not None else
+                       f"ground truth: {app.reference.loaded.material}'s volume")
 
         imgui.separator_text("light")
         self._slider("light_theta")
