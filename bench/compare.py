@@ -213,7 +213,11 @@ def _write(out: Path, material: str, config: CompareConfig, rows: list[dict[str,
     with atomic_paths(out / "compare.md", out / "compare.json", out / "compare.png",
                       out / "compare.config.json") as (markdown, figures, picture, settings):
         markdown.write_text(table(material, rows), encoding="utf-8")
-        figures.write_text(json.dumps({"material": material, "views": rows}, indent=1) + "\n", encoding="utf-8")
+        summary = {"material": material,
+                   "volume": f"{volume_metadata.get('resolution')}² × {volume_metadata.get('slices')} "
+                             f"{volume_metadata.get('scheme')}, {config.reference_precision}",
+                   "image": f"{config.width}×{config.height}, {config.spp} spp", "views": rows}
+        figures.write_text(json.dumps(summary, indent=1) + "\n", encoding="utf-8")
         figure.savefig(picture, format="png", dpi=80)
         settings.write_text(config_text(out / "compare.json", **documents), encoding="utf-8")
     plt.close(figure)
