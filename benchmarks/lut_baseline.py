@@ -14,6 +14,7 @@ trilinear in (u*, v*, t), float16 storage) at full resolution and with only ever
 
     python benchmarks/lut_baseline.py paper-cd VOLUME.exr [--strides 1,4] [--frame 1920x1080] [--repeats 3]
         [--cache-dir out/cache] [--json docs/data/lut_baseline_paper-cd.json] [--figure docs/images/lut_baseline.png]
+    python benchmarks/lut_baseline.py paper-cd VOLUME.exr --plot-only --json ROWS.json --figure PLOT.png
 
 Prints a markdown table; --json writes every figure, --figure plots error against frame time (marker labels: MB).
 """
@@ -35,6 +36,7 @@ from gratnet.atomic import atomic_path, write_text_atomic
 from gratnet.modelfile import load_model
 from gratnet.reference import texture_bytes
 from gratnet.volume import Volume, read_volume
+from trainer.evaluate import STANDARD_SLICES, slice_label
 from viewer.camera import Camera, Light
 from viewer.catalog import build_mesh, resolve_material
 from viewer.context import create_headless_context
@@ -66,7 +68,10 @@ def measure(material: str, volume_path: Path, strides: list[int], size: tuple[in
     """One row for the network, one per stride for the look-up table."""
     model_path = resolve_material(material)
     metrics = json.loads((model_path.parent / "metrics.json").read_text(encoding="utf-8"))
-    network_flip = [entry["flip"] for entry in metrics["brdf_slices"]]
+    paper_slices = {slice_label(theta, phi, exposure) for theta, phi, exposure in STANDARD_SLICES}
+    network_flip = [entry["flip"] for entry in metrics["brdf_slices"] if entry["slice"] in paper_slices]
+    if len(network_flip) != len(paper_slices):  # like for like: the oracle scores exactly these five
+        raise SystemExit(f"lut_baseline: {model_path.parent / 'metrics.json'} lacks some of the paper's five slices")
     volume = read_volume(volume_path)
     ctx = create_headless_context()
     rows = []
@@ -108,7 +113,7 @@ def figure(rows: list[dict[str, Any]], path: Path) -> None:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    axes = plt.figure(figsize=(6.0, 4.0), layout="constrained").gca()
+    axes = plt.figure(figsize=(7.0, 4.2), layout="constrained").gca()
     for row in rows:
         marker = "o" if row["what"] == "network" else "s"
         axes.scatter(row["ms_per_frame"], row["flip_mean"], marker=marker, s=40)
@@ -118,6 +123,9 @@ def figure(rows: list[dict[str, Any]], path: Path) -> None:
     axes.set_ylabel("mean LDR-FLIP, the paper's five BRDF slices")
     axes.set_title("network against the ground-truth volume as a look-up table", fontsize=9)
     axes.set_yscale("log")
+    axes.set_xscale("log")
+    low, high = min(row["ms_per_frame"] for row in rows), max(row["ms_per_frame"] for row in rows)
+    axes.set_xlim(low / 2.0, high * 8.0)  # room for the labels right of the points
     with atomic_path(path) as temporary:
         axes.figure.savefig(temporary, format="png", dpi=110)
     plt.close(axes.figure)
@@ -134,7 +142,13 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--cache-dir", default="out/cache")
     parser.add_argument("--json", type=Path)
     parser.add_argument("--figure", type=Path)
+    parser.add_argument("--plot-only", action="store_true", help="draw --figure from the rows in --json (no runs)")
     arguments = parser.parse_args(argv)
+    if arguments.plot_only:
+        if not (arguments.json and arguments.figure):
+            parser.error("--plot-only needs --json (the rows) and --figure")
+        figure(json.loads(arguments.json.read_text(encoding="utf-8")), arguments.figure)
+        return 0
     try:
         strides = [int(part) for part in arguments.strides.split(",")]
         width, height = (int(part) for part in arguments.frame.lower().split("x"))

@@ -410,6 +410,45 @@ def _studies_section() -> list[str]:
     ]
 
 
+COMPARE_DATA = Path("docs/data/compare")
+
+
+def _meshes_section(folder: Path = COMPARE_DATA) -> list[str]:
+    """Network against its ground-truth volume on meshes (``gratnet compare``'s compare.json per material)."""
+    lines = [
+        "## Error where users look: the network against its ground truth on meshes",
+        "",
+        "`gratnet compare MATERIAL --reference VOLUME.exr` renders each view twice on the same rasterizer — the",
+        "network, and the material's ground-truth volume looked up per pixel (`gratnet render --reference`, trilinear,",
+        "exact at the volume's samples) — and scores the pair with LDR-FLIP over the pixels the mesh covers. Views:",
+        "each mesh's default view (`gratnet render`'s) and two more (the light turned 90° in azimuth; the camera 60°",
+        "round and 25° lower). Rendered here on llvmpipe at the size and samples per pixel shown.",
+        "",
+    ]
+    files = sorted(folder.glob("*.json"))
+    if not files:
+        return [*lines, "No comparison recorded yet.", ""]
+    lines += ["| material | volume | image, spp | cd | sphere | plane | mean of 9 views | picture |",
+              "|---|---|---|---|---|---|---|---|"]
+    for path in files:
+        data = json.loads(path.read_text(encoding="utf-8"))
+        views = data["views"]
+        per_mesh = {}
+        for row in views:
+            per_mesh.setdefault(row["mesh"], []).append(row["flip_covered"])
+        cells = [" / ".join(f"{value:.4f}" for value in per_mesh.get(mesh, [])) or "—"
+                 for mesh in ("cd", "sphere", "plane")]
+        mean = sum(row["flip_covered"] for row in views) / len(views)
+        picture = f"[picture](images/compare_{data['material']}.png)"
+        lines.append(f"| {data['material']} | {data.get('volume', '—')} | {data.get('image', '—')} | "
+                     f"{' | '.join(cells)} | {mean:.4f} | {picture} |")
+    lines += ["", "Per mesh: FLIP at the default view / light turned / camera moved. The rainbow rings and swirls "
+              "across the CD disc are in the reference renders too: they are the surface's diffraction, not network "
+              "error ([experiments/2026-11-26-reference-renders.md](experiments/2026-11-26-reference-renders.md)).",
+              ""]
+    return lines
+
+
 def _reproduce_section() -> list[str]:
     """The commands that rebuild what this page shows."""
     return [
@@ -419,6 +458,7 @@ def _reproduce_section() -> list[str]:
         "    bash scripts/ship_materials.sh                    # the 20 µm tiles",
         "    bash scripts/reevaluate_materials.sh NAME         # today's evaluation of a shipped model",
         "    python benchmarks/oracle_table.py VOLUMES --json docs/data/oracle_paper.json",
+        "    gratnet compare NAME --reference VOLUME.exr --out DIR  # docs/data/compare/NAME.json (see that section)",
         "    python benchmarks/results_table.py                # this page",
         "",
         "Each experiment log in docs/experiments/ gives its own commands and data.",
@@ -458,6 +498,7 @@ def main() -> None:
         "",
         *paper_datasets_table(Path(arguments.assets)),
         "",
+        *_meshes_section(),
         "## Earlier materials: 20 µm tiles (not the paper's datasets)",
         "",
         "`bash scripts/ship_materials.sh` (ground truth, training and evaluation on this project's 2-core CPU",
