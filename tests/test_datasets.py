@@ -17,6 +17,7 @@ PAPER_TABLE = {
     "paper-cd": (65.0, 40.0, None),
     "paper-gaussian": (65.0, 65.0, 1.0),
     "paper-snake": (None, 65.0, None),
+    "paper-sunbeam": (None, 65.0, None),
     "paper-scratches": (80.0, 65.0, 0.873),
     "paper-corner-cubes": (72.0, 40.0, 1.5),
     "paper-pits": (24.0, 15.556, None),

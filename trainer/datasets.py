@@ -27,11 +27,24 @@ from trainer.groundtruth import VolumeConfig
 from trainer.heightfield import HeightField
 from trainer.heightfile import LoadOptions, read_heightfield_file
 
-#: The real corn-snake AFM crop (credit and scale: assets/data/README.md).
-SNAKE_SCAN = Path(__file__).resolve().parents[1] / "assets" / "data" / "elaphe_guttata_afm_100x100.png"
-#: Its scale, from the scan's source (approximate): pixel pitch and the height of white (µm).
-SNAKE_SCAN_DX_UM = 0.1
-SNAKE_SCAN_WHITE_UM = 0.375
+_DATA = Path(__file__).resolve().parents[1] / "assets" / "data"
+
+
+@dataclasses.dataclass(frozen=True)
+class ScanSource:
+    """A measured height field shipped in assets/data (credit and scale: assets/data/README.md): the image, its
+    pixel pitch and the height of white (µm; both from the scan's source, approximate)."""
+
+    path: Path
+    dx_um: float
+    white_um: float
+
+
+#: The real corn-snake (Elaphe guttata) AFM crop.
+SNAKE_SCAN = ScanSource(_DATA / "elaphe_guttata_afm_100x100.png", dx_um=0.1, white_um=0.375)
+#: The real sunbeam-snake (Xenopeltis unicolor) AFM crop, from the same source; its maximum height there is
+#: 4.4345e-1 µm (the source's matlab/ComputeFFTImages.m).
+SUNBEAM_SCAN = ScanSource(_DATA / "xenopeltis_unicolor_afm_100x100.png", dx_um=0.1, white_um=0.4435)
 
 SOURCE_PREFIX = "dataset:"
 
@@ -41,9 +54,10 @@ class DatasetPreset:
     """One of the paper's datasets: where it comes from, its height field and its optics.
 
     ``generator`` names a built-in generator (trainer/generators.py) run with ``parameters``; ``None``
-    means the measured scan :data:`SNAKE_SCAN`. ``patch_um`` and ``max_height_um`` are the paper's
-    nominal values (µm; ``None`` where the paper gives none; the snake's 65 µm is the paper's scan, of
-    which only a 10 µm crop is available here); ``four_sigma_s_um`` is its coherence window 4σs.
+    means the measured ``scan`` (:data:`SNAKE_SCAN`, :data:`SUNBEAM_SCAN`). ``patch_um`` and
+    ``max_height_um`` are the paper's nominal values (µm; ``None`` where the paper gives none; the snakes'
+    65 µm are the paper's scans, of which only 10 µm crops are available here); ``four_sigma_s_um`` is its
+    coherence window 4σs.
     """
 
     name: str
@@ -56,6 +70,7 @@ class DatasetPreset:
     parameters: Mapping[str, float] = dataclasses.field(default_factory=lambda: MappingProxyType({}))
     notes: str = ""
     volume: VolumeConfig = VolumeConfig()
+    scan: ScanSource | None = None
 
     @property
     def sigma_s_um(self) -> float:
@@ -72,8 +87,10 @@ class DatasetPreset:
             from trainer import generators
 
             return generators.generate(self.generator, **self.parameters)
-        options = LoadOptions(dx_um=SNAKE_SCAN_DX_UM, height_scale_um=SNAKE_SCAN_WHITE_UM)
-        scan = read_heightfield_file(SNAKE_SCAN, options)
+        if self.scan is None:
+            raise GratNetError(f"dataset {self.name} names neither a generator nor a scan")
+        options = LoadOptions(dx_um=self.scan.dx_um, height_scale_um=self.scan.white_um)
+        scan = read_heightfield_file(self.scan.path, options)
         return HeightField(scan.heights_um, scan.dx_um, SOURCE_PREFIX + self.name)
 
 
@@ -109,7 +126,14 @@ PRESETS: dict[str, DatasetPreset] = {
             four_sigma_s_um=65.0, patch_um=65.0, max_height_um=None, generator=None,
             notes="the real Elaphe guttata AFM crop in assets/data (100 × 100 px, dx ≈ 0.1 µm, white ≈ 0.375 µm, "
             "both approximate), repeated periodically under the window: the paper's full 65 µm scan is not "
-            "available here",
+            "available here", scan=SNAKE_SCAN,
+        ),
+        _preset(
+            name="paper-sunbeam", title="sunbeam snake skin (AFM scan)", paper="§4 Datasets (the Xenopeltis column)",
+            four_sigma_s_um=65.0, patch_um=65.0, max_height_um=None, generator=None,
+            notes="the real Xenopeltis unicolor AFM crop in assets/data (100 × 100 px, dx ≈ 0.1 µm, white ≈ "
+            "0.4435 µm, both approximate), repeated periodically under the window: the paper's full 65 µm scan is "
+            "not available here", scan=SUNBEAM_SCAN,
         ),
         _preset(
             name="paper-scratches", title="ball-pen tip scratches, 80 µm patch", paper="§4 Datasets; Fig. 2",
