@@ -29,6 +29,7 @@ import numpy as np
 
 from gratnet.config import add_arguments, add_quiet_flag, config_field, from_arguments
 from gratnet.errors import GratNetError
+from viewer.defaults import SceneDefaults
 
 __all__ = ["CompareConfig", "View", "register", "run", "views"]
 
@@ -56,17 +57,12 @@ class CompareConfig:
 
 
 @dataclasses.dataclass(frozen=True)
-class View:
-    """One scene: a mesh, a directional light (θ, φ degrees), an orbit camera (metres, degrees), an exposure."""
+class View(SceneDefaults):
+    """One scene: a mesh and a directional light, orbit camera and exposure (:class:`~viewer.defaults.SceneDefaults`,
+    the flags' units), named for the table."""
 
-    mesh: str
-    name: str
-    light_theta_degrees: float
-    light_phi_degrees: float
-    camera_distance: float
-    camera_azimuth_degrees: float
-    camera_elevation_degrees: float
-    exposure: float
+    mesh: str = "cd"
+    name: str = "default"
 
 
 def views(material: str, mesh: str) -> list[View]:
@@ -74,8 +70,7 @@ def views(material: str, mesh: str) -> list[View]:
     from viewer.defaults import resolve_defaults
 
     d = resolve_defaults(material, mesh)
-    base = View(mesh, "default", d.light_theta_degrees, d.light_phi_degrees, d.camera_distance,
-                d.camera_azimuth_degrees, d.camera_elevation_degrees, d.exposure)
+    base = View(**dataclasses.asdict(d), mesh=mesh, name="default")
     turned = dataclasses.replace(base, name=f"light φ{LIGHT_TURN_DEGREES:+g}°",
                                  light_phi_degrees=d.light_phi_degrees + LIGHT_TURN_DEGREES)
     camera = dataclasses.replace(
