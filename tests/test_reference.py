@@ -319,3 +319,16 @@ def test_viewer_shows_the_reference_and_the_flip_heat_map(ctx, tmp_path):
         assert not viewer.set(shading="reference") and "cd's, not blazed's" in viewer.message
     finally:
         viewer.release()
+
+
+def test_view_refuses_a_foreign_volume_before_any_window(tmp_path, monkeypatch, capsys):
+    import viewer.window
+
+    def no_window(*args: object, **kwargs: object) -> None:
+        raise AssertionError("a window was opened for a bad --reference")
+
+    monkeypatch.setattr(viewer.window, "ViewerWindow", no_window)
+    volume = cd_volume(tmp_path / "cd.exr", source="generator:cd(seed=3)")
+    assert main(["view", "--material", "cd", "--reference", str(volume), "--screenshot-dir", str(tmp_path)]) == 2
+    error = capsys.readouterr().err.strip()
+    assert len(error.splitlines()) == 1 and "not the ground truth of cd" in error, error
