@@ -13,13 +13,24 @@ session and prints one JSON object:
 4. a switch to the BRDF slice, frames until the slice is on show.
 
 Every frame's work (``stats.last_frame_s``: from the end of the wait for input to the buffer swap) is
-recorded per phase: ``max_frame_s``. With ``--inject`` a child process moves the real X pointer through
-XTest (libXtst) in a left-button drag over the picture every ``--inject-interval-s`` (±50 % jitter), and
-each motion's latency (its time stamp to the swap of the frame that applied it) is reported:
-``input_latency_s``. Example (an empty shader cache: the first compile, as a new user sees it):
+recorded per phase: ``max_frame_s``, ``frame_work_summary_s``, ``frames_over_150ms``. With ``--inject`` a child
+process moves the real X pointer through XTest (libXtst) in a left-button drag over the picture every
+``--inject-interval-s`` (±50 % jitter), and each motion's latency is reported (``input_latency_s``, with its
+summary overall and per phase): from the motion's time stamp (taken just before it is sent) to the swap of the
+first frame whose *picture* reflects it (:func:`match_inputs`: the pointer column each frame's drag saw says
+which motions it consumed; the state of the picture on show says which frame's input it reflects). A motion
+consumed while the picture could not follow (a shader or a mesh not ready) waits for the picture that does.
+``--default-view`` starts at the material's default view on the mesh (what ``gratnet view`` shows). The load
+average at the start and the end is in the report: on a shared 2-core machine it decides the numbers.
+
+The X screen must hold the window (``-screen 0 WxHx24``; ``xvfb-run``'s default screen is 640×480 at 8 bits):
+the drag stays inside the picture and the screen. Examples (an empty shader cache: the first compile, as a
+new user sees it):
 
     MESA_SHADER_CACHE_DIR=$(mktemp -d) xvfb-run -s "-screen 0 1024x768x24" \\
         python benchmarks/viewer_latency.py --material blazed --mesh plane --switch-to cd --inject
+    xvfb-run -a -s "-screen 0 1280x1024x24" python benchmarks/viewer_latency.py --material paper-cd --mesh cd \\
+        --size 512,512 --default-view --switch-to cd --inject
 """
 
 from __future__ import annotations
@@ -30,21 +41,24 @@ _STARTED = time.perf_counter()
 
 import argparse  # noqa: E402 - the start time is taken before the imports
 import ctypes  # noqa: E402
+import dataclasses  # noqa: E402
 import json  # noqa: E402
 import os  # noqa: E402
 import random  # noqa: E402
 import subprocess  # noqa: E402
 import sys  # noqa: E402
+from collections.abc import Sequence  # noqa: E402
 from pathlib import Path  # noqa: E402
 from typing import Any  # noqa: E402
 
 
-def _injector(x0: int, y0: int, interval: float, seed: int) -> int:
+def _injector(x0: int, y0: int, span: int, interval: float, seed: int) -> int:
     """Child mode: press the left button at (x0, y0) (screen pixels), then move by 2 pixels every
-    ~``interval`` seconds, right for 100 motions, then left for 100, and so on (the screen has an edge);
-    after every 20th motion a pause of 0.5 s, the button held (a hand that stops; the turns fall in these
-    pauses, so no frame sees a motion and its reverse). Prints ``TIME TOTAL`` after each motion is
-    flushed, TOTAL the pixels moved so far; releases the button on stdin EOF."""
+    ~``interval`` seconds, right until ``x0 + span``, then left back to ``x0``, and so on (the caller keeps
+    that range inside the picture and the screen); after every 20th motion a pause of 0.5 s, the button held
+    (a hand that stops; the turns fall in these pauses, so no frame sees a motion and its reverse). Prints
+    ``TIME X`` for each motion, TIME taken just before the motion is sent (``time.perf_counter()``, the
+    parent's clock) and X the pointer's new screen column; releases the button on stdin EOF."""
     import select
 
     x11 = ctypes.CDLL("libX11.so.6")
@@ -66,21 +80,83 @@ def _injector(x0: int, y0: int, interval: float, seed: int) -> int:
     xtst.XTestFakeButtonEvent(display, 1, 1, 0)
     x11.XFlush(display)
     print("pressed", flush=True)
+    steps = max(1, span // 2)
     moved = offset = 0
     while True:
-        pause = 0.5 if moved and moved % 40 == 0 else 0.0
+        pause = 0.5 if moved and moved % 20 == 0 else 0.0
         ready, _, _ = select.select([sys.stdin], [], [], pause + interval * rng.uniform(0.5, 1.5))
         if ready and not sys.stdin.readline():
             break
-        offset += 2 if (moved // 200) % 2 == 0 else -2
-        moved += 2
+        offset += 2 if (moved // steps) % 2 == 0 else -2
+        moved += 1
+        stamp = time.perf_counter()  # before the event exists: no frame can have seen it earlier
         xtst.XTestFakeMotionEvent(display, -1, x0 + offset, y0, 0)
         x11.XFlush(display)
-        print(f"{time.perf_counter():.6f} {moved}", flush=True)
+        print(f"{stamp:.6f} {x0 + offset}", flush=True)
     xtst.XTestFakeButtonEvent(display, 1, 0, 0)
     x11.XFlush(display)
     x11.XCloseDisplay(display)
     return 0
+
+
+@dataclasses.dataclass
+class FrameRecord:
+    """One window frame as the benchmark saw it.
+
+    Attributes:
+        swapped: ``time.perf_counter()`` right after its buffer swap (the picture is on screen).
+        pointer_x: the pointer's screen column of the last drag the frame applied (None: it applied none).
+        shown_state_frame: the index of the frame whose input produced the state of the picture on show
+            (None: no picture yet).
+    """
+
+    swapped: float
+    pointer_x: float | None = None
+    shown_state_frame: int | None = None
+
+
+def match_inputs(injected: Sequence[tuple[float, float]], frames: Sequence[FrameRecord]) -> dict[str, Any]:
+    """Each injected motion (``(time stamp, screen column)``, in order) matched to the first frame whose
+    picture reflects it.
+
+    Frame f *consumed* motions 0 … j when the last drag it applied left the pointer at motion j's column
+    (searched forward from the motion consumed before: the path goes right and back, so a column recurs,
+    but never between two frames that both see it; a column that no motion from there on has is counted in
+    ``unmatched_drags``). A picture reflects the motions consumed by the frame that made its state; motion k
+    is answered by the first frame (in order) on whose swap a picture reflecting k is on show. Its latency
+    is that swap's time minus k's stamp (taken before the motion was sent: never negative, else the match
+    is wrong and ``negative`` counts it).
+
+    Returns:
+        ``{"latency_s": [seconds or None per motion], "answered_by": [frame index or None], "consumed":
+        [motions consumed through each frame], "unmatched_drags": int, "negative": int}``.
+    """
+    columns = [column for _, column in injected]
+    consumed: list[int] = []
+    count = unmatched = 0
+    for frame in frames:
+        if frame.pointer_x is not None:
+            found = next((index for index in range(count, len(columns))
+                          if abs(columns[index] - frame.pointer_x) < 0.5), None)
+            if found is None:
+                unmatched += 1
+            else:
+                count = found + 1
+        consumed.append(count)
+    latency: list[float | None] = [None] * len(injected)
+    answered_by: list[int | None] = [None] * len(injected)
+    next_motion = 0
+    for index, frame in enumerate(frames):
+        if frame.shown_state_frame is None:
+            continue
+        reflected = consumed[frame.shown_state_frame]
+        while next_motion < min(reflected, len(injected)):
+            latency[next_motion] = frame.swapped - injected[next_motion][0]
+            answered_by[next_motion] = index
+            next_motion += 1
+    negative = sum(1 for value in latency if value is not None and value < 0.0)
+    return {"latency_s": latency, "answered_by": answered_by, "consumed": consumed, "unmatched_drags": unmatched,
+            "negative": negative}
 
 
 class Session:
@@ -92,28 +168,42 @@ class Session:
         self.launched_at = launched_at
         self.phase = "launch"
         self.frames: list[dict[str, Any]] = []
-        self.orbit_dx = 0.0  # pixels of drag the app has applied (|dx| summed: the drag turns)
-        self.injected: list[tuple[float, float]] = []  # (time, total dx) per motion
+        self.records: list[FrameRecord] = []
+        self.injected: list[tuple[float, float]] = []  # (time stamp, screen column) per motion
         self.injector: subprocess.Popen[str] | None = None
         self._pending = ""
+        self._pointer_x: float | None = None  # the pointer's screen column at the frame's last drag
+        #: render key → the index of the frame whose input (or switch) made that state (the latest one).
+        self._state_frame: dict[tuple[Any, ...], int] = {}
         self.baked_at: float | None = None  # when the baked program first rendered the state on show
         original = self.app.orbit
 
         def orbit(dx: float, dy: float, *args: Any, **kwargs: Any) -> bool:
-            self.orbit_dx += abs(dx)
-            return original(dx, dy, *args, **kwargs)
+            changed = original(dx, dy, *args, **kwargs)
+            import glfw
+            from imgui_bundle import imgui
 
-        self.app.orbit = orbit  # counts the drag the app receives (the work itself is unchanged)
+            window_x, _ = glfw.get_window_pos(self.window.handle)
+            self._pointer_x = window_x + float(imgui.get_io().mouse_pos.x)
+            self._state_frame[self.app.render_key()] = len(self.records)
+            return changed
+
+        self.app.orbit = orbit  # records where the pointer was (the work itself is unchanged)
 
     def frame(self) -> None:
-        window = self.window
+        window, app = self.window, self.app
+        self._pointer_x = None
         window.frame()
         swapped = time.perf_counter()
-        self.frames.append({"phase": self.phase, "work_s": self.app.stats.last_frame_s, "swapped": swapped,
-                            "orbit_dx": self.orbit_dx, "renders": self.app.stats.renders,
-                            "kind": self.app.stats.last_kind, "render_s": self.app.stats.last_render_s})
+        index = len(self.records)
+        self._state_frame.setdefault(app.render_key(), index)  # a state made without a drag (a switch)
+        shown = None if app.image is None else self._state_frame.get(app.image.key)
+        self.records.append(FrameRecord(swapped, self._pointer_x, shown))
+        self.frames.append({"phase": self.phase, "work_s": app.stats.last_frame_s, "swapped": swapped,
+                            "renders": app.stats.renders, "kind": app.stats.last_kind,
+                            "render_s": app.stats.last_render_s})
         self._read_injector()
-        if self.baked_at is None and self.app.weights_path_in_use() == "baked":
+        if self.baked_at is None and app.weights_path_in_use() == "baked":
             self.baked_at = swapped
 
     def run_until(self, condition: Any, timeout: float) -> float | None:
@@ -131,8 +221,10 @@ class Session:
 
         x, y = glfw.get_window_pos(window.handle)
         ax, ay, aw, ah = window.render_area()
-        command = [sys.executable, __file__, "--injector", str(x + ax + aw // 4), str(y + ay + ah // 2),
-                   str(interval)]
+        screen_width = _screen_width()
+        x0 = x + ax + aw // 4
+        span = max(2, min(200, x + ax + aw - 4 - x0, (screen_width or 1 << 30) - 4 - x0))
+        command = [sys.executable, __file__, "--injector", str(x0), str(y + ay + ah // 2), str(span), str(interval)]
         self.injector = subprocess.Popen(command, stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True)
         assert self.injector.stdout is not None
         os.set_blocking(self.injector.stdout.fileno(), False)
@@ -159,20 +251,47 @@ class Session:
             self.injector.wait(timeout=10)
             self._read_injector()
 
-    def latencies(self) -> list[float | None]:
-        """Per injected motion: seconds from its time stamp to the swap of the first frame whose state
-        includes it (None: never applied)."""
-        result: list[float | None] = []
-        for stamp, total in self.injected:
-            answered = next((f["swapped"] for f in self.frames if f["orbit_dx"] >= total - 1e-6), None)
-            result.append(None if answered is None else answered - stamp)
-        return result
+    def matched(self) -> dict[str, Any]:
+        """:func:`match_inputs` over the session."""
+        return match_inputs(self.injected, self.records)
+
+
+def _screen_width() -> int | None:
+    """The X screen's width in pixels (None: unknown)."""
+    try:
+        x11 = ctypes.CDLL("libX11.so.6")
+    except OSError:
+        return None
+    x11.XOpenDisplay.restype = ctypes.c_void_p
+    x11.XOpenDisplay.argtypes = [ctypes.c_char_p]
+    x11.XDefaultScreen.argtypes = [ctypes.c_void_p]
+    x11.XDisplayWidth.argtypes = [ctypes.c_void_p, ctypes.c_int]
+    x11.XCloseDisplay.argtypes = [ctypes.c_void_p]
+    display = x11.XOpenDisplay(None)
+    if not display:
+        return None
+    try:
+        return int(x11.XDisplayWidth(display, x11.XDefaultScreen(display)))
+    finally:
+        x11.XCloseDisplay(display)
+
+
+def _summary(values: Sequence[float]) -> dict[str, float | int | None]:
+    """Count, median, 90th percentile and maximum (seconds, rounded)."""
+    if not values:
+        return {"count": 0, "median": None, "p90": None, "max": None}
+    ordered = sorted(values)
+
+    def at(fraction: float) -> float:
+        return round(ordered[min(len(ordered) - 1, int(fraction * len(ordered)))], 4)
+
+    return {"count": len(ordered), "median": at(0.5), "p90": at(0.9), "max": round(ordered[-1], 4)}
 
 
 def main(argv: list[str] | None = None) -> int:
     argv = sys.argv[1:] if argv is None else argv
     if argv and argv[0] == "--injector":
-        return _injector(int(argv[1]), int(argv[2]), float(argv[3]), seed=1)
+        return _injector(int(argv[1]), int(argv[2]), int(argv[3]), float(argv[4]), seed=1)
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--material", default="blazed")
     parser.add_argument("--mesh", default="plane")
@@ -185,18 +304,30 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--timeout-s", type=float, default=120.0, help="limit of each phase")
     parser.add_argument("--launched-at", type=float, default=_STARTED)
     parser.add_argument("--background", action=argparse.BooleanOptionalAction, default=True)
+    parser.add_argument("--default-view", action="store_true",
+                        help="start at the material's default view on the mesh, as gratnet view does (default: the "
+                        "fixed view of issue 11's measurements: camera 0.15 m, light 30°)")
     arguments = parser.parse_args(argv)
 
     from viewer.state import ViewerState
     from viewer.window import ViewerWindow
 
     width, height = (int(v) for v in arguments.size.split(","))
-    state = ViewerState(material=arguments.material, mesh=arguments.mesh, camera_distance=0.15, light_theta=30.0)
+    if arguments.default_view:
+        from viewer.default_view import state_defaults
+
+        state = ViewerState(material=arguments.material, mesh=arguments.mesh,
+                            **state_defaults(arguments.material, arguments.mesh))
+    else:
+        state = ViewerState(material=arguments.material, mesh=arguments.mesh, camera_distance=0.15, light_theta=30.0)
     report: dict[str, Any] = {"material": arguments.material, "mesh": arguments.mesh, "size": [width, height],
-                              "shader_cache": os.environ.get("MESA_SHADER_CACHE_DIR", "default")}
+                              "default_view": arguments.default_view,
+                              "shader_cache": os.environ.get("MESA_SHADER_CACHE_DIR", "default"),
+                              "load_average_at_start": [round(value, 2) for value in os.getloadavg()]}
     constructed = time.perf_counter()
     window = ViewerWindow(state, (width, height), background=arguments.background)
     report["window_open_s"] = time.perf_counter() - constructed  # the constructor (blocks only when not background)
+    report["window_shown_s"] = time.perf_counter() - arguments.launched_at  # the panel is on screen from here
     session = Session(window, arguments.launched_at)
     app = window.app
     try:
@@ -258,11 +389,25 @@ def main(argv: list[str] | None = None) -> int:
     if os.environ.get("VIEWER_LATENCY_FRAMES"):  # every frame, for a closer look
         report["frames"] = [{"at_s": round(f["swapped"] - arguments.launched_at, 3), "work_s": round(f["work_s"], 4),
                              "kind": f["kind"], "render_s": round(f["render_s"], 4)} for f in session.frames]
-    latencies = session.latencies()
+    matched = session.matched()
+    latencies: list[float | None] = matched["latency_s"]
     report["input_events"] = len(latencies)
     report["input_latency_s"] = [None if value is None else round(value, 4) for value in latencies]
+    report["input_unanswered"] = latencies.count(None)
+    report["input_negative"] = matched["negative"]  # 0 unless the matching is wrong
+    report["input_unmatched_drags"] = matched["unmatched_drags"]
+    report["input_latency_summary_s"] = _summary([value for value in latencies if value is not None])
+    by_phase: dict[str, list[float]] = {}
+    for value, frame in zip(latencies, matched["answered_by"], strict=True):
+        if value is not None and frame is not None:
+            by_phase.setdefault(session.frames[frame]["phase"], []).append(value)
+    report["input_latency_by_phase_s"] = {phase: _summary(values) for phase, values in by_phase.items()}
     answered = [value for value in latencies if value is not None]
     report["max_input_latency_s"] = max(answered) if answered else None
+    works = [f["work_s"] for f in session.frames]
+    report["frame_work_summary_s"] = _summary(works)
+    report["frames_over_150ms"] = sum(1 for value in works if value > 0.150)
+    report["load_average_at_end"] = [round(value, 2) for value in os.getloadavg()]
     print(json.dumps(report))
     return 0
 
