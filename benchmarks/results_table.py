@@ -14,6 +14,7 @@ import re
 from pathlib import Path
 
 from gratnet.atomic import write_text_atomic
+from trainer.datasets import PRESETS
 
 # The paper's mean FLIP at the (0°, 0°) 2000 RU BRDF slice (issue 3's targets); None where it gives none.
 PAPER_FLIP_0_0 = {
@@ -162,13 +163,11 @@ def _presets_section() -> list[str]:
 
 
 #: The paper's mean FLIP at (0°, 0°) 2000 RU for its own datasets, by preset (issue 15's table).
-#: Each paper dataset's own column of the paper's table (mean FLIP at (0°, 0°) 2000 RU): paper-snake is the corn
-#: snake (Elaphe guttata, the "Cornsnake" column); the sunbeam snake (Xenopeltis) is another column and dataset.
-PAPER_COLUMNS = {"paper-blazed": ("blazed grating", 0.0021), "paper-cd": ("CD", 0.0178),
-                 "paper-snake": ("corn snake (Elaphe)", 0.0221),
-                 "paper-sunbeam": ("sunbeam snake (Xenopeltis)", 0.0318), "paper-scratches": ("scratches", 0.0123),
-                 "paper-corner-cubes": ("corner cubes", 0.0751),
-                 "paper-pits": ("pits", 0.0878)}
+#: Each paper dataset's own column of the paper's table (mean FLIP at (0°, 0°) 2000 RU), from its preset
+#: (trainer/datasets.py): paper-snake is the corn snake (Elaphe guttata, the "Cornsnake" column); the sunbeam snake
+#: (Xenopeltis) is another column and dataset.
+PAPER_COLUMNS = {name: (preset.paper_column, preset.paper_flip) for name, preset in PRESETS.items()
+                 if preset.paper_flip is not None}
 PAPER_FLIP_PAPER_DATASETS = {name: figure for name, (_, figure) in PAPER_COLUMNS.items()}
 
 #: benchmarks/oracle_table.py's --json output for the paper's datasets (committed: the volumes are not).

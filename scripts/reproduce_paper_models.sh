@@ -5,6 +5,11 @@
 # the paper's five BRDF slices and docs/results.md's three further views.
 # Usage: bash scripts/reproduce_paper_models.sh [NAME ...]   (default: every assets/paper-*)
 #   OUT=out/paper (volumes, runs, slice cache), GRATNET=.venv/bin/gratnet, DRY_RUN=1 prints the commands only.
+#   SEEDS="0 1 2": each dataset's recipe once per seed (`--seed K` appended), into OUT/runs/NAME/seed-K, then
+#   OUT/seeds.json and OUT/seeds.md: per dataset the mean and spread of the (0°, 0°) FLIP against the paper's
+#   column (benchmarks/seed_summary.py). Finished runs (their metrics.json) are skipped, so a second call goes on
+#   where the first stopped; TIME_BUDGET_S=N starts no new run after N seconds (a device call's time limit).
+#   DEVICE=cuda trains there whatever device the recipe recorded (paper-cd's was trained on the CPU).
 # Nothing is copied into assets/: compare OUT/runs/NAME/metrics.json with assets/NAME/metrics.json.
 # GPU training is not bit-reproducible: expect figures near, not equal to, the shipped ones. A recorded
 # "environment" (the thread count of a CPU training, e.g. paper-cd's OMP_NUM_THREADS=1) is applied too.
@@ -15,10 +20,15 @@ python=${PYTHON:-python3}
 out=${OUT:-out/paper}
 views="45,60,5000;15,200,3000;60,315,5000"
 names=("$@")
+seeds=(${SEEDS:-})
+started=$SECONDS
+budget=${TIME_BUDGET_S:-0}
+left=0
 if [ ${#names[@]} -eq 0 ]; then
     for folder in assets/paper-*/; do names+=("$(basename "$folder")"); done
 fi
 run() { echo "+ $*"; if [ -z "${DRY_RUN:-}" ]; then "$@"; fi; }
+spent() { [ "$budget" -gt 0 ] && [ $((SECONDS - started)) -ge "$budget" ]; }
 for name in "${names[@]}"; do  # every name is checked before any work
     [ -f "assets/$name/train_command.json" ] || { echo "reproduce: no assets/$name/train_command.json" >&2; exit 2; }
 done
@@ -44,10 +54,24 @@ PY
     trainer=("$gratnet")
     if [ "$environment" != "-" ]; then read -r -a assignments <<< "$environment"; trainer=(env "${assignments[@]}" "$gratnet"); fi
     volume="$out/volumes/$name-s$slices.exr"
-    if [ ! -f "$volume" ]; then
-        run "$gratnet" groundtruth "$name" --sampling simple-max --slices "$slices" --device auto --out "$volume"
-    fi
-    run "${trainer[@]}" train "$volume" --out "$out/runs/$name" "${flags[@]}"
-    run "$gratnet" evaluate "$out/runs/$name/model.npz" --out "$out/runs/$name" --heightfield "$name" \
-        --volume "$volume" --views "$views" --cache-dir "$out/cache"
+    for seed in "${seeds[@]:-}"; do  # one pass with no seed of its own when SEEDS is unset
+        runs="$out/runs/$name${seed:+/seed-$seed}"
+        if [ -f "$runs/metrics.json" ]; then echo "= $runs: finished"; continue; fi
+        if spent; then left=$((left + 1)); continue; fi
+        if [ ! -f "$volume" ]; then
+            run "$gratnet" groundtruth "$name" --sampling simple-max --slices "$slices" --device auto --out "$volume"
+        fi
+        if [ ! -f "$runs/model.npz" ]; then  # model.npz lands at the end of a training: then only evaluate
+            resume=()
+            if [ -f "$runs/checkpoint.pt" ]; then resume=(--resume); fi  # a training cut off by the last call
+            run "${trainer[@]}" train "$volume" --out "$runs" "${flags[@]}" ${seed:+--seed "$seed"} \
+                ${DEVICE:+--device "$DEVICE"} "${resume[@]}"
+        fi
+        run "$gratnet" evaluate "$runs/model.npz" --out "$runs" --heightfield "$name" \
+            --volume "$volume" --views "$views" --cache-dir "$out/cache"
+    done
 done
+if [ "$left" -gt 0 ]; then echo "reproduce: TIME_BUDGET_S=$budget spent; $left run(s) left: call again to go on"; fi
+if [ ${#seeds[@]} -gt 0 ]; then
+    run "$python" benchmarks/seed_summary.py "$out/runs" --json "$out/seeds.json" --markdown "$out/seeds.md"
+fi

@@ -71,6 +71,9 @@ class DatasetPreset:
     notes: str = ""
     volume: VolumeConfig = VolumeConfig()
     scan: ScanSource | None = None
+    #: The paper's table: this dataset's own column and its mean FLIP at (0°, 0°) 2000 RU (the target), if any.
+    paper_column: str = ""
+    paper_flip: float | None = None
 
     @property
     def sigma_s_um(self) -> float:
@@ -103,12 +106,14 @@ PRESETS: dict[str, DatasetPreset] = {
     preset.name: preset
     for preset in (
         _preset(
+            paper_column="blazed grating", paper_flip=0.0021,
             name="paper-blazed", title="blazed grating, 100 µm patch", paper="§4 Datasets; Fig. 2 (crop shown: 20 µm)",
             four_sigma_s_um=65.0, patch_um=100.0, max_height_um=0.25, generator="blazed",
             parameters={"period_um": 2.5, "max_height_um": 0.25, "size_um": 100.0},
             notes="sawtooth, period 2.5 µm, tooth height 250 nm",
         ),
         _preset(
+            paper_column="CD", paper_flip=0.0178,
             name="paper-cd", title="synthetic compact disc, 65 µm patch", paper="§4 Datasets; Fig. 2",
             four_sigma_s_um=40.0, patch_um=65.0, max_height_um=None, generator="cd",
             parameters={"size_um": 65.0},
@@ -122,6 +127,7 @@ PRESETS: dict[str, DatasetPreset] = {
             notes="heights rescaled to [0, 1 µm]; the correlation length (1.5 µm) is this project's choice",
         ),
         _preset(
+            paper_column="corn snake (Elaphe)", paper_flip=0.0221,
             name="paper-snake", title="corn snake skin (AFM scan)", paper="§4 Datasets; Fig. 2 (crop 12.5 µm)",
             four_sigma_s_um=65.0, patch_um=65.0, max_height_um=None, generator=None,
             notes="the real Elaphe guttata AFM crop in assets/data (100 × 100 px, dx ≈ 0.1 µm, white ≈ 0.375 µm, "
@@ -129,6 +135,7 @@ PRESETS: dict[str, DatasetPreset] = {
             "available here", scan=SNAKE_SCAN,
         ),
         _preset(
+            paper_column="sunbeam snake (Xenopeltis)", paper_flip=0.0318,
             name="paper-sunbeam", title="sunbeam snake skin (AFM scan)", paper="§4 Datasets (the Xenopeltis column)",
             four_sigma_s_um=65.0, patch_um=65.0, max_height_um=None, generator=None,
             notes="the real Xenopeltis unicolor AFM crop in assets/data (100 × 100 px, dx ≈ 0.1 µm, white ≈ "
@@ -136,6 +143,7 @@ PRESETS: dict[str, DatasetPreset] = {
             "not available here", scan=SUNBEAM_SCAN,
         ),
         _preset(
+            paper_column="scratches", paper_flip=0.0123,
             name="paper-scratches", title="ball-pen tip scratches, 80 µm patch", paper="§4 Datasets; Fig. 2",
             four_sigma_s_um=65.0, patch_um=80.0, max_height_um=0.873, generator="scratches",
             parameters={"size_um": 80.0, "count": 60, "tip_radius_um": 2.0, "depth_um": 0.5, "depth_jitter": 0.3,
@@ -145,12 +153,14 @@ PRESETS: dict[str, DatasetPreset] = {
             "window σ = 13.3 µm (the patch edge at 3σ; the paper gives no σ), deepest cut rescaled to 873 nm",
         ),
         _preset(
+            paper_column="corner cubes", paper_flip=0.0751,
             name="paper-corner-cubes", title="corner cubes, 72 µm patch", paper="§4 Datasets; Fig. 2",
             four_sigma_s_um=40.0, patch_um=72.0, max_height_um=1.5, generator="corner_cube",
             parameters={"size_um": 72.0, "mirror_tile_um": 24.0, "max_height_um": 1.5},
             notes="a 24 µm corner-cube design mirrored to 3 × 3 tiles, 1.5 µm peak to valley",
         ),
         _preset(
+            paper_column="pits", paper_flip=0.0878,
             name="paper-pits", title="spherical pits, 24 µm patch", paper="§4 Datasets; Fig. 2",
             four_sigma_s_um=15.556, patch_um=24.0, max_height_um=None, generator="pits",
             parameters={"size_um": 24.0, "spacing_um": 2.4, "radius_um": 0.8},
