@@ -14,10 +14,12 @@ XYZ and coverage, ``float32`` ``(H, W, 4)``, row 0 at the top):
      factor > 0, not excluded by the skip bound (``shaders/skip.glsl``) when a ``skip_threshold`` is given
      — are appended to a list in an SSBO with an atomic counter; the others are finished in place
      (``(0, 0, 0, coverage)``). Background, A = 0 and bound-dark pixels cost nothing afterwards.
-  3. **Shading** (``SHADE``): one invocation per list entry, dispatched indirectly
-     (``glDispatchComputeIndirect``: the list length never comes back to the CPU), evaluates the same
+  3. **Shading** (``SHADE``): one invocation per list entry evaluates the same
      ``encoding.glsl``/``mlp.glsl``/``range.glsl`` as the forward path and writes ``factor · XYZ`` into
-     the G-buffer texel.
+     the G-buffer texel. The list's length is read back (4 bytes) and the list is shaded in pieces of
+     entries, each one dispatch finished before the next (:mod:`viewer.pacing`: no GL call runs long, so
+     Ctrl-C is answered; each texel is computed as in one dispatch, bit for bit). The G-buffer pass is
+     drawn in bands of rows for the same reason.
   4. **Resolve** (``RESOLVE``, only for several samples): the mean of a pixel's samples.
 
 Samples: ``offsets_px`` (``(N, 2)`` pixels, :func:`viewer.antialias.sample_offsets`) renders N G-buffers
@@ -55,6 +57,7 @@ from viewer.antialias import check_offsets, jitter_matrix
 from viewer.camera import Camera, Light
 from viewer.forward import SURFACE_PROGRAM
 from viewer.glsl import compile_compute, compile_program
+from viewer.pacing import Pacer, Progress, read_rows
 from viewer.renderer import NetworkRenderer, is_software_rasterizer, set_uniform, skip_threshold_value
 from viewer.surface import MeshBuffers, set_surface_uniforms
 
@@ -75,6 +78,12 @@ _TILE = 8  # COMPACT / RESOLVE work groups: 8×8 texels
 _LIST_BINDING = 7  # SSBO bindings: skip counters 5 (renderer.py), weights 6, the list 7
 _WEIGHTS_BINDING = 6
 CHUNK_TEXELS = 1 << 26  # G-buffer texels per chunk of samples at most (1 GiB of RGBA32F)
+_MAX_GROUPS = 65535  # work groups per dimension of a dispatch (the least GL 4.3 guarantees)
+_PIECE_ENTRIES = 256  # SHADE pieces start at multiples of 256 list entries: 1 KiB-aligned SSBO offsets
+_BAND_MULTIPLE = 4  # G-buffer bands on multiples of 4 rows (llvmpipe rasterizes 4×4 pixel blocks)
+_FIRST_GBUFFER_ROWS = 256  # the G-buffer pass's first band (rows): no MLP, cheap
+_FIRST_SHADE_ENTRIES = 4096  # the first SHADE piece (entries: ~0.1 s of the texture-weights net on llvmpipe)
+_GBUFFER_SHARE = 0.1  # the share of a chunk's progress given to its G-buffer and compaction
 
 
 def _groups(count: int, size: int) -> int:
@@ -112,6 +121,12 @@ class DeferredRenderer:
         self._targets: tuple[tuple[int, int], moderngl.Texture, moderngl.Renderbuffer, moderngl.Framebuffer] | None
         self._targets = None
         self._output: moderngl.Texture | None = None
+        #: Called with the fraction of the render done (0 … 1) after each band and piece; None: not reported.
+        self.progress: Progress | None = None
+        #: The sizes of the G-buffer's bands of rows and of the SHADE pieces of the list, from the time of those
+        #: before (kept between renders).
+        self.gbuffer_pacer = Pacer(self.ctx, first_cost=_FIRST_GBUFFER_ROWS)
+        self.shade_pacer = Pacer(self.ctx, first_cost=_FIRST_SHADE_ENTRIES)
 
     # ---------------------------------------------------------------------------------------------
     # Programs
@@ -176,7 +191,7 @@ class DeferredRenderer:
         """One callable per program, each compiling (or linking from the driver's cache) that program: the
         viewer runs one per frame, since linking them all at once from Mesa's cache blocked a frame 0.6 s."""
         steps: list[Callable[[], object]] = [self._gbuffer_program]
-        kernels = ("COMPACT", "ARGS", "SHADE", "RESOLVE")
+        kernels = ("COMPACT", "SHADE", "RESOLVE")
         return steps + [lambda kernel=kernel: self._compute(kernel) for kernel in kernels]
 
     def compile(self) -> None:
@@ -231,7 +246,7 @@ class DeferredRenderer:
         set_surface_uniforms(gbuffer_program, camera, light, width, height, float(exposure), ior)
         compact = self._compute("COMPACT", counting=statistics is not None)
         bound, unit = self.network.skip_uniforms(compact, threshold)
-        args, shade, resolve = self._compute("ARGS"), self._compute("SHADE"), self._compute("RESOLVE")
+        shade, resolve = self._compute("SHADE"), self._compute("RESOLVE")
         view_projection = np.ascontiguousarray(camera.view_projection(width / height), dtype=np.float32)
         vertex_array = None
         if not uploaded.empty:
@@ -244,11 +259,16 @@ class DeferredRenderer:
         several = len(offsets) > 1
         output = self._output_texture(width, height) if several else None
         scope = self.ctx.scope(framebuffer, enable_only=moderngl.DEPTH_TEST)
+        readable = None
         try:
             with scope:
                 for number, chunk in enumerate(chunks):
+                    def report(fraction: float, number: int = number) -> None:
+                        if self.progress is not None:
+                            self.progress(min(1.0, (number + fraction) / len(chunks)))
+
                     self._draw_gbuffer(framebuffer, gbuffer_program, vertex_array, view_projection, chunk, width,
-                                       height)
+                                       height, lambda done: report(_GBUFFER_SHARE * done))
                     rows = height * len(chunk)
                     list_buffer.write(np.array([0, 1, 1, 0], dtype=np.uint32).tobytes())
                     list_buffer.bind_to_storage_buffer(_LIST_BINDING)
@@ -256,10 +276,14 @@ class DeferredRenderer:
                     bound.use(location=unit)
                     compact.run(_groups(width, _TILE), _groups(rows, _TILE))
                     self.ctx.memory_barrier()
-                    args.run(1)
-                    self.ctx.memory_barrier()
+                    entries = int(np.frombuffer(list_buffer.read(4, offset=12), dtype=np.uint32)[0])
                     self._bind_weights()
-                    shade.run_indirect(list_buffer, 0)
+                    texture.bind_to_image(0, read=True, write=True)
+                    share = (1.0 - _GBUFFER_SHARE) / max(entries, 1)
+                    for first, end in self.shade_pacer.pieces(
+                            entries, multiple=_PIECE_ENTRIES,
+                            done=lambda end, share=share: report(_GBUFFER_SHARE + share * end)):
+                        self._shade(shade, list_buffer, first, end)
                     self.ctx.memory_barrier()
                     if output is not None:
                         set_uniform(resolve, "u_samples", len(chunk))
@@ -270,20 +294,37 @@ class DeferredRenderer:
                         output.bind_to_image(1, read=True, write=True)
                         resolve.run(_groups(width, _TILE), _groups(height, _TILE))
                         self.ctx.memory_barrier()
+                    report(1.0)
                 if statistics is not None:
                     self.network.read_counters(statistics)
-                result = (output if output is not None else texture).read(alignment=1)
+                readable = framebuffer if output is None else self.ctx.framebuffer(color_attachments=[output])
+                pixels = read_rows(readable, (width, height))  # sample 0's rows, or the resolved mean
         finally:
             scope.release()
+            if readable is not None and readable is not framebuffer:
+                readable.release()
             if vertex_array is not None:
                 vertex_array.release()
-        pixels = np.frombuffer(result, dtype=np.float32)[:width * height * 4].reshape(height, width, 4)
         return pixels[::-1].copy()  # GL rows start at the bottom; ours at the top
+
+    def _shade(self, shade: moderngl.ComputeShader, list_buffer: moderngl.Buffer, first: int, end: int) -> None:
+        """The SHADE kernel over list entries ``first … end − 1``: the list is bound from byte ``4 · first``, so
+        that the kernel's header (dispatch size, entry count) lies on entries ``first − 4 … first − 1``, which
+        earlier pieces have shaded already (``first`` is 0 or a multiple of :data:`_PIECE_ENTRIES`, so the
+        binding offset is 1 KiB-aligned); the header says ``end − first`` entries."""
+        count = end - first
+        offset = 4 * first
+        list_buffer.write(np.array([0, 0, 1, count], dtype=np.uint32).tobytes(), offset=offset)
+        list_buffer.bind_to_storage_buffer(_LIST_BINDING, offset=offset, size=16 + 4 * count)
+        groups = _groups(count, _SHADE_GROUP)
+        shade.run(min(groups, _MAX_GROUPS), _groups(groups, _MAX_GROUPS))
 
     def _draw_gbuffer(self, framebuffer: moderngl.Framebuffer, program: moderngl.Program,
                       vertex_array: moderngl.VertexArray | None, view_projection: np.ndarray, chunk: np.ndarray,
-                      width: int, height: int) -> None:
-        """Sample k of ``chunk`` into rows ``k·height …`` of the G-buffer, with its jittered projection."""
+                      width: int, height: int, done: Callable[[float], None]) -> None:
+        """Sample k of ``chunk`` into rows ``k·height …`` of the G-buffer, with its jittered projection, in bands
+        of rows (a scissor box inside the sample's viewport; :mod:`viewer.pacing`). ``done``: the fraction of the
+        chunk's G-buffer drawn, after each band."""
         framebuffer.use()
         framebuffer.clear(0.0, 0.0, 0.0, -1.0, depth=1.0)  # factor −1: background
         if vertex_array is None:
@@ -294,10 +335,12 @@ class DeferredRenderer:
                 if offset[0] != 0.0 or offset[1] != 0.0:  # (0, 0): the forward path's matrix, bit for bit
                     matrix = np.ascontiguousarray(view_projection @ jitter_matrix(offset, width, height))
                 set_uniform(program, "u_view_projection", matrix.astype(np.float32))
-                box = (0, k * height, width, height)
-                self.ctx.viewport = box
-                self.ctx.scissor = box  # the viewport does not clip every implementation's guard band
-                vertex_array.render(moderngl.TRIANGLES)
+                self.ctx.viewport = (0, k * height, width, height)
+                for first, end in self.gbuffer_pacer.pieces(
+                        height, multiple=_BAND_MULTIPLE, done=lambda end, k=k: done((k + end / height) / len(chunk))):
+                    # The scissor box also clips what the viewport does not on every implementation (guard bands).
+                    self.ctx.scissor = (0, k * height + first, width, end - first)
+                    vertex_array.render(moderngl.TRIANGLES)
         finally:
             self.ctx.scissor = None
 

@@ -18,12 +18,15 @@ Rendering only: no glfw, no imgui, no torch.
 
 from __future__ import annotations
 
+from collections.abc import Callable
+
 import moderngl
 import numpy as np
 
 from viewer.antialias import jitter_matrix
 from viewer.camera import Camera, Light
 from viewer.glsl import compile_program
+from viewer.pacing import Pacer, Progress, covered_row_costs, read_rows
 from viewer.shading import ShadingPrograms, set_uniform
 from viewer.surface import MeshBuffers, set_surface_uniforms
 
@@ -33,6 +36,9 @@ __all__ = ["SURFACE_PROGRAM", "ForwardRenderer"]
 SURFACE_PROGRAM = "surface"
 _ACCUMULATE = "accumulate"  # shaders/accumulate.glsl: adds a sample image into a float32 sum
 _SAMPLE_UNIT = 1  # texture unit of accumulate.glsl's u_sample (the weights use 0, the skip bound 3)
+_BAND_MULTIPLE = 4  # band boundaries on multiples of 4 rows (llvmpipe rasterizes 4×4 pixel blocks)
+_FIRST_DEPTH_ROWS = 256  # the depth pass's first band (rows): no MLP, cheap
+_FIRST_SHADE_PIXELS = 1024  # the shading pass's first band: ~1k covered pixels (0.1 s at 10k pixels/s on llvmpipe)
 
 
 def _bound_to(vertex_array: moderngl.VertexArray, program: moderngl.Program) -> bool:
@@ -56,6 +62,12 @@ class ForwardRenderer:
         self.ctx = shading.ctx
         self._accumulate_program: moderngl.Program | None = None
         self._accumulate_array: moderngl.VertexArray | None = None
+        #: Called with the fraction of the render done (0 … 1) after each band; None: not reported.
+        self.progress: Progress | None = None
+        #: The bands' sizes, from the time of the bands before (kept between renders: the first band of the next
+        #: render starts at the rate measured): the depth pass's rows, and the shading pass's (weighed by coverage).
+        self.depth_pacer = Pacer(self.ctx, first_cost=_FIRST_DEPTH_ROWS)
+        self.shade_pacer = Pacer(self.ctx, first_cost=_FIRST_SHADE_PIXELS)
 
     @property
     def program(self) -> moderngl.Program:
@@ -66,7 +78,10 @@ class ForwardRenderer:
                ior: float | None, layers: int, skip_threshold: float | None, depth_prepass: bool,
                statistics: dict[str, int] | None, offsets: np.ndarray) -> list[np.ndarray]:
         """``layers`` images (1: exposed XYZ and coverage; 2: also the key vector and A), each ``float32``
-        ``(H, W, 4)`` with row 0 at the top, the mean over the samples at ``offsets`` (pixels, ``(N, 2)``)."""
+        ``(H, W, 4)`` with row 0 at the top, the mean over the samples at ``offsets`` (pixels, ``(N, 2)``).
+
+        Each sample is drawn in bands of rows (a scissor box; :mod:`viewer.pacing`), each band finished before
+        the next: the same pixels, bit for bit, as one draw, but no GL call runs long (Ctrl-C is answered)."""
         width, height = size
         program = self.program
         if statistics is not None:
@@ -84,6 +99,7 @@ class ForwardRenderer:
         framebuffer = self.ctx.framebuffer(color_attachments=targets, depth_attachment=depth)
         sums = [self.ctx.texture((width, height), 4, dtype="f4") for _ in range(layers)] if count > 1 else []
         sum_framebuffers = [self.ctx.framebuffer(color_attachments=[target]) for target in sums]
+        depth_array: moderngl.VertexArray | None = None
         # The scope restores the caller's framebuffer and enable flags (a window may share this context).
         scope = self.ctx.scope(framebuffer, enable_only=moderngl.DEPTH_TEST)
         try:
@@ -92,74 +108,117 @@ class ForwardRenderer:
                     target.clear(0.0, 0.0, 0.0, 0.0)
                 if statistics is not None:
                     self.shading.reset_counters()
-                for offset in offsets:
-                    self._draw_sample(framebuffer, uploaded, vertex_array, program, bound, unit, camera,
-                                      (width, height), offset, layers, depth_prepass)
-                    if count > 1:
-                        self._accumulate(targets, sum_framebuffers)
+                if vertex_array is not None:
+                    depth_array = self._depth_array(uploaded)
+                for number, offset in enumerate(offsets):
+                    self._draw_sample(framebuffer, targets, vertex_array, depth_array, program, bound, unit,
+                                      camera, offset, depth_prepass, sum_framebuffers,
+                                      lambda fraction, number=number: self._report((number + fraction) / count))
                 if statistics is not None:
                     self.shading.read_counters(statistics)
-                if count > 1:
-                    data = [target.read() for target in sums]
-                else:
-                    data = [framebuffer.read(components=4, dtype="f4", attachment=k) for k in range(layers)]
+                readable = sum_framebuffers if count > 1 else [framebuffer] * layers
+                images = [read_rows(source, size, attachment=0 if count > 1 else k)
+                          for k, source in enumerate(readable)]
         finally:
             scope.release()
+            for target in (framebuffer, *sum_framebuffers):
+                target.scissor = None
             for owned in (framebuffer, depth, *targets, *sum_framebuffers, *sums):
                 owned.release()
             if vertex_array is not None and vertex_array is not uploaded.vertex_array:
                 vertex_array.release()
+            if depth_array is not None and depth_array is not uploaded.depth_vertex_array:
+                depth_array.release()
         # GL rows start at the bottom; ours at the top. N samples: the float32 sum over N (their mean).
-        images = [np.frombuffer(layer, dtype=np.float32).reshape(height, width, 4)[::-1].copy() for layer in data]
+        images = [image[::-1].copy() for image in images]
         if count > 1:
             images = [image / np.float32(count) for image in images]
         return images
 
-    def _draw_sample(self, framebuffer: moderngl.Framebuffer, uploaded: MeshBuffers,
-                     vertex_array: moderngl.VertexArray | None, program: moderngl.Program, bound: moderngl.Texture,
-                     unit: int, camera: Camera, size: tuple[int, int], offset: np.ndarray, layers: int,
-                     depth_prepass: bool) -> None:
-        """One sample into ``framebuffer`` (cleared first): the camera's view-projection moved by ``offset``
-        (pixels, x right, y up; :func:`viewer.antialias.jitter_matrix`), then the depth pre-pass and the
-        shading pass. The other uniforms are set by the caller."""
-        width, height = size
+    def _report(self, fraction: float) -> None:
+        if self.progress is not None:
+            self.progress(min(1.0, fraction))
+
+    def _depth_array(self, uploaded: MeshBuffers) -> moderngl.VertexArray:
+        """The mesh buffers bound to the depth-only program (the depth pre-pass, and the coverage that sizes the
+        bands); the caller releases it unless it is ``uploaded.depth_vertex_array``."""
+        depth_program = self.shading.depth_only_program(SURFACE_PROGRAM)
+        if uploaded.depth_vertex_array is None:
+            uploaded.depth_vertex_array = uploaded.vertex_array_for(depth_program)
+        depth_array = uploaded.depth_vertex_array
+        if not _bound_to(depth_array, depth_program):  # another material's depth program made it
+            depth_array = uploaded.vertex_array_for(depth_program)
+        return depth_array
+
+    def _draw_sample(self, framebuffer: moderngl.Framebuffer, targets: list[moderngl.Texture],
+                     vertex_array: moderngl.VertexArray | None, depth_array: moderngl.VertexArray | None,
+                     program: moderngl.Program, bound: moderngl.Texture, unit: int, camera: Camera, offset: np.ndarray,
+                     depth_prepass: bool, sums: list[moderngl.Framebuffer], done: Callable[[float], None]) -> None:
+        """One sample into ``framebuffer`` (colour ``targets``, cleared first), added into ``sums`` when given:
+        the camera's view-projection moved by ``offset`` (pixels, x right, y up;
+        :func:`viewer.antialias.jitter_matrix`), then the depth pass and the shading pass in bands of rows. The
+        other uniforms are set by the caller.
+
+        The depth pass (the depth-only program: same vertex stage, no MLP, colour writes masked) is drawn first
+        over the whole image, in bands of its own: its coverage weighs the rows of the shading bands. With
+        ``depth_prepass`` it stays, and the shading pass tests ``LEQUAL`` against it: the invariant vertex stage
+        gives bit-identical depths, so exactly the visible surface passes and early fragment tests stop every
+        other fragment before the MLP. Without it the depth is cleared again before the shading pass."""
+        width, height = size = framebuffer.size
+        layers = len(targets)
         view_projection = camera.view_projection(width / height)
         if np.any(offset != 0.0):  # the pixel centre: the un-jittered matrix itself (bit-identical renders)
             view_projection = view_projection @ jitter_matrix(offset, width, height)
         view_projection = np.ascontiguousarray(view_projection, dtype=np.float32)
         set_uniform(program, "u_view_projection", view_projection)
+        framebuffer.scissor = None
         framebuffer.use()  # the scope binds the framebuffer but leaves the viewport as it was
         framebuffer.clear(0.0, 0.0, 0.0, 0.0, depth=1.0)
-        if vertex_array is None:
+        if vertex_array is None or depth_array is None:
+            self._accumulate(framebuffer, targets, sums, (0, 0, width, height))
+            done(1.0)
             return
         self.shading.bind_material()
         bound.use(location=unit)
-        if depth_prepass:
-            # Pass 1: depth only (the DEPTH_ONLY program: same vertex stage, no MLP; colour writes masked).
-            # Pass 2: the invariant vertex stage gives bit-identical depths, so LEQUAL passes exactly the
-            # visible surface and early fragment tests stop every other fragment before the MLP.
-            depth_program = self.shading.depth_only_program(SURFACE_PROGRAM)
-            set_uniform(depth_program, "u_view_projection", view_projection)
-            if uploaded.depth_vertex_array is None:
-                uploaded.depth_vertex_array = uploaded.vertex_array_for(depth_program)
-            depth_array = uploaded.depth_vertex_array
-            if not _bound_to(depth_array, depth_program):  # another material's depth program made it
-                depth_array = uploaded.vertex_array_for(depth_program)
-            framebuffer.color_mask = _color_masks(False, layers)
-            try:
-                depth_array.render(moderngl.TRIANGLES)
-            finally:
-                framebuffer.color_mask = _color_masks(True, layers)
-                if depth_array is not uploaded.depth_vertex_array:
-                    depth_array.release()
-            self.ctx.depth_func = "<="
+        set_uniform(self.shading.depth_only_program(SURFACE_PROGRAM), "u_view_projection", view_projection)
+        framebuffer.color_mask = _color_masks(False, layers)
         try:
-            vertex_array.render(moderngl.TRIANGLES)
+            for first, end in self.depth_pacer.pieces(height, multiple=_BAND_MULTIPLE):
+                framebuffer.scissor = (0, first, width, end - first)
+                framebuffer.use()
+                depth_array.render(moderngl.TRIANGLES)
+        finally:
+            framebuffer.color_mask = _color_masks(True, layers)
+        costs = covered_row_costs(framebuffer, size)
+        framebuffer.scissor = None
+        if depth_prepass:
+            self.ctx.depth_func = "<="
+        else:
+            framebuffer.use()
+            framebuffer.clear(0.0, 0.0, 0.0, 0.0, depth=1.0)
+        total = float(costs.sum())
+        cumulative = np.cumsum(costs)
+        try:
+            for first, end in self.shade_pacer.pieces(height, costs, _BAND_MULTIPLE,
+                                                       lambda end: done(float(cumulative[end - 1]) / total)):
+                box = (0, first, width, end - first)
+                framebuffer.scissor = box
+                framebuffer.use()
+                self.shading.bind_material()
+                bound.use(location=unit)
+                vertex_array.render(moderngl.TRIANGLES)
+                self._accumulate(framebuffer, targets, sums, box)
         finally:
             self.ctx.depth_func = "<"  # moderngl's default
+            framebuffer.scissor = None
 
-    def _accumulate(self, samples: list[moderngl.Texture], sums: list[moderngl.Framebuffer]) -> None:
-        """Add each sample image into its RGBA32F sum: a full-screen draw with additive blending."""
+    def _accumulate(self, framebuffer: moderngl.Framebuffer, samples: list[moderngl.Texture],
+                    sums: list[moderngl.Framebuffer], box: tuple[int, int, int, int]) -> None:
+        """Add ``box`` of each sample image (``framebuffer``'s colour attachments) into its RGBA32F sum (a
+        full-screen draw with additive blending, scissored to ``box``); nothing when ``sums`` is empty.
+        ``framebuffer`` is bound again afterwards."""
+        if not sums:
+            return
         if self._accumulate_program is None:
             self._accumulate_program = compile_program(self.ctx, _ACCUMULATE, {}, self.shading.shader_root)
             self._accumulate_array = self.ctx.vertex_array(self._accumulate_program, [])
@@ -170,11 +229,15 @@ class ForwardRenderer:
         try:
             for sample, target in zip(samples, sums, strict=True):
                 sample.use(location=_SAMPLE_UNIT)
+                target.scissor = box
                 target.use()
                 array.render(moderngl.TRIANGLES, vertices=3)
         finally:
+            for target in sums:
+                target.scissor = None
             self.ctx.blend_func = moderngl.DEFAULT_BLENDING
             self.ctx.enable_only(moderngl.DEPTH_TEST)
+            framebuffer.use()
 
     def release(self) -> None:
         """Free this path's own GL objects (the material belongs to the caller)."""

@@ -29,7 +29,13 @@ no torch, no glfw, no imgui.
 from __future__ import annotations
 
 import argparse
+import atexit
+import contextlib
 import dataclasses
+import gc
+import signal
+import sys
+from collections.abc import Iterator
 from pathlib import Path
 from typing import TYPE_CHECKING
 
@@ -50,9 +56,22 @@ from viewer.scene_config import (
 )
 
 if TYPE_CHECKING:
+    import moderngl
     import numpy as np
 
-__all__ = ["register", "resolve_config", "run"]
+    from viewer.pacing import Progress
+
+__all__ = ["PROGRESS_DELAY", "available_memory", "check_render_size", "register", "render_bytes", "resolve_config",
+           "run"]
+
+#: A render shows its progress bar once it has run this long (seconds): short renders print nothing more.
+PROGRESS_DELAY = 2.0
+_PROGRESS_STEPS = 1000
+#: Memory per pixel of the image on the CPU, besides the render targets (bytes; measured: 200 per pixel in
+#: all at 2048² on llvmpipe, of which 20 the forward path's targets): the float32 read-back and its flip, the
+#: XYZ, and the writer's float64 conversions (viewer.scene_config.write_render, gratnet.display).
+_CPU_BYTES_PER_PIXEL = 192
+_SIZE_LIMITS = ("GL_MAX_TEXTURE_SIZE", "GL_MAX_RENDERBUFFER_SIZE", "GL_MAX_VIEWPORT_DIMS")
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
@@ -97,6 +116,42 @@ def resolve_config(arguments: argparse.Namespace) -> RenderConfig:
     return config
 
 
+@contextlib.contextmanager
+def _progress_bar(quiet: bool) -> Iterator[Progress]:
+    """A progress bar on stderr for the render (tqdm, as the other commands), shown once it has run for
+    :data:`PROGRESS_DELAY` seconds, cleared when it ends; ``quiet``: none. Yields the renderers' report."""
+    from tqdm import tqdm
+
+    with tqdm(total=_PROGRESS_STEPS, desc="gratnet render", delay=PROGRESS_DELAY, leave=False, disable=quiet,
+              file=sys.stderr, bar_format="{desc}: {percentage:3.0f}%|{bar}| {elapsed}<{remaining}") as bar:
+        def report(fraction: float) -> None:
+            with _sigint_deferred():  # a Ctrl-C inside tqdm's refresh would leave the bar on the screen
+                bar.update(max(0, round(_PROGRESS_STEPS * min(1.0, fraction)) - bar.n))
+
+        yield report
+
+
+@contextlib.contextmanager
+def _sigint_deferred() -> Iterator[None]:
+    """A SIGINT (Ctrl-C) inside the block is handled right after it, by the handler that was in place (Python's
+    raises KeyboardInterrupt); outside the main thread nothing is deferred. (Blocking the signal would not do:
+    the process's other threads, e.g. llvmpipe's, would take it.)"""
+    held: list[int] = []
+    try:
+        previous = signal.signal(signal.SIGINT, lambda number, _frame: held.append(number))
+    except ValueError:  # not the main thread
+        yield
+        return
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGINT, previous)
+        if held and callable(previous):
+            previous(signal.SIGINT, None)
+        elif held and previous == signal.SIG_DFL:
+            raise KeyboardInterrupt
+
+
 def _auto_exposure(xyz: np.ndarray) -> float:
     """The exposure that puts the brightest 0.5 % of the lit pixels at display white (largest linear sRGB
     channel), for a picture rendered at exposure 1; 1 when nothing is lit."""
@@ -113,14 +168,40 @@ def _auto_exposure(xyz: np.ndarray) -> float:
 
 
 def run(arguments: argparse.Namespace) -> int:
-    """Check every input, render, write the image and its config atomically."""
+    """Check every input, render, write the image and its config atomically. Ctrl-C: exit status 130 and one
+    line saying whether the output was written (it lands whole or not at all; the render answers within a
+    second, :mod:`viewer.pacing`)."""
+    out = Path(arguments.out)
+    before = _file_state(out)
+    try:
+        return _render(arguments, out)
+    except KeyboardInterrupt:
+        landed = _file_state(out) not in (before, None)
+        what = f"{out} and its config were written before it" if landed else "nothing was written"
+        print(f"gratnet render: interrupted; {what}", file=sys.stderr)
+        # The interpreter's own teardown then spends 0.4 s collecting colour-science's objects (measured on
+        # llvmpipe's 2-core machine); frozen at exit, nothing is collected: the process ends within ~0.05 s.
+        atexit.register(gc.freeze)
+        return 130
+
+
+def _file_state(path: Path) -> tuple[int, int] | None:
+    """``(inode, mtime_ns)`` of the file at ``path``, or None: a new file landed there if this changed."""
+    try:
+        status = path.stat()
+    except OSError:
+        return None
+    return status.st_ino, status.st_mtime_ns
+
+
+def _render(arguments: argparse.Namespace, out: Path) -> int:
+    """:func:`run` up to Ctrl-C's handling."""
     import numpy as np
 
     from gratnet.modelfile import load_model
     from viewer.camera import Camera, Light
     from viewer.catalog import build_mesh, resolve_material
 
-    out = Path(arguments.out)
     reference_only = bool(arguments.reference) and arguments.material is None
     if arguments.material is None:
         arguments.material = DEFAULT_MATERIAL
@@ -150,18 +231,23 @@ def run(arguments: argparse.Namespace) -> int:
     skip_threshold = DISPLAY_SKIP_THRESHOLD if config.skip_dark else None
     ctx = create_headless_context()
     try:
+        check_render_size(ctx, config)  # before any program compiles: a size this machine cannot render is refused
         with SceneRenderer(ctx, model, weights_path=config.weights_path, render_path=config.render_path,
                            reference_precision=config.reference_precision) as renderer:
             # A BRDF slice has one path (a full-screen fragment pass); a mesh takes the one chosen.
             resolved = ({"path": "forward", "reason": "BRDF slices are rendered by the fragment pass only"}
                         if config.slice else {"path": renderer.render_path, "reason": renderer.render_path_reason})
-            if config.slice:
-                xyz = renderer.shading.render_brdf_slice(config.light_theta_degrees, config.light_phi_degrees,
-                                                         config.width, config.exposure, config.effective_ior,
-                                                         skip_threshold=skip_threshold)
-            else:
-                xyz = renderer.render(mesh, camera, light, (config.width, config.height), config.exposure,
-                                      config.effective_ior, skip_threshold=skip_threshold, samples=config.spp)
+            with _progress_bar(arguments.quiet) as progress:
+                if config.slice:
+                    xyz = renderer.shading.render_brdf_slice(config.light_theta_degrees, config.light_phi_degrees,
+                                                             config.width, config.exposure, config.effective_ior,
+                                                             skip_threshold=skip_threshold, progress=progress)
+                else:
+                    renderer.forward.progress = progress  # set after the path is chosen: not its probe's renders
+                    if renderer.deferred is not None:
+                        renderer.deferred.progress = progress
+                    xyz = renderer.render(mesh, camera, light, (config.width, config.height), config.exposure,
+                                          config.effective_ior, skip_threshold=skip_threshold, samples=config.spp)
     finally:
         ctx.release()
     if not np.all(np.isfinite(xyz)):
@@ -192,3 +278,99 @@ def run(arguments: argparse.Namespace) -> int:
     print(f"wrote {out}: {source}, {what}, {config.width}×{config.height}{samples}, exposure {config.exposure:g}")
     warn_if_black(xyz, config.exposure)
     return 0
+
+
+def available_memory() -> int | None:
+    """Bytes of memory available to a new allocation (``MemAvailable`` of ``/proc/meminfo``), or None where
+    that file is missing (the memory check is then skipped)."""
+    try:
+        with open("/proc/meminfo", encoding="ascii") as meminfo:
+            for line in meminfo:
+                if line.startswith("MemAvailable:"):
+                    return int(line.split()[1]) * 1024
+    except (OSError, ValueError, IndexError):
+        return None
+    return None
+
+
+def check_render_size(ctx: moderngl.Context, config: RenderConfig) -> None:
+    """Refuse, in one :class:`GratNetError` naming the largest size that would do, a ``--size`` this machine
+    cannot render, before any program compiles: beyond the GL limits (``GL_MAX_TEXTURE_SIZE``,
+    ``GL_MAX_RENDERBUFFER_SIZE``, ``GL_MAX_VIEWPORT_DIMS``), a float32 render target the driver does not
+    allocate (probed: llvmpipe refuses single textures over about 1.5 GiB, e.g. 12000×12000 RGBA32F), or more
+    memory than ``MemAvailable`` (:func:`render_bytes`)."""
+    width, height = config.width, config.height
+    problem = _size_problem(ctx, config, width, height)
+    if problem is None:
+        return
+    low, high = 0, width  # the largest width (at this aspect ratio) whose size has no problem
+    while high - low > 1:
+        middle = (low + high) // 2
+        if _size_problem(ctx, config, middle, _scaled_height(width, height, middle)) is None:
+            low = middle
+        else:
+            high = middle
+    fits = f"; at most {low},{_scaled_height(width, height, low)} at this aspect ratio" if low else ""
+    raise GratNetError(f"--size {width},{height} is too large for this machine: {problem}{fits}")
+
+
+def _scaled_height(width: int, height: int, scaled_width: int) -> int:
+    return max(1, height * scaled_width // width)
+
+
+def render_bytes(config: RenderConfig, width: int, height: int, software: bool) -> int:
+    """The memory a render of ``width`` × ``height`` pixels takes at its peak, in bytes: the image on the CPU
+    (the read-back, its flip, the XYZ and the float64 conversions of the writer: :data:`_CPU_BYTES_PER_PIXEL`)
+    and, on a software rasterizer, whose "GPU" memory is this memory, the render targets of the path that
+    takes the most (forward: RGBA32F targets, a sum per layer for several samples, float32 depth; deferred:
+    the stacked G-buffer, its depth and list, the resolved mean; a slice: two RGBA32F targets)."""
+    from viewer.deferred import CHUNK_TEXELS
+
+    pixels = width * height
+    several = config.spp > 1
+    if config.slice:
+        targets = 32
+    else:
+        stacked = max(1, min(config.spp, CHUNK_TEXELS // max(1, pixels)))
+        forward = 16 * (2 if several else 1) + 4
+        deferred = 24 * stacked + (16 if several else 0)
+        targets = max(forward, deferred)
+    return pixels * (_CPU_BYTES_PER_PIXEL + (targets if software else 0))
+
+
+def _size_problem(ctx: moderngl.Context, config: RenderConfig, width: int, height: int) -> str | None:
+    """Why a ``width`` × ``height`` render cannot be made here, or None."""
+    from viewer.renderer import is_software_rasterizer
+
+    for name in _SIZE_LIMITS:
+        value = ctx.info.get(name)  # an int, or (width, height) for the viewport
+        most = (value, value) if isinstance(value, int) else tuple(value) if isinstance(value, tuple) else None
+        if most is not None and len(most) == 2 and (width > most[0] or height > most[1]):
+            return f"{name} is {value} here"
+    if not _allocates(ctx, width, height):
+        return (f"the GPU ({ctx.info.get('GL_RENDERER', '?')}) cannot allocate a {width}×{height} float32 RGBA render "
+                f"target ({16 * width * height / 2**30:.1f} GiB)")
+    available = available_memory()
+    needed = render_bytes(config, width, height, is_software_rasterizer(ctx))
+    if available is not None and needed > available:
+        return (f"the render needs about {needed / 2**30:.1f} GiB of memory and {available / 2**30:.1f} GiB is "
+                f"available")
+    return None
+
+
+def _allocates(ctx: moderngl.Context, width: int, height: int) -> bool:
+    """Whether the driver makes a complete framebuffer of a ``width`` × ``height`` RGBA32F texture and a depth
+    renderbuffer (what every path renders into; nothing is drawn, and llvmpipe commits no memory for it)."""
+    import moderngl
+
+    owned: list[moderngl.Texture | moderngl.Renderbuffer | moderngl.Framebuffer] = []
+    try:
+        owned.append(ctx.texture((width, height), 4, dtype="f4"))
+        owned.append(ctx.depth_renderbuffer((width, height)))
+        owned.append(ctx.framebuffer(color_attachments=[owned[0]], depth_attachment=owned[1]))
+    except moderngl.Error:
+        return False
+    finally:
+        for resource in reversed(owned):
+            resource.release()
+    return True

@@ -22,6 +22,7 @@ from gratnet.brdf import direction
 from gratnet.display import xyz_to_display_srgb8
 from gratnet.errors import GratNetError
 from viewer.glsl import GeneratedSource, compile_program
+from viewer.pacing import Pacer, Progress, disc_row_costs, read_rows
 
 __all__ = ["SKIP_COUNTER_BINDING", "STATISTICS_KEYS", "ShadingPrograms", "ior_uniform", "set_uniform",
            "skip_threshold_value"]
@@ -32,6 +33,7 @@ SKIP_COUNTER_BINDING = 5
 _COUNTER_SLOTS = 8
 _COUNTING_SUFFIX = "#count"  # program-cache key of a program compiled with COUNT_EVALUATIONS
 _DEPTH_ONLY_SUFFIX = "#depth"  # ... and of one compiled with DEPTH_ONLY (the depth pre-pass)
+_FIRST_SLICE_PIXELS = 2048  # a BRDF slice's first band: ~2k pixels in the disc
 
 
 def set_uniform(program: moderngl.Program | moderngl.ComputeShader, name: str, value: object) -> None:
@@ -86,6 +88,8 @@ class ShadingPrograms:
         self.compiled: dict[str, moderngl.Program] = {}
         self.vertex_arrays: dict[str, moderngl.VertexArray] = {}
         self._counters: moderngl.Buffer | None = None
+        #: The sizes of a BRDF slice's bands of rows, from the time of the bands before (viewer.pacing).
+        self.slice_pacer = Pacer(ctx, first_cost=_FIRST_SLICE_PIXELS)
 
     # ---------------------------------------------------------------------------------------------
     # What a material says about itself
@@ -192,7 +196,7 @@ class ShadingPrograms:
     def render_brdf_slice_layers(
         self, theta_deg: float, phi_deg: float, size: int, exposure: float = 1.0, ior: float | None = 1.5,
         skip_threshold: float | None = None, statistics: dict[str, int] | None = None,
-        rows: tuple[int, int] | None = None,
+        rows: tuple[int, int] | None = None, progress: Progress | None = None,
     ) -> tuple[np.ndarray, np.ndarray]:
         """A BRDF slice (docs/physics.md "BRDF slice") and the material's XYZ behind it.
 
@@ -204,6 +208,8 @@ class ShadingPrograms:
                 counting variant of the program (slower: time renders without it).
             rows: ``(first, end)``: compute only these rows (from the top; a scissor box, so the time is the
                 band's); the other rows are not written. The viewer refines a slice in such bands between frames.
+            progress: called with the fraction done (0 … 1) after each band of rows: the rows are drawn in bands
+                of about :data:`viewer.pacing.PIECE_SECONDS` each (Ctrl-C is answered between them).
 
         Returns:
             ``(exposed, material)``, both ``float32`` ``(size, size, 3)`` with row 0 at the top (as
@@ -232,16 +238,18 @@ class ShadingPrograms:
         targets = [self.ctx.texture((size, size), 4, dtype="f4") for _ in range(2)]
         framebuffer = self.ctx.framebuffer(color_attachments=targets)
         try:
-            scissor = None if rows is None else (0, size - rows[1], size, rows[1] - rows[0])  # GL rows: bottom up
-            self.draw(key, framebuffer, ((bound, unit),), scissor)
+            # Bands of rows (scissor boxes), each finished before the next: no GL call runs long (viewer.pacing).
+            first, end = (0, size) if rows is None else rows
+            costs = disc_row_costs(size, first, end)
+            total = float(costs.sum())
+            cumulative = np.cumsum(costs)
+            done = None if progress is None else lambda row: progress(float(cumulative[row - 1]) / total)
+            for top, bottom in self.slice_pacer.pieces(end - first, costs, done=done):
+                self.draw(key, framebuffer, ((bound, unit),), (0, size - first - bottom, size, bottom - top))
             if statistics is not None:
                 self.read_counters(statistics)
-            images = [
-                np.frombuffer(framebuffer.read(components=4, dtype="f4", attachment=k), dtype=np.float32)
-                .reshape(size, size, 4)[::-1, :, :3]  # GL rows start at the bottom; ours at the top
-                .copy()
-                for k in range(2)
-            ]
+            # GL rows start at the bottom; ours at the top.
+            images = [read_rows(framebuffer, (size, size), attachment=k)[::-1, :, :3].copy() for k in range(2)]
         finally:
             framebuffer.release()
             for target in targets:
@@ -251,18 +259,18 @@ class ShadingPrograms:
     def render_brdf_slice(
         self, theta_deg: float, phi_deg: float, size: int, exposure: float = 1.0, ior: float | None = 1.5,
         skip_threshold: float | None = None, statistics: dict[str, int] | None = None,
-        rows: tuple[int, int] | None = None,
+        rows: tuple[int, int] | None = None, progress: Progress | None = None,
     ) -> np.ndarray:
         """Exposed CIE XYZ of a BRDF slice, ``float32`` ``(size, size, 3)``, row 0 at the top.
 
         The light is at polar angle ``theta_deg`` and azimuth ``phi_deg``; pixel ``(i, j)`` holds
         ``exposure · A(ωi, ωo) · XYZ(−(ωi + ωo))`` (eq. 5) for its view direction, 0 outside the disc.
         ``ior`` is the Fresnel refractive index (``None`` or 0: no Fresnel). ``skip_threshold``,
-        ``statistics`` and ``rows``: see :meth:`render_brdf_slice_layers` (default: no skipping, exact linear
-        values, every row).
+        ``statistics``, ``rows`` and ``progress``: see :meth:`render_brdf_slice_layers` (default: no skipping,
+        exact linear values, every row).
         """
         return self.render_brdf_slice_layers(theta_deg, phi_deg, size, exposure, ior, skip_threshold,
-                                             statistics, rows)[0]
+                                             statistics, rows, progress)[0]
 
     def render_brdf_slice_srgb8(
         self, theta_deg: float, phi_deg: float, size: int, exposure: float = 1.0, ior: float | None = 1.5,

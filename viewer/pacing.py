@@ -1,0 +1,159 @@
+"""Long GPU work in short GL calls, so that Ctrl-C is answered within a second (issue 36).
+
+moderngl holds the GIL through every GL call, and a CPU rasterizer (Mesa llvmpipe) runs a whole draw or
+dispatch inside the call that submits it (or the ``finish`` after it): a 1024² mesh draw of the shipped
+network takes tens of seconds there, and a SIGINT only becomes a ``KeyboardInterrupt`` once the call returns.
+The renderers therefore split their work into *pieces* — bands of rows drawn with a scissor box, ranges of the
+deferred path's pixel list — and finish each one (``ctx.finish()``) before the next: Python gets control
+between pieces, raises a pending ``KeyboardInterrupt``, and the renderer's ``finally`` blocks free the GL
+objects. A scissor box and a sub-range of a list change which pixels a call computes, never how: the pieces
+together give the unsplit result bit for bit.
+
+:class:`Pacer` sizes the pieces from measured time: each piece is predicted to take :data:`PIECE_SECONDS`
+from the rate (seconds per unit of cost) of the piece before, starting small and growing at most
+:data:`GROWTH` times per piece (a cheap piece, e.g. rows of background, must not predict a huge one).
+Costs are per unit (per row, per list entry) and may differ between units: the forward path weighs a row by
+the pixels its depth pre-pass covered, a BRDF slice's row by its pixels inside the unit disc.
+
+Rendering only: no glfw, no imgui, no torch.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from collections.abc import Callable, Iterator
+
+import moderngl
+import numpy as np
+
+__all__ = ["GROWTH", "PIECE_SECONDS", "READ_BYTES", "Pacer", "Progress", "covered_row_costs", "disc_row_costs",
+           "read_depth_rows", "read_rows"]
+
+#: The time one piece of GPU work is sized to take (seconds): a Ctrl-C waits for the piece under way.
+PIECE_SECONDS = 0.2
+#: The most a piece's predicted cost may exceed the cost of the piece measured before it.
+GROWTH = 4.0
+
+#: A render's progress report: the fraction of its work done, 0 … 1.
+Progress = Callable[[float], None]
+
+
+class Pacer:
+    """Consecutive pieces of one kind of GPU work, each about :data:`PIECE_SECONDS` long (see the module
+    docstring). One pacer may serve several jobs of the same kind (a render's samples, its chunks): the rate
+    measured in one sizes the first piece of the next.
+
+    Args:
+        ctx: the context whose work is finished after each piece.
+        first_cost: the cost of the first piece (in the units' cost; units of cost 1 when uniform).
+        seconds: the time a piece is sized to take.
+    """
+
+    def __init__(self, ctx: moderngl.Context, first_cost: float, seconds: float = PIECE_SECONDS) -> None:
+        if not (first_cost > 0.0 and seconds > 0.0):
+            raise ValueError(f"first_cost and seconds must be positive, got {first_cost!r}, {seconds!r}")
+        self.ctx = ctx
+        self.seconds = seconds
+        self.rate: float | None = None  # seconds per unit of cost, of the last measured piece
+        self.budget = float(first_cost)  # the next piece's cost
+        self.pieces_done = 0
+        self.longest = 0.0  # the longest piece so far (seconds, submission to finish)
+
+    def pieces(self, total: int, costs: np.ndarray | None = None, multiple: int = 1,
+               done: Callable[[int], None] | None = None) -> Iterator[tuple[int, int]]:
+        """``(start, end)`` ranges covering ``0 … total``; the caller submits the GPU work of each before asking
+        for the next, and the pacer finishes it and times it then.
+
+        Args:
+            costs: the relative cost of each unit (``(total,)``; default 1 each), e.g. the covered pixels of a row.
+            multiple: piece boundaries fall on multiples of this (the last piece ends at ``total``).
+            done: called with ``end`` after each piece is finished.
+        """
+        cumulative = None if costs is None else np.concatenate(([0.0], np.cumsum(np.asarray(costs, np.float64))))
+        start = 0
+        while start < total:
+            end = self._end(start, total, cumulative, max(1, int(multiple)))
+            began = time.perf_counter()
+            yield start, end
+            self.ctx.finish()
+            elapsed = time.perf_counter() - began
+            self.longest = max(self.longest, elapsed)
+            cost = float(end - start) if cumulative is None else float(cumulative[end] - cumulative[start])
+            self._measured(cost, elapsed)
+            start = end
+            if done is not None:
+                done(end)
+
+    def _end(self, start: int, total: int, cumulative: np.ndarray | None, multiple: int) -> int:
+        """The end of the piece from ``start`` whose cost fits :attr:`budget` (at least ``multiple`` units)."""
+        if cumulative is None:
+            end = start + int(self.budget)
+        else:
+            end = int(np.searchsorted(cumulative, cumulative[start] + self.budget, side="right")) - 1
+        end = max(start + multiple, end - end % multiple)
+        return min(total, end)
+
+    def _measured(self, cost: float, elapsed: float) -> None:
+        """Size the next piece from this one: :attr:`seconds` at this piece's rate, at most :data:`GROWTH`
+        times this piece's cost (and never less than a 16th of it: one slow piece on a busy CPU must not
+        shrink the rest to slivers)."""
+        self.pieces_done += 1
+        if cost <= 0.0:
+            return
+        self.rate = max(elapsed, 1e-6) / cost
+        target = self.seconds / self.rate
+        self.budget = max(1.0, min(GROWTH * max(cost, self.budget), max(target, cost / 16.0)))
+        if not math.isfinite(self.budget):
+            self.budget = cost
+
+
+#: Bytes one ``glReadPixels`` of :func:`read_rows` reads at most (a whole 8192² RGBA32F image is 1 GiB).
+READ_BYTES = 1 << 25
+
+
+def read_rows(framebuffer: moderngl.Framebuffer, size: tuple[int, int], attachment: int = 0,
+              components: int = 4) -> np.ndarray:
+    """``framebuffer``'s ``attachment`` (−1: the depth) as ``float32`` ``(H, W, components)`` in GL row order
+    (row 0 at the bottom), read in pieces of at most :data:`READ_BYTES` (each a short call)."""
+    width, height = size
+    out = np.empty((height, width, components), dtype=np.float32)
+    rows = max(1, READ_BYTES // (4 * components * width))
+    for first in range(0, height, rows):
+        count = min(rows, height - first)
+        framebuffer.read_into(out[first:first + count], viewport=(0, first, width, count), components=components,
+                              attachment=attachment, dtype="f4")
+    return out
+
+
+def covered_row_costs(framebuffer: moderngl.Framebuffer, size: tuple[int, int]) -> np.ndarray:
+    """Per GL row (bottom up), the cost of shading it: 1 per pixel the depth attachment covers (depth < 1,
+    the clear value), :data:`viewer.scheduling.UNCOVERED_COST` per other pixel (the network runs where covered)."""
+    from viewer.scheduling import UNCOVERED_COST
+
+    width, height = size
+    costs = np.empty(height, dtype=np.float64)
+    rows = max(1, READ_BYTES // (4 * width))
+    for first in range(0, height, rows):
+        depth = read_depth_rows(framebuffer, width, first, min(rows, height - first))
+        covered = np.count_nonzero(depth < 1.0, axis=1)
+        costs[first:first + len(covered)] = covered + UNCOVERED_COST * (width - covered)
+    return costs
+
+
+def read_depth_rows(framebuffer: moderngl.Framebuffer, width: int, first: int, count: int) -> np.ndarray:
+    """GL rows ``first … first + count − 1`` of ``framebuffer``'s depth, ``float32`` ``(count, width)``."""
+    out = np.empty((count, width), dtype=np.float32)
+    framebuffer.read_into(out, viewport=(0, first, width, count), components=1, attachment=-1, dtype="f4")
+    return out
+
+
+def disc_row_costs(size: int, first: int, end: int) -> np.ndarray:
+    """Per row ``first … end − 1`` of a ``size``² BRDF slice (from the top), the pixels whose centre lies in the
+    unit disc (where the material runs) plus :data:`viewer.scheduling.UNCOVERED_COST` per other pixel."""
+    from viewer.scheduling import UNCOVERED_COST
+
+    centres = (np.arange(size, dtype=np.float64) + 0.5) / size * 2.0 - 1.0
+    reach = np.sqrt(np.maximum(0.0, 1.0 - centres[first:end] ** 2))  # |x| ≤ reach inside the disc
+    inside = np.searchsorted(centres, reach, side="right") - np.searchsorted(centres, -reach, side="left")
+    return inside + UNCOVERED_COST * (size - inside)
