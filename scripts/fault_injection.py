@@ -10,7 +10,8 @@ start-up, computation, writing). After each kill:
 
 - processes: no process of the command is alive 10 s later. Every process the command starts (Ray's local
   instance and workers included, whatever their process group) inherits an environment variable
-  (:data:`TAG_VARIABLE`) with a value unique to that command, read back from ``/proc/PID/environ``;
+  (:data:`TAG_VARIABLE`) with a value unique to that command, read back from ``/proc/PID/environ``, and its
+  working folder (the command's own: a process that retitled itself has overwritten its environment);
 - files: every file left in its folder loads as what it is (a volume with gratnet.volume.read_volume, a model
   with gratnet.modelfile.load_model, a checkpoint, an EXR or PNG image, JSON, CSV, ``.npy``), or is a
   temporary of gratnet.atomic (a hidden ``.NAME.RANDOM.tmp.EXT`` or ``.NAME.PID.backup``), which no command
@@ -141,10 +142,12 @@ def start(arguments: list[str], folder: Path, tag: str) -> subprocess.Popen:
         log.close()
 
 
-def tagged_processes(tag: str) -> dict[int, str]:
-    """PID → command line of every live process whose environment holds ``TAG_VARIABLE=tag`` (zombies have
-    none)."""
+def tagged_processes(tag: str, folder: Path) -> dict[int, str]:
+    """PID → command line of every live process of the command: its environment holds ``TAG_VARIABLE=tag``, or
+    its working folder is the command's ``folder`` (or in it). The second catches processes that overwrote
+    their environment (setproctitle does, for titles such as ``ray::DashboardAgent``). Zombies have neither."""
     needle = f"{TAG_VARIABLE}={tag}".encode()
+    inside = str(folder.resolve())
     found: dict[int, str] = {}
     for entry in os.scandir("/proc"):
         if not entry.name.isdigit() or int(entry.name) == os.getpid():
@@ -153,7 +156,9 @@ def tagged_processes(tag: str) -> dict[int, str]:
             with open(f"/proc/{entry.name}/environ", "rb") as handle:
                 variables = handle.read().split(b"\0")
             if needle not in variables:
-                continue
+                where = os.readlink(f"/proc/{entry.name}/cwd")
+                if where != inside and not where.startswith(inside + os.sep):
+                    continue
             with open(f"/proc/{entry.name}/cmdline", "rb") as handle:
                 command = handle.read().replace(b"\0", b" ").decode(errors="replace").strip()
         except OSError:
@@ -162,14 +167,14 @@ def tagged_processes(tag: str) -> dict[int, str]:
     return found
 
 
-def wait_until_gone(tag: str, grace: float = GRACE_SECONDS) -> tuple[float, dict[int, str]]:
-    """Seconds until no process of ``tag`` is left (up to ``grace``), and those still alive then — which are
-    then killed (SIGKILL), so that nothing outlives the check."""
+def wait_until_gone(tag: str, folder: Path, grace: float = GRACE_SECONDS) -> tuple[float, dict[int, str]]:
+    """Seconds until no process of the command (``tag``, ``folder``) is left (up to ``grace``), and those still
+    alive then — which are then killed (SIGKILL), so that nothing outlives the check."""
     started = time.monotonic()
-    alive = tagged_processes(tag)
+    alive = tagged_processes(tag, folder)
     while alive and time.monotonic() - started < grace:
         time.sleep(0.1)
-        alive = tagged_processes(tag)
+        alive = tagged_processes(tag, folder)
     elapsed = time.monotonic() - started
     for pid in alive:
         try:
@@ -190,7 +195,7 @@ def run_to_end(arguments: list[str], folder: Path, timeout: float = 600.0) -> tu
         if process.poll() is None:
             process.kill()
             process.wait()
-        wait_until_gone(tag)
+        wait_until_gone(tag, folder)
     return status, time.monotonic() - began
 
 
@@ -433,7 +438,7 @@ def kill_once(case: Case, folder: Path, moment: float, reference: Path) -> Kill:
     if killed:
         os.kill(process.pid, signal.SIGKILL)
     process.wait()
-    gone_after, survivors = wait_until_gone(tag)
+    gone_after, survivors = wait_until_gone(tag, folder)
     left = [str(path) for path in inventory(folder)]
     loaded, temporaries, broken = check_files(folder)
     result = Kill(case.name, round(moment, 3), killed, left, len(loaded), temporaries, broken,

@@ -42,7 +42,7 @@ def run(arguments: argparse.Namespace) -> int:
     """Check everything up front, then run the sweep; exit 1 when tasks failed (the others' results are kept)."""
     from gratnet.atomic import check_output_folder
     from gratnet.errors import GratNetError
-    from sweep.runner import import_ray, plan_sweep, run_sweep
+    from sweep.runner import Stopped, import_ray, plan_sweep, run_sweep
     from sweep.spec import load_sweep
 
     if arguments.workers is not None and arguments.workers < 1:
@@ -60,10 +60,11 @@ def run(arguments: argparse.Namespace) -> int:
     import_ray()  # before any work: one line when Ray is missing
     try:
         rows, failures = run_sweep(spec, arguments.address, arguments.workers, progress=not arguments.quiet)
-    except KeyboardInterrupt:
-        print("gratnet sweep: interrupted; finished volumes and runs are kept, and the same command resumes the "
-              "rest (trainings from their last checkpoint)", file=sys.stderr)
-        return 130
+    except KeyboardInterrupt as error:  # Ctrl-C, or SIGTERM / SIGHUP (Stopped): Ray was shut down
+        how = f" ({error})" if isinstance(error, Stopped) else ""
+        print(f"gratnet sweep: interrupted{how}; finished volumes and runs are kept, and the same command resumes "
+              "the rest (trainings from their last checkpoint)", file=sys.stderr)
+        return 128 + error.signum if isinstance(error, Stopped) else 130
     for failure in failures:
         print(f"gratnet sweep: failed: {failure}", file=sys.stderr)
     if rows:

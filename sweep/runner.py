@@ -1,29 +1,82 @@
 """Running a sweep on Ray: the task graph, its progress, and the results at the end.
 
-Per dataset: one ground-truth task (or, with ``parts`` > 1, a preparation task, one task per wavelength block
-and an assembling task that adds them), then one task per evaluation BRDF slice (filling the shared cache);
-per run: one training + evaluation task that depends on its dataset's tasks through their object refs, so
-each volume is computed once and Ray starts a run as soon as its volume is written. Finished volumes and
-runs are skipped; interrupted trainings resume from their checkpoints (sweep/tasks.py).
+Per dataset: one ground-truth task (or, with ``parts`` > 1, one task per wavelength block and an assembling
+task that adds them), then one task per evaluation BRDF slice (filling the shared cache); per run: one
+training + evaluation task that depends on its dataset's tasks through their object refs, so each volume is
+computed once and Ray starts a run as soon as its volume is written. Finished volumes and runs are skipped;
+interrupted trainings resume from their checkpoints (sweep/tasks.py).
+
+Faults (docs/robustness.md):
+
+- a worker or a node that dies: Ray runs its task again elsewhere (``max_retries``, :data:`MAX_RETRIES`;
+  exceptions raised by a task are not retried). Tasks are idempotent and write atomically, and pass only small
+  values to each other (the arrays go through the results folder), so a retry finds what was finished and a
+  finished output is not computed again (OUT/records, sweep/records.py);
+- the sweep itself: Ctrl-C, SIGTERM and SIGHUP end it through ``ray.shutdown()`` (exit 130, or 128 + the
+  signal); a local Ray instance also has a watchdog (sweep/watchdog.py) that removes every process of it when
+  the sweep is killed with SIGKILL. The same command then continues: finished volumes, blocks, slices and runs
+  are kept, trainings resume from their checkpoints.
 
 Ray is imported here only, when a sweep runs: every other command works without it.
 """
 
 from __future__ import annotations
 
+import contextlib
 import dataclasses
 import json
 import os
+import signal
 import sys
+import threading
+from collections.abc import Callable, Iterator
 from pathlib import Path
 from typing import Any
 
 from gratnet.atomic import make_folder, write_text_atomic
 from gratnet.errors import GratNetError
-from sweep import tasks
+from sweep import tasks, watchdog
+from sweep.records import NODE_VARIABLE
 from sweep.spec import SweepSpec
 
 MISSING_RAY = "gratnet sweep needs Ray, which is not installed: pip install 'gratnet[sweep]' (or 'ray>=2.9')"
+#: Times Ray runs a task again after its worker process or its node died (Ray's own default, said here).
+MAX_RETRIES = 3
+
+
+class Stopped(KeyboardInterrupt):
+    """SIGTERM or SIGHUP received by the sweep, raised as Ctrl-C's KeyboardInterrupt is (the same cleanup)."""
+
+    def __init__(self, signum: int) -> None:
+        super().__init__(signal.Signals(signum).name)
+        self.signum = signum
+
+
+@contextlib.contextmanager
+def signals_stop_the_sweep() -> Iterator[None]:
+    """While the sweep runs, SIGTERM and SIGHUP raise :class:`Stopped` in the main thread."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+
+    def stop(signum: int, _frame: object) -> None:
+        raise Stopped(signum)
+
+    previous = {number: signal.signal(number, stop) for number in (signal.SIGTERM, signal.SIGHUP)}
+    try:
+        yield
+    finally:
+        for number, handler in previous.items():
+            signal.signal(number, handler)
+
+
+def on_node(function: Callable[..., Any], *arguments: Any) -> Any:
+    """A task as Ray runs it: ``function(*arguments)``, with the Ray node's id in the environment for the task's
+    record (sweep/records.py)."""
+    import ray
+
+    os.environ[NODE_VARIABLE] = ray.get_runtime_context().get_node_id()
+    return function(*arguments)
 
 
 def import_ray() -> Any:
@@ -78,12 +131,11 @@ def _submit(ray: Any, spec: SweepSpec, plan: Plan, out: Path) -> dict[Any, str]:
         if gigabytes > 0:
             options["memory"] = int(gigabytes * 2**30)
     labels: dict[Any, str] = {}
-    remote: dict[Any, Any] = {}  # one Ray remote function per task function
+    remote = ray.remote(on_node)
 
     def task(function: Any, label: str, options: dict[str, Any], *arguments: Any) -> Any:
-        if function not in remote:
-            remote[function] = ray.remote(function)
-        ref = remote[function].options(name=label, **options).remote(*arguments)
+        ref = remote.options(name=label, max_retries=MAX_RETRIES, retry_exceptions=False,
+                             **options).remote(function, *arguments)
         labels[ref] = label
         return ref
 
@@ -99,18 +151,17 @@ def _submit(ray: Any, spec: SweepSpec, plan: Plan, out: Path) -> dict[Any, str]:
         elif dataset.parts == 1:
             metadata = task(tasks.ground_truth, f"{name}: ground truth", gt_options, out, dataset, gt_device)
         else:
-            surface = task(tasks.prepare, f"{name}: prepare surface", gt_options, dataset)
-            parts = [task(tasks.volume_part, f"{name}: λ block {block + 1}/{dataset.parts}", gt_options, dataset,
-                          surface, block, gt_device) for block in range(dataset.parts)]
+            parts = [task(tasks.volume_block, f"{name}: λ block {block + 1}/{dataset.parts}", gt_options, out,
+                          dataset, block, gt_device) for block in range(dataset.parts)]
             metadata = task(tasks.assemble_volume, f"{name}: assemble volume", {"num_cpus": 1}, out, dataset,
-                            surface, *parts)
+                            *parts)
         dependencies[name] = [metadata]
         evaluate = spec.runs[0].evaluate
         if evaluate.brdf_slices and name in needed:
             from trainer.evaluate import STANDARD_SLICES
 
             dependencies[name] += [task(tasks.evaluation_slice, f"{name}: BRDF slice {index + 1}", gt_options,
-                                        dataset, metadata, evaluate, index, gt_device)
+                                        out, dataset, metadata, evaluate, index, gt_device)
                                    for index in range(len(STANDARD_SLICES))]
     threads = max(1, int(resources.train_cpus))
     for run in pending_runs:
@@ -125,6 +176,54 @@ def _cause(error: BaseException) -> str:
     return text.strip().splitlines()[0] if text.strip() else type(cause).__name__
 
 
+def _init(ray: Any, address: str | None, workers: int | None) -> None:
+    """Join the cluster at ``address``, or start a local instance with ``workers`` CPUs (default: all)."""
+    options: dict[str, Any] = {"include_dashboard": False, "log_to_driver": False, "configure_logging": False}
+    if address:
+        options["address"] = address
+    else:
+        options["num_cpus"] = workers or os.cpu_count() or 1
+        # A private instance reports no usage statistics (and tries no network beyond loopback for them).
+        os.environ.setdefault("RAY_USAGE_STATS_ENABLED", "0")
+        # Workers of a local instance import gratnet, trainer and sweep from where the driver does.
+        root = str(Path(__file__).resolve().parents[1])
+        path = os.pathsep.join(filter(None, [root, os.environ.get("PYTHONPATH")]))
+        options["runtime_env"] = {"env_vars": {"PYTHONPATH": path}}
+    try:
+        ray.init(**options)
+    except ConnectionError as error:
+        raise GratNetError(f"cannot join the Ray cluster at {address}: {error}") from None
+
+
+def _wait(ray: Any, labels: dict[Any, str], progress: bool) -> list[str]:
+    """Wait for every task, with a progress bar; the failures, one line per distinct cause."""
+    from tqdm.auto import tqdm
+
+    failures: list[str] = []
+    bar = tqdm(total=len(labels), desc="sweep", unit="task", disable=not progress, dynamic_ncols=True)
+    pending = list(labels)
+    causes: set[str] = set()
+    repeated = 0
+    with bar:
+        while pending:
+            ready, pending = ray.wait(pending, num_returns=1)
+            for ref in ready:
+                try:
+                    ray.get(ref)
+                except Exception as error:  # a task's failure; its dependants raise the same error
+                    cause = _cause(error)
+                    if cause in causes:
+                        repeated += 1
+                    else:
+                        causes.add(cause)
+                        failures.append(f"{labels[ref]}: {cause}")
+                bar.update(1)
+                bar.set_postfix_str(labels[ref][:60])
+    if repeated:
+        failures.append(f"{repeated} more tasks failed with one of these errors (or depended on a failed task)")
+    return failures
+
+
 def run_sweep(spec: SweepSpec, address: str | None = None, workers: int | None = None, progress: bool = True,
               ) -> tuple[list[dict[str, Any]], list[str]]:
     """Run what is left of ``spec`` on Ray; write the results table and plot. Returns (rows, failures).
@@ -132,8 +231,6 @@ def run_sweep(spec: SweepSpec, address: str | None = None, workers: int | None =
     ``address`` joins a running cluster (``ray start --head`` prints it; "auto" finds a local one); without it a
     local Ray instance with ``workers`` CPUs (default: all) is started and shut down afterwards.
     """
-    from tqdm.auto import tqdm
-
     ray = import_ray()
     plan = plan_sweep(spec)
     out = make_folder(spec.out).resolve()
@@ -142,49 +239,21 @@ def run_sweep(spec: SweepSpec, address: str | None = None, workers: int | None =
         print(f"gratnet sweep: {plan.summary()}", file=sys.stderr)
     nothing_left = all(state == "done" for state in plan.runs.values())
     owned = not ray.is_initialized() and not nothing_left
-    if owned:
-        options: dict[str, Any] = {"include_dashboard": False, "log_to_driver": False, "configure_logging": False}
-        if address:
-            options["address"] = address
-        else:
-            options["num_cpus"] = workers or os.cpu_count() or 1
-            # A private instance reports no usage statistics (and tries no network beyond loopback for them).
-            os.environ.setdefault("RAY_USAGE_STATS_ENABLED", "0")
-            # Workers of a local instance import gratnet, trainer and sweep from where the driver does.
-            root = str(Path(__file__).resolve().parents[1])
-            path = os.pathsep.join(filter(None, [root, os.environ.get("PYTHONPATH")]))
-            options["runtime_env"] = {"env_vars": {"PYTHONPATH": path}}
-        try:
-            ray.init(**options)
-        except ConnectionError as error:
-            raise GratNetError(f"cannot join the Ray cluster at {address}: {error}") from None
     failures: list[str] = []
-    try:
-        labels = {} if nothing_left else _submit(ray, spec, plan, out)
-        bar = tqdm(total=len(labels), desc="sweep", unit="task", disable=not progress, dynamic_ncols=True)
-        pending = list(labels)
-        causes: set[str] = set()
-        repeated = 0
-        with bar:
-            while pending:
-                ready, pending = ray.wait(pending, num_returns=1)
-                for ref in ready:
-                    try:
-                        ray.get(ref)
-                    except Exception as error:  # a task's failure; its dependants raise the same error
-                        cause = _cause(error)
-                        if cause in causes:
-                            repeated += 1
-                        else:
-                            causes.add(cause)
-                            failures.append(f"{labels[ref]}: {cause}")
-                    bar.update(1)
-                    bar.set_postfix_str(labels[ref][:60])
-        if repeated:
-            failures.append(f"{repeated} more tasks failed with one of these errors (or depended on a failed task)")
-    finally:
-        if owned:
-            ray.shutdown()
+    with signals_stop_the_sweep():
+        guard = watchdog.start() if owned and not address else None  # before Ray starts any process
+        try:
+            if owned:
+                _init(ray, address, workers)
+            labels = {} if nothing_left else _submit(ray, spec, plan, out)
+            failures = _wait(ray, labels, progress)
+        finally:
+            try:
+                if owned:
+                    ray.shutdown()
+            finally:
+                if guard is not None:
+                    guard.close()
     rows = collect_rows(spec)
     if rows:
         from sweep.results import write_results

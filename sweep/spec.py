@@ -526,7 +526,8 @@ def _resolve(path: Path, document: dict[str, Any], out: str | Path | None) -> Sw
     _check_held_out(datasets, variants)
 
     out_path = Path(out_value)
-    evaluate = dataclasses.replace(evaluate, cache_dir=str(out_path / "cache"), progress=False)
+    # Absolute: the tasks of a cluster's nodes run in other folders than the driver's.
+    evaluate = dataclasses.replace(evaluate, cache_dir=str(out_path.resolve() / "cache"), progress=False)
     runs = [
         RunSpec(dataset, preset, variant.name, seed, dataclasses.replace(variant.train, preset=preset, seed=seed),
                 evaluate)

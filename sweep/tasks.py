@@ -4,13 +4,21 @@ They call the project's own functions, exactly as ``gratnet groundtruth`` and ``
 (trainer/groundtruth_cli.py, trainer/train_cli.py), and write into the results folder OUT:
 
     OUT/volumes/NAME.exr (+ NAME.config.json)   one volume per dataset, shared by its runs
+    OUT/volumes/NAME.parts/block-K.{npy,json}   a split volume's wavelength blocks (float64 sums), until the
+                                                volume is assembled
     OUT/cache/brdf_*.npy                        ground-truth BRDF slices of the evaluation, shared
     OUT/runs/RUN/                               model.npz, checkpoint.pt, history.json, metrics.json, report.md,
                                                 run.json (the run's spec, written first), result.json (its table
                                                 row, written last: the run is finished)
+    OUT/records/KEY/*.json                      one record per attempt of each task (sweep/records.py)
 
-Every file is written atomically, so an interrupted sweep leaves whole files or none; a training resumes
-from its last checkpoint (trainer.train's own ``resume``).
+Every task is idempotent: it first looks for its output, and when it is there (finished by an earlier attempt
+or sweep) returns it without computing (its record says "found"). Every file is written atomically, so a task
+killed at any moment leaves whole files or none, and Ray can run it again (a retry after its worker or node
+died) or a rerun of the sweep can: a training resumes from its last checkpoint (trainer.train's own
+``resume``), a split volume keeps its finished blocks. Tasks return small values only (metadata, a block's
+node count, a table row): the large arrays go through the results folder, so no task's result lives only in
+the memory of a node that may die.
 """
 
 from __future__ import annotations
@@ -20,9 +28,10 @@ import time
 from pathlib import Path
 from typing import Any
 
-from gratnet.atomic import write_text_atomic
-from gratnet.config import config_path_for, save_config
+from gratnet.atomic import atomic_path, atomic_paths, write_text_atomic
+from gratnet.config import config_path_for, config_text, save_config
 from gratnet.errors import GratNetError
+from sweep.records import attempt
 from sweep.spec import DatasetSpec, RunSpec
 
 RESULT_FILE = "result.json"
@@ -79,10 +88,37 @@ def load_field(dataset: DatasetSpec) -> Any:
 
 
 def prepare(dataset: DatasetSpec) -> Any:
-    """The prepared surface (resampled, repeated, windowed) that every wavelength block shares."""
+    """The prepared surface (resampled, repeated, windowed) that every wavelength block shares (deterministic:
+    each block's task and the assembling task prepare it alike)."""
     from trainer.fourier import prepare_surface
 
     return prepare_surface(load_field(dataset), dataset.optics)
+
+
+def parts_folder(out: Path, dataset: DatasetSpec) -> Path:
+    """Where a split volume's finished wavelength blocks wait for the assembling task."""
+    return out / "volumes" / f"{dataset.name}.parts"
+
+
+def _block_files(out: Path, dataset: DatasetSpec, block: int) -> tuple[Path, Path]:
+    folder = parts_folder(out, dataset)
+    return folder / f"block-{block}.npy", folder / f"block-{block}.json"
+
+
+def _block_record(dataset: DatasetSpec, block: int) -> dict[str, Any]:
+    return json.loads(json.dumps({"dataset": dataset.to_dict(), "block": block, "parts": dataset.parts}))
+
+
+def _finished_block(out: Path, dataset: DatasetSpec, block: int) -> dict[str, Any] | None:
+    """The record of block ``block`` when its sum is on disk for this very dataset and split, else None."""
+    array, record = _block_files(out, dataset, block)
+    try:
+        written = json.loads(record.read_text(encoding="utf-8"))
+    except (OSError, ValueError):
+        return None
+    if not isinstance(written, dict) or written.get("block") != _block_record(dataset, block) or not array.is_file():
+        return None
+    return written
 
 
 def volume_part(dataset: DatasetSpec, surface: Any, block: int, device: str | None = None
@@ -97,63 +133,136 @@ def volume_part(dataset: DatasetSpec, surface: Any, block: int, device: str | No
     return xyz, nodes, time.perf_counter() - started
 
 
+def volume_block(out: Path, dataset: DatasetSpec, block: int, device: str | None = None) -> dict[str, Any]:
+    """The task of block ``block``: :func:`volume_part` written to OUT/volumes/NAME.parts/block-K.npy with its
+    record (node count, seconds) beside it, which is returned. A block already on disk, or a volume already
+    assembled, is not computed again."""
+    import numpy as np
+
+    label = f"{dataset.name}: λ block {block + 1}/{dataset.parts}"
+    with attempt(out, f"volume-{dataset.name}-block-{block + 1}-of-{dataset.parts}", label) as record:
+        if volume_state(out, dataset) == "done":
+            record["outcome"] = "found"
+            return {"block": block, "assembled": True}
+        finished = _finished_block(out, dataset, block)
+        if finished is not None:
+            record["outcome"] = "found"
+            return finished
+        xyz, nodes, seconds = volume_part(dataset, prepare(dataset), block, device)
+        array, record_file = _block_files(out, dataset, block)
+        with atomic_path(array) as temporary:
+            np.save(temporary, xyz)
+        written = {"block": _block_record(dataset, block), "nodes": int(nodes), "seconds": round(seconds, 3)}
+        write_text_atomic(record_file, json.dumps(written, indent=1) + "\n")  # last: the block is finished
+        return written
+
+
 def _write_volume(out: Path, dataset: DatasetSpec, volume: Any, seconds: float) -> dict[str, Any]:
+    """The volume and its config, landing together (the config says the volume is this dataset's)."""
     from gratnet.volume import write_volume
 
     volume.metadata["compute_seconds"] = round(seconds, 3)
     volume.metadata["wavelength_blocks"] = dataset.parts
     path = volume_path(out, dataset)
-    write_volume(path, volume)
-    save_config(path, dataset=dataset.to_dict(), volume=dataset.volume, optics=dataset.optics, load=dataset.load)
+    config = config_text(path, dataset=dataset.to_dict(), volume=dataset.volume, optics=dataset.optics,
+                         load=dataset.load)
+    with atomic_paths(path, config_path_for(path)) as (volume_file, config_file):
+        write_volume(volume_file, volume)
+        config_file.write_text(config, encoding="utf-8")
     return dict(volume.metadata)
 
 
-def assemble_volume(out: Path, dataset: DatasetSpec, surface: Any, *parts: tuple[Any, int, float]
-                    ) -> dict[str, Any]:
-    """Add the wavelength blocks' sums (in block order) and write the volume; returns its metadata (its
-    ``compute_seconds``: the blocks' seconds added, as if computed one after another)."""
+def assemble_volume(out: Path, dataset: DatasetSpec, *parts: dict[str, Any]) -> dict[str, Any]:
+    """Add the wavelength blocks' sums (read from OUT/volumes/NAME.parts, in block order), write the volume and
+    remove the blocks; returns its metadata (its ``compute_seconds``: the blocks' seconds added, as if computed
+    one after another). ``parts``: the blocks' tasks' results (only ordering: Ray starts this task after them)."""
+    import shutil
+
+    import numpy as np
+
     from trainer.groundtruth import volume_from_sum
 
-    total = parts[0][0].copy()
-    for xyz, _, _ in parts[1:]:
-        total += xyz
-    volume = volume_from_sum(load_field(dataset), dataset.volume, dataset.optics, surface, total, parts[0][1])
-    return _write_volume(out, dataset, volume, sum(part[2] for part in parts))
+    del parts
+    with attempt(out, f"volume-{dataset.name}", f"{dataset.name}: assemble volume") as record:
+        if volume_state(out, dataset) == "done":
+            record["outcome"] = "found"
+            return read_volume_metadata(out, dataset)
+        found = [_finished_block(out, dataset, block) for block in range(dataset.parts)]
+        blocks = [block for block in found if block is not None]
+        if len(blocks) < dataset.parts:
+            missing = [index + 1 for index, block in enumerate(found) if block is None]
+            raise GratNetError(f"{parts_folder(out, dataset)} lacks wavelength blocks {missing} of {dataset.parts}")
+        total = np.load(_block_files(out, dataset, 0)[0])
+        for block in range(1, dataset.parts):
+            total += np.load(_block_files(out, dataset, block)[0])
+        volume = volume_from_sum(load_field(dataset), dataset.volume, dataset.optics, prepare(dataset), total,
+                                 blocks[0]["nodes"])
+        metadata = _write_volume(out, dataset, volume, sum(block["seconds"] for block in blocks))
+        shutil.rmtree(parts_folder(out, dataset), ignore_errors=True)
+        return metadata
 
 
 def ground_truth(out: Path, dataset: DatasetSpec, device: str | None = None) -> dict[str, Any]:
-    """The whole volume in one task (``gratnet groundtruth``'s call); returns its metadata."""
+    """The whole volume in one task (``gratnet groundtruth``'s call); returns its metadata (a volume already
+    written is read, not computed again)."""
     from trainer.groundtruth import compute_volume
 
-    started = time.perf_counter()
-    volume = compute_volume(load_field(dataset), dataset.volume, dataset.optics, progress=False, device=device)
-    return _write_volume(out, dataset, volume, time.perf_counter() - started)
+    with attempt(out, f"volume-{dataset.name}", f"{dataset.name}: ground truth") as record:
+        if volume_state(out, dataset) == "done":
+            record["outcome"] = "found"
+            return read_volume_metadata(out, dataset)
+        started = time.perf_counter()
+        volume = compute_volume(load_field(dataset), dataset.volume, dataset.optics, progress=False, device=device)
+        return _write_volume(out, dataset, volume, time.perf_counter() - started)
 
 
 def read_volume_metadata(out: Path, dataset: DatasetSpec) -> dict[str, Any]:
-    """The metadata of a volume finished by an earlier sweep."""
+    """The metadata of a finished volume."""
     from gratnet.volume import read_volume
 
     return dict(read_volume(volume_path(out, dataset)).metadata)
 
 
-def evaluation_slice(dataset: DatasetSpec, metadata: dict[str, Any], evaluate: Any, index: int,
-                     device: str | None = None) -> None:
-    """Fill the evaluation cache with ground-truth BRDF slice ``index`` (trainer.evaluate.STANDARD_SLICES),
-    with the optics the evaluation will read back from the volume, so that no run computes it again."""
+def _slice_config(metadata: dict[str, Any], evaluate: Any, index: int) -> tuple[Any, Any]:
     from trainer.brdfslice import SliceConfig
-    from trainer.evaluate import STANDARD_SLICES, ground_truth_brdf_slice
+    from trainer.evaluate import STANDARD_SLICES
     from trainer.fourier import OpticsConfig
 
     theta, phi, exposure = STANDARD_SLICES[index]
-    config = SliceConfig(theta, phi, size=evaluate.size, exposure=exposure, ior=evaluate.ior)
-    ground_truth_brdf_slice(load_field(dataset), OpticsConfig.from_volume_metadata(metadata), config,
-                            evaluate.cache_dir, progress=False, device=device)
+    return (SliceConfig(theta, phi, size=evaluate.size, exposure=exposure, ior=evaluate.ior),
+            OpticsConfig.from_volume_metadata(metadata))
+
+
+def brdf_cache_file(field: Any, optics: Any, config: Any, cache_dir: str | Path) -> Path:
+    """The file trainer.evaluate.ground_truth_brdf_slice caches a slice in (its key: source, optics, slice
+    config); tests/test_faults_cluster.py checks that the two agree."""
+    import hashlib
+
+    from gratnet.config import config_to_dict
+
+    key = json.dumps([field.source, config_to_dict(optics), config_to_dict(config)], sort_keys=True)
+    return Path(cache_dir) / f"brdf_{hashlib.sha256(key.encode()).hexdigest()[:20]}.npy"
+
+
+def evaluation_slice(out: Path, dataset: DatasetSpec, metadata: dict[str, Any], evaluate: Any, index: int,
+                     device: str | None = None) -> None:
+    """Fill the evaluation cache with ground-truth BRDF slice ``index`` (trainer.evaluate.STANDARD_SLICES),
+    with the optics the evaluation will read back from the volume, so that no run computes it again."""
+    from trainer.evaluate import ground_truth_brdf_slice
+
+    with attempt(out, f"slice-{dataset.name}-{index + 1}", f"{dataset.name}: BRDF slice {index + 1}") as record:
+        config, optics = _slice_config(metadata, evaluate, index)
+        field = load_field(dataset)
+        if brdf_cache_file(field, optics, config, evaluate.cache_dir).is_file():
+            record["outcome"] = "found"
+            return
+        ground_truth_brdf_slice(field, optics, config, evaluate.cache_dir, progress=False, device=device)
 
 
 def train_run(out: Path, run: RunSpec, threads: int, *dependencies: Any) -> dict[str, Any]:
     """Train (resuming from a checkpoint) and evaluate one run, as ``gratnet train --resume`` does; returns its
-    table row. ``dependencies`` are the results of the tasks it waits for (volume, BRDF-slice cache)."""
+    table row (a run already finished: its recorded row). ``dependencies`` are the results of the tasks it
+    waits for (volume, BRDF-slice cache)."""
     import dataclasses
 
     import torch
@@ -161,29 +270,35 @@ def train_run(out: Path, run: RunSpec, threads: int, *dependencies: Any) -> dict
     from gratnet.volume import read_volume
     from trainer.evaluate import evaluate_model
     from trainer.fourier import OpticsConfig
-    from trainer.train import train
+    from trainer.train import read_checkpoint, train
 
     del dependencies  # only ordering: Ray starts this task once they are done
-    torch.set_num_threads(max(1, threads))
     folder = run_folder(out, run)
-    write_text_atomic(folder / SPEC_FILE, json.dumps({"spec": run.to_dict()}, indent=1) + "\n")
-    started = time.perf_counter()
-    path = volume_path(out, run.dataset)
-    volume = read_volume(path)
-    _, model_file, history = train(volume, run.train, folder, resume=True, progress=False)
-    save_config(folder / "model.npz", train=run.train, volume=str(path))
-    field = optics = None
-    if run.evaluate.brdf_slices:
-        field, optics = load_field(run.dataset), OpticsConfig.from_volume_metadata(volume.metadata)
-    held_out = ([int(part) for part in run.train.test_slices.split(",") if part.strip()]
-                if run.train.split == "slices" else [])
-    evaluate_model(model_file, folder, dataclasses.replace(run.evaluate, progress=False), volume=volume, field=field,
-                   optics=optics, volume_slices=held_out,
-                   extra={"training": {k: v for k, v in history.items() if k != "epochs"}})
-    row = result_row(run, folder)
-    row["run_seconds"] = round(time.perf_counter() - started, 2)
-    write_text_atomic(folder / RESULT_FILE, json.dumps({"spec": run.to_dict(), "row": row}, indent=1) + "\n")
-    return row
+    with attempt(out, f"run-{run.name}", f"run {run.name}") as record:
+        if run_state(out, run) == "done":
+            record["outcome"] = "found"
+            return json.loads((folder / RESULT_FILE).read_text(encoding="utf-8"))["row"]
+        torch.set_num_threads(max(1, threads))
+        write_text_atomic(folder / SPEC_FILE, json.dumps({"spec": run.to_dict()}, indent=1) + "\n")
+        if (folder / "checkpoint.pt").is_file():
+            record["resumed_from_epoch"] = int(read_checkpoint(folder / "checkpoint.pt")["epoch"])
+        started = time.perf_counter()
+        path = volume_path(out, run.dataset)
+        volume = read_volume(path)
+        _, model_file, history = train(volume, run.train, folder, resume=True, progress=False)
+        save_config(folder / "model.npz", train=run.train, volume=str(path))
+        field = optics = None
+        if run.evaluate.brdf_slices:
+            field, optics = load_field(run.dataset), OpticsConfig.from_volume_metadata(volume.metadata)
+        held_out = ([int(part) for part in run.train.test_slices.split(",") if part.strip()]
+                    if run.train.split == "slices" else [])
+        evaluate_model(model_file, folder, dataclasses.replace(run.evaluate, progress=False), volume=volume,
+                       field=field, optics=optics, volume_slices=held_out,
+                       extra={"training": {k: v for k, v in history.items() if k != "epochs"}})
+        row = result_row(run, folder)
+        row["run_seconds"] = round(time.perf_counter() - started, 2)
+        write_text_atomic(folder / RESULT_FILE, json.dumps({"spec": run.to_dict(), "row": row}, indent=1) + "\n")
+        return row
 
 
 def result_row(run: RunSpec, folder: Path) -> dict[str, Any]:
