@@ -176,6 +176,7 @@ class Session:
         #: render key → the index of the frame whose input (or switch) made that state (the latest one).
         self._state_frame: dict[tuple[Any, ...], int] = {}
         self.baked_at: float | None = None  # when the baked program first rendered the state on show
+        self.view_exact_at: float | None = None  # when no default view was pending any more (after a start)
         original = self.app.orbit
 
         def orbit(dx: float, dy: float, *args: Any, **kwargs: Any) -> bool:
@@ -205,6 +206,8 @@ class Session:
         self._read_injector()
         if self.baked_at is None and app.weights_path_in_use() == "baked":
             self.baked_at = swapped
+        if self.view_exact_at is None and not app.default_view_stage:
+            self.view_exact_at = swapped
 
     def run_until(self, condition: Any, timeout: float) -> float | None:
         """Frames until ``condition()``; the seconds it took (None: timed out)."""
@@ -305,27 +308,29 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--launched-at", type=float, default=_STARTED)
     parser.add_argument("--background", action=argparse.BooleanOptionalAction, default=True)
     parser.add_argument("--default-view", action="store_true",
-                        help="start at the material's default view on the mesh, as gratnet view does (default: the "
-                        "fixed view of issue 11's measurements: camera 0.15 m, light 30°)")
+                        help="open the window as gratnet view does, at the material's default view on the mesh "
+                        "(default: the fixed view of issue 11's measurements: camera 0.15 m, light 30°)")
     arguments = parser.parse_args(argv)
 
     from viewer.state import ViewerState
     from viewer.window import ViewerWindow
 
     width, height = (int(v) for v in arguments.size.split(","))
-    if arguments.default_view:
-        from viewer.default_view import state_defaults
-
-        state = ViewerState(material=arguments.material, mesh=arguments.mesh,
-                            **state_defaults(arguments.material, arguments.mesh))
-    else:
-        state = ViewerState(material=arguments.material, mesh=arguments.mesh, camera_distance=0.15, light_theta=30.0)
     report: dict[str, Any] = {"material": arguments.material, "mesh": arguments.mesh, "size": [width, height],
                               "default_view": arguments.default_view,
                               "shader_cache": os.environ.get("MESA_SHADER_CACHE_DIR", "default"),
                               "load_average_at_start": [round(value, 2) for value in os.getloadavg()]}
     constructed = time.perf_counter()
-    window = ViewerWindow(state, (width, height), background=arguments.background)
+    if arguments.default_view:  # what `gratnet view --material M --mesh MESH --size W,H` opens
+        from gratnet.cli import build_parser
+        from viewer.view_cli import open_window
+
+        command = build_parser(only="view").parse_args(
+            ["view", "--material", arguments.material, "--mesh", arguments.mesh, "--size", arguments.size])
+        window = open_window(command, background=arguments.background)
+    else:
+        state = ViewerState(material=arguments.material, mesh=arguments.mesh, camera_distance=0.15, light_theta=30.0)
+        window = ViewerWindow(state, (width, height), background=arguments.background)
     report["window_open_s"] = time.perf_counter() - constructed  # the constructor (blocks only when not background)
     report["window_shown_s"] = time.perf_counter() - arguments.launched_at  # the panel is on screen from here
     session = Session(window, arguments.launched_at)
@@ -342,16 +347,30 @@ def main(argv: list[str] | None = None) -> int:
         report["worker_started_s"] = None if worker is None else round(worker.started - arguments.launched_at, 3)
         report["worker_ready_at_s"] = {} if worker is None else {
             " ".join(k): round(v - arguments.launched_at, 3) for k, v in worker.ready_at.items()}
-        ready_at = app.supply.display_ready_at
-        report["display_import_done_s"] = None if ready_at is None else round(ready_at - arguments.launched_at, 3)
 
         session.phase = "interact"
         session.run_until(lambda: False, arguments.interact_s)
+        exact = session.view_exact_at
+        report["start_view_exact_s"] = None if exact is None else exact - arguments.launched_at
 
         session.phase = "material switch"
+        switched = time.perf_counter()
         app.switch(material=arguments.switch_to)
+
+        def on_show(stages: tuple[str, ...]) -> bool:  # the new material's picture, at a view of these stages
+            image = app.image
+            return (image is not None and image.key[0] == arguments.switch_to and image.key == app.render_key()
+                    and app.default_view_stage in stages)
+
         report["switch_picture_s"] = session.run_until(
             lambda: app.image is not None and app.image.key[0] == arguments.switch_to, arguments.timeout_s)
+        # A picture of the new material at a view handed over (a quick guess or the exact defaults), then at the
+        # exact defaults (None: not within the time limit, or the drag kept the whole view).
+        for name, stages in (("switch_usable_view_s", ("refining", "")), ("switch_exact_view_s", ("",))):
+            took = session.run_until(lambda stages=stages: on_show(stages), arguments.timeout_s)
+            report[name] = None if took is None else time.perf_counter() - switched
+        report["switch_view_after"] = {name: getattr(app.state, name) for name in
+                                       ("light_theta", "light_phi", "camera_distance", "camera_elevation", "exposure")}
         if arguments.takeover:
             report["takeover_s"] = session.run_until(lambda: app.weights_path_in_use() == "baked"
                                                      and app.stats.weights_path == "baked", arguments.timeout_s)

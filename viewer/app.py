@@ -86,6 +86,7 @@ from viewer.scheduling import (
     reduced_size,
     upscale,
 )
+from viewer.srgb import display_srgb8
 from viewer.state import SLIDERS, ViewerState
 
 __all__ = ["ViewerApp", "drive_slider"]
@@ -115,6 +116,9 @@ class ViewerApp:
             anti-aliasing, see the module docstring; 1: off, the default here; the window's default is 16).
         reference: a material's checked ground-truth volume: ``state.shading`` may then show it, or the FLIP
             heat map between it and the network, while that material is on show (:mod:`viewer.reference_view`).
+        refine_view: fields of ``state`` (:data:`viewer.default_view.VIEW_FIELDS` names) that are a first guess at
+            the default view (``gratnet view`` without ``--light``, ``--camera`` or ``--exposure``): the exact
+            defaults replace them once worked out, unless the user moves the view first.
 
     Raises:
         GratNetError: the initial material or mesh cannot be loaded.
@@ -124,7 +128,7 @@ class ViewerApp:
                  policy: ResolutionPolicy | None = None, clock: Callable[[], float] = time.perf_counter,
                  extra_meshes: Iterable[str] = (), weights_path: str = "auto", background: bool = False,
                  worker: Any = None, max_samples: int = 1, render_path: str = "auto",
-                 reference: LoadedReference | None = None) -> None:
+                 reference: LoadedReference | None = None, refine_view: Iterable[str] = ()) -> None:
         from viewer.antialias import check_samples
         from viewer.scene_supply import SceneSupply
         from viewer.surface import check_size
@@ -140,8 +144,8 @@ class ViewerApp:
         self.meshes = list(MESHES) + [spec for spec in extra_meshes if spec not in MESHES]
         self.weights_path = weights_path
         self.supply = SceneSupply(ctx, weights_path, background, worker, render_path)
-        # A switch of material, mesh or mode brings that pair's default view (viewer.defaults), worked out in a
-        # worker process in the background mode.
+        # A switch of material, mesh or mode brings that pair's default view (viewer.default_view): remembered, or
+        # a quick guess at once and the exact one from a worker process (started now in the background mode).
         self._defaults = DefaultViewRequests(background)
         self._last_mesh = self.state.mesh  # the last mesh that loaded (restored if a newer one fails)
         # Per material and mesh: measured seconds per "effective pixel" (covered + 5 % of uncovered).
@@ -165,6 +169,11 @@ class ViewerApp:
         except BaseException:
             self.supply.release()
             raise
+        self._defaults.start()
+        refine = tuple(refine_view)
+        if refine:
+            self._defaults.request(self.state, refine)
+            self._take_default_view()
         if self.state.mesh not in self.meshes:
             self.meshes.append(self.state.mesh)
 
@@ -228,9 +237,16 @@ class ViewerApp:
         changed = self.set(**changes) if changes else False
         if changed or not changes:
             self._defaults.request(self.state)
-            if (ready := self._defaults.take(self.state)) is not None:  # computed at once (blocking mode)
-                self.set(**ready)
+            self._take_default_view()  # remembered, or computed at once (blocking mode)
         return changed
+
+    def _take_default_view(self) -> None:
+        """Apply the requested default view's next step once it has arrived (viewer.default_view: remembered, a
+        quick guess, then the exact one), unless the user moved the view since."""
+        ready = self._defaults.take(self.state)
+        if ready is not None:
+            self.set(**ready)
+            self._defaults.applied(self.state)
 
     def set_size(self, size: tuple[int, int]) -> bool:
         """Change the full render size (the window's render area); returns whether it changed."""
@@ -313,13 +329,11 @@ class ViewerApp:
 
     @staticmethod
     def _display(xyz: np.ndarray) -> np.ndarray:
-        """8-bit display sRGB of exposed XYZ (``gratnet.display``); FLIP-mode data (network XYZ, reference XYZ,
-        coverage) shows as the FLIP heat map."""
+        """8-bit display sRGB of exposed XYZ (:mod:`viewer.srgb`: ``gratnet.display``'s bytes without importing
+        colour-science); FLIP-mode data (network XYZ, reference XYZ, coverage) shows as the FLIP heat map."""
         if xyz.shape[-1] == _FLIP_CHANNELS:
             return flip_heat_map(xyz[..., :3], xyz[..., 3:6])[0]
-        from viewer.scene import SceneRenderer
-
-        return SceneRenderer.display_srgb8(xyz)
+        return display_srgb8(xyz)
 
     def render_key(self) -> tuple[Any, ...]:
         return (*self.state.key(), *self.full_size())
@@ -359,8 +373,7 @@ class ViewerApp:
         - picture complete and current → nothing.
         """
         now = self.clock() if now is None else float(now)
-        if (ready := self._defaults.take(self.state)) is not None:  # a default view asked for by switch()
-            self.set(**ready)
+        self._take_default_view()  # a default view asked for by switch() or at the start
         step = self.supply.poll(self.state, self._idle(now))  # background: at most one GL step (a cache hit)
         self._check_background_errors()
         if step is not None:
@@ -400,10 +413,18 @@ class ViewerApp:
         """What is being compiled or loaded for the state on show ("compiling the shader for cd… 12 s"),
         or an empty string."""
         status = self.supply.status(self.state)
-        if self._defaults.pending:
-            choosing = f"choosing a view that shows {self.state.material}..."
+        stage = self.default_view_stage
+        if stage:
+            choosing = (f"choosing a view that shows {self.state.material}..." if stage == "guessing" else
+                        f"refining the view of {self.state.material}...")
             status = f"{choosing} {status}" if status else choosing
         return status
+
+    @property
+    def default_view_stage(self) -> str:
+        """Where the requested default view is (:attr:`viewer.default_view.DefaultViewRequests.stage`):
+        ``guessing``, ``refining`` (a quick guess on show) or an empty string (none pending)."""
+        return self._defaults.stage
 
     def weights_path_in_use(self) -> str | None:
         """The weights path that renders the current state (``None``: none ready yet)."""
@@ -479,7 +500,7 @@ class ViewerApp:
         if seconds_per_pixel is not None:  # with the last preview's coverage
             covered = float(np.mean(self._coverage))
             predicted = seconds_per_pixel * full[0] * full[1] * (covered + UNCOVERED_COST * (1.0 - covered))
-        factor = self.policy.reduced_factor(predicted)
+        factor = self.policy.reduced_factor(predicted, full)
         size = reduced_size(full, factor)  # square in slice mode (full is square)
         self._accumulation = None  # a new view: its samples start again
         xyz, coverage = self._timed_render(self.state, size, preview=True)
@@ -523,7 +544,8 @@ class ViewerApp:
             self.stats.last_kind = f"refine 1/{factor} rows {row0}-{row1}"
         else:  # the next band of rows at full resolution, over the upscaled preview
             row0 = refinement.next_row
-            rows = self.policy.band_rows(self._row_seconds(width, height)[row0:] * first_band_margin(row0))
+            rows = self.policy.band_rows(self._row_seconds(width, height)[row0:] * first_band_margin(row0),
+                                         self._band_multiple(state))
             row1 = min(height, row0 + rows)
             band = self._band_camera(state, width, height, row0, row1)
             xyz = self._timed_render(state, (width, row1 - row0), band)[0]
@@ -557,7 +579,8 @@ class ViewerApp:
         assert accumulation is not None and self.image is not None
         state, (width, height) = self.state, self.full_size()
         row0 = accumulation.next_row
-        row1 = min(height, row0 + self.policy.band_rows(self._row_seconds(width, height)[row0:]))
+        row1 = min(height, row0 + self.policy.band_rows(self._row_seconds(width, height)[row0:],
+                                                        self._band_multiple(state)))
         started = time.perf_counter()
         xyz = self._timed_render(state, (width, row1 - row0), self._band_camera(state, width, height, row0, row1),
                                  sample=accumulation.samples)[0]
@@ -579,6 +602,12 @@ class ViewerApp:
         self.stats.last_kind = f"sample {accumulation.samples + (row1 < height)} rows {row0}-{row1}"
         self.stats.last_sample_s = time.perf_counter() - started
         self._publish(key, pixels, (width, height), True, 1.0, accumulation.samples)
+
+    def _band_multiple(self, state: ViewerState) -> int | None:
+        """Mesh bands on the deferred path take any number of rows (the network runs per covered pixel, not
+        per 4×4 block of fragments); elsewhere the policy's multiple."""
+        supplied = self.supply.scene(state)
+        return 1 if supplied is not None and supplied[0].render_path == "deferred" else None
 
     def _row_seconds(self, width: int, height: int) -> np.ndarray:
         """Predicted seconds of each full-resolution row, from the preview's coverage of that row."""

@@ -58,11 +58,14 @@ def shader_cache_enabled(environment: dict[str, str] | None = None) -> bool:
 
 
 def window_render_path(requested: str, software: bool) -> str:
-    """The render path the viewer's window takes (and so the one to warm for it). ``auto`` is forward on a
-    software rasterizer: there the deferred path's first frames after each switch cost 0.3–0.6 s of one
-    frame in JIT work even with Mesa's cache warm (measured under test_window_never_blocks), over the
-    150 ms a frame may take; on a GPU ``auto`` is the cached, measured verdict. An explicit path is kept."""
-    return "forward" if requested == "auto" and software else requested
+    """The render path the viewer's window takes (and so the one to warm for it). ``auto`` is deferred on a
+    software rasterizer: Mesa llvmpipe runs a fragment shader on whole 4×4 pixel blocks per triangle, so on the
+    forward path the network ran 5–10 times per covered pixel of the viewer's small previews and thin disc
+    triangles (paper-cd, 32²: 210 ms forward against 22 ms deferred, whose compute pass runs it once per
+    covered pixel; issue 35). Its programs are warmed by the compile child like the forward ones (the 0.3–0.6 s
+    of JIT work once seen in a frame after a switch are the child's now). On a GPU ``auto`` is the cached,
+    measured verdict. An explicit path is kept."""
+    return "deferred" if requested == "auto" and software else requested
 
 
 def warm_group(scene: Any, group: str, buffers: Any = None) -> None:

@@ -10,20 +10,15 @@ uploaded mesh for a :class:`~viewer.state.ViewerState`, in one of two modes:
   (warming Mesa's disk shader cache), the quick texture path first and, where ``auto`` picks the baked
   path, the baked one after it; :meth:`poll` then links each warm program in the window's context (a
   cache hit, one step per call) and the faster path takes over as soon as it is linked. Meshes are built
-  on a thread, and colour-science (~1 s to import, needed by the display conversion and the renderer's
-  skip uniforms) is imported on a thread at start. Until a renderer is ready :meth:`scene` returns
-  ``None`` and :meth:`status` says what is being waited for ("compiling the shader for cd… 12 s").
+  on a thread. Until a renderer is ready :meth:`scene` returns ``None`` and :meth:`status` says what is
+  being waited for ("compiling the shader for cd… 12 s"). (colour-science is not needed: the window's
+  display conversion is :mod:`viewer.srgb`'s.)
 
 Rendering only: no glfw, no imgui.
 """
 
 from __future__ import annotations
 
-import importlib
-import sys
-import threading
-import time
-import types
 from collections.abc import Callable
 from concurrent.futures import Future, ThreadPoolExecutor
 from typing import Any
@@ -32,7 +27,7 @@ from gratnet.errors import GratNetError
 from viewer.catalog import build_mesh, check_mesh_spec, resolve_material
 from viewer.compile_worker import GROUPS, CompileWorker, shader_cache_enabled, warm_group, window_render_path
 
-__all__ = ["PREVIEW_MESHES", "SceneSupply", "start_display_import"]
+__all__ = ["PREVIEW_MESHES", "SceneSupply"]
 
 
 def _preview_disc() -> Any:
@@ -48,42 +43,13 @@ def _preview_sphere() -> Any:
 
 
 #: Coarser tessellations of the built-in meshes for previews. llvmpipe shades whole pixel blocks per
-#: triangle, so at 1/4–1/8 resolution the 4096-triangle disc costs 2–3× a 128-triangle one; the outline
-#: and the interpolated tangents differ invisibly at preview resolution. Full-resolution pictures always
-#: use ``build_mesh`` (the meshes of ``gratnet render``).
+#: triangle, so on the forward path at 1/4–1/8 resolution the 4096-triangle disc costs 2–3× a 128-triangle
+#: one; the outline and the interpolated tangents differ invisibly at preview resolution. Full-resolution
+#: pictures always use ``build_mesh`` (the meshes of ``gratnet render``).
 PREVIEW_MESHES: dict[str, Callable[[], Any]] = {"cd": _preview_disc, "sphere": _preview_sphere}
 
 #: Weights paths from slowest to fastest to draw on a CPU rasterizer (the later one takes over).
 _SPEED_ORDER = ("texture", "baked")
-
-
-_display_import: threading.Thread | None = None
-
-
-def start_display_import() -> threading.Thread:
-    """Import colour-science (the display conversion's library) on a thread, once per process; the
-    thread is returned (finished when the import is done). The window starts it first thing."""
-    global _display_import
-    if _display_import is None:
-        _display_import = threading.Thread(target=_import_colour, daemon=True, name="gratnet-import-colour")
-        _display_import.start()
-    return _display_import
-
-
-def _import_colour() -> None:
-    """``import colour`` without its plotting subpackage: the package's ``__init__`` imports
-    ``colour.plotting`` and with it matplotlib, 1.5 s of the 1.7 s import on this machine, on the way to the
-    first picture; the viewer never plots. A placeholder module stands in for ``colour.plotting`` during
-    the import only (a later ``import colour.plotting`` imports the real one)."""
-    if "colour" in sys.modules:
-        return
-    placeholder = types.ModuleType("colour.plotting")
-    sys.modules.setdefault("colour.plotting", placeholder)
-    try:
-        importlib.import_module("colour")
-    finally:
-        if sys.modules.get("colour.plotting") is placeholder:
-            del sys.modules["colour.plotting"]
 
 
 class SceneSupply:
@@ -122,16 +88,9 @@ class SceneSupply:
         self._active: set[tuple[str, str]] = set()  # ... and drawn once: ready to render
         self._worker: CompileWorker | None = None
         self._prestarted = worker
-        #: ``time.perf_counter()`` when the colour-science import was first seen finished.
-        self.display_ready_at: float | None = None
         self._meshes: dict[str, Any] = {}  # mesh key -> Mesh, or Future of one
         self._buffers: dict[tuple[str, str], Any] = {}  # (path, mesh key) -> MeshBuffers
         self._executor = ThreadPoolExecutor(1, thread_name_prefix="gratnet-mesh") if background else None
-        self._display_import: threading.Thread | None = None
-        if background:  # colour-science takes ~0.5 s to import even without plotting: not on this thread
-            self._display_import = start_display_import()
-        else:
-            importlib.import_module("colour")
 
     @staticmethod
     def start_worker(state: Any, weights_path: str = "auto", render_path: str = "auto") -> CompileWorker | None:
@@ -223,10 +182,6 @@ class SceneSupply:
                 made = tuple(path for path in self._paths if any((path, g) in worker.ready for g in GROUPS))
                 self._paths = made or self._paths[:1]
         self._collect_meshes()
-        if not self.display_ready():
-            return None
-        if self.display_ready_at is None:
-            self.display_ready_at = time.perf_counter()
         group = _group(state)
         best = self._best_active(group)
         for path in reversed(self._paths):
@@ -243,7 +198,7 @@ class SceneSupply:
 
     def step_due(self, state: Any, idle: bool = True) -> bool:
         """Whether :meth:`poll` (with the same ``idle``) has a GL step to do for ``state`` right now."""
-        if not self.background or state.material != self._material or not self.display_ready():
+        if not self.background or state.material != self._material:
             return False
         if self._worker is not None:
             self._worker.poll()
@@ -259,8 +214,6 @@ class SceneSupply:
         """Whether something is still on its way for ``state`` (so the caller should poll again soon)."""
         if not self.background:
             return False
-        if self._display_import is not None and self._display_import.is_alive():
-            return True
         key = _mesh_key(state.mesh, False)
         if not state.slice_mode and isinstance(self._meshes.get(key), Future):
             return True
@@ -290,10 +243,6 @@ class SceneSupply:
         """The compile child of the current material (its ``seconds`` and ``ready_at`` time each program), or
         ``None`` when the programs compile in this process."""
         return self._worker
-
-    def display_ready(self) -> bool:
-        """Whether colour-science is imported (the thread that imports it has finished)."""
-        return self._display_import is None or not self._display_import.is_alive()
 
     def weights_path_in_use(self, state: Any) -> str | None:
         """The weights path that renders ``state`` now (``None``: nothing ready yet)."""

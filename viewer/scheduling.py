@@ -36,38 +36,57 @@ class ResolutionPolicy:
         interactive_budget_s: target time of one reduced-resolution render while moving.
         refine_budget_s: target time of the refinement work done in one frame (one band). Predictions
             were seen 1.7–2x short on a busy CPU, and a frame must stay under 150 ms (issue 11).
-        factors: the allowed reductions (divisors of width and height), smallest first.
-        default_factor: used before anything has been measured for a material and mesh.
+        factors: the allowed reductions (divisors of width and height), smallest first. On a CPU rasterizer
+            a covered pixel of a feature-grid network costs 30–75 µs (Mesa llvmpipe, 2 cores; issue 35): a
+            512² picture holds ~9 s of work, so a preview that fits the budget is 1/16 (32²).
+        default_factor: used before anything has been measured for a material and mesh; ``None``: the
+            smallest factor whose preview has at most ``first_preview_pixels`` pixels.
+        first_preview_pixels: see ``default_factor`` (1024 pixels: ~40 ms at the slowest rate measured).
         band_multiple: band heights are multiples of this (llvmpipe shades 4×4 pixel blocks, so a band of
-            5 rows costs nearly as much as 8).
+            5 rows costs nearly as much as 8 where the network runs per fragment: the forward path and the
+            BRDF slice; the deferred path runs it per covered pixel, and its bands take any height).
     """
 
     idle_seconds: float = 0.25
     interactive_budget_s: float = 0.05
     refine_budget_s: float = 0.05  # with the frame's other work, a 3x margin to the 150 ms target
-    factors: tuple[int, ...] = (2, 4, 8)
-    default_factor: int = 4
+    factors: tuple[int, ...] = (2, 4, 8, 16, 32)
+    default_factor: int | None = None
+    first_preview_pixels: int = 1024
     band_multiple: int = 4
 
-    def reduced_factor(self, full_seconds: float | None) -> int:
-        """The smallest factor whose render is predicted to fit the interactive budget (else the largest),
-        given the predicted time of a full-resolution render (``None``: nothing measured yet)."""
-        if full_seconds is None:
+    def first_factor(self, size: tuple[int, int]) -> int:
+        """The factor of a preview before anything was measured: ``default_factor``, or the smallest whose
+        preview of a ``size`` picture has at most ``first_preview_pixels`` pixels (else the largest)."""
+        if self.default_factor is not None:
             return self.default_factor
+        for factor in self.factors:
+            width, height = reduced_size(size, factor)
+            if width * height <= self.first_preview_pixels:
+                return factor
+        return self.factors[-1]
+
+    def reduced_factor(self, full_seconds: float | None, size: tuple[int, int] = (512, 512)) -> int:
+        """The smallest factor whose render is predicted to fit the interactive budget (else the largest),
+        given the predicted time of a full-resolution render of ``size`` (``None``: nothing measured yet:
+        :meth:`first_factor`)."""
+        if full_seconds is None:
+            return self.first_factor(size)
         for factor in self.factors:
             if full_seconds / factor**2 <= self.interactive_budget_s:
                 return factor
         return self.factors[-1]
 
-    def band_rows(self, row_seconds: np.ndarray) -> int:
+    def band_rows(self, row_seconds: np.ndarray, multiple: int | None = None) -> int:
         """Rows of the next refinement band: as many of the remaining rows (their predicted seconds, in
-        order) as fit ``refine_budget_s``, rounded down to a multiple of ``band_multiple`` (at least that
-        many); all the remaining rows when they fit or are fewer."""
+        order) as fit ``refine_budget_s``, rounded down to a multiple of ``multiple`` (default
+        ``band_multiple``; at least that many); all the remaining rows when they fit or are fewer."""
+        multiple = self.band_multiple if multiple is None else max(1, int(multiple))
         remaining = len(row_seconds)
         fits = int(np.searchsorted(np.cumsum(row_seconds), self.refine_budget_s, side="right"))
         if fits >= remaining:
             return max(1, remaining)
-        rows = max(self.band_multiple, fits - fits % self.band_multiple)
+        rows = max(multiple, fits - fits % multiple)
         return max(1, min(remaining, rows))
 
 

@@ -8,7 +8,9 @@
 - ``--size W,H``: the render area in pixels (the window adds the panel on the left).
 - ``--light θ,φ``, ``--camera DIST,AZIMUTH,ELEVATION``, ``--exposure``, ``--ior``, ``--no-fresnel``,
   ``--slice``: the starting view, as in ``gratnet render``; light, camera and exposure left out are chosen
-  from the material and the mesh (viewer.defaults), the same values as ``gratnet render``'s.
+  from the material and the mesh (viewer.defaults), the same values as ``gratnet render``'s: remembered from
+  an earlier run, else a quick guess at once that the exact values replace when a worker process has them
+  (viewer.default_view), so that the window shows without waiting for them.
 - ``--weights-path auto|texture|baked``: where the shader reads the weights, as in ``gratnet render``.
 - ``--render-path auto|forward|deferred``: as in ``gratnet render``. In the window ``auto`` is forward on a CPU
   rasterizer (llvmpipe: the deferred path's first frames after a switch cost 0.3–0.6 s of JIT work, over the
@@ -31,7 +33,9 @@ Needs a display (X11 or Wayland) and OpenGL 4.3; without one it exits with statu
 from __future__ import annotations
 
 import argparse
-from typing import TYPE_CHECKING
+import contextlib
+import math
+from typing import TYPE_CHECKING, Any
 
 from gratnet.config import add_quiet_flag, parse_float, parse_int
 from gratnet.errors import GratNetError
@@ -46,8 +50,9 @@ from viewer.scene_config import (
 
 if TYPE_CHECKING:  # the viewer's modules load numpy and pyrr: `gratnet --help` stays quick without them
     from viewer.state import ViewerState
+    from viewer.window import ViewerWindow
 
-__all__ = ["register", "run", "starting_state"]
+__all__ = ["open_window", "register", "run", "starting_state", "starting_view"]
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
@@ -106,8 +111,52 @@ def _scene_numbers(arguments: argparse.Namespace) -> tuple[float, float, float, 
             config.camera_azimuth_degrees, config.camera_elevation_degrees)
 
 
-def starting_state(arguments: argparse.Namespace) -> ViewerState:
-    """The starting :class:`~viewer.state.ViewerState`, every value checked before a window opens."""
+def _guess_view(arguments: argparse.Namespace) -> tuple[str, ...]:
+    """Fill the unset ``--light``, ``--camera`` and ``--exposure`` with a first view, fast and without
+    colour-science (issue 35: the exact defaults took 4–6 s before the window showed): the exact defaults
+    remembered from an earlier start or switch (:func:`viewer.default_view.remembered_view`), else the quick
+    guess (:func:`viewer.default_view.quick_view`; the window replaces it by the exact defaults once a worker
+    process has them), else (a model file without its display analysis) the exact defaults computed now.
+    Returns the viewer fields that hold a guess."""
+    from gratnet.modelfile import load_model
+    from viewer.catalog import build_mesh, resolve_material
+    from viewer.default_view import quick_view, remembered_view
+    from viewer.defaults import FOV_DEGREES
+
+    unset = {"light": arguments.light_text is None, "camera": arguments.camera_text is None,
+             "exposure": arguments.exposure is None}
+    if not any(unset.values()):
+        return ()
+    ior = arguments.ior if arguments.fresnel and arguments.ior != 0 else None
+    if ior is not None and not (math.isfinite(ior) and ior > 0.0):
+        ior = 1.5  # an invalid --ior is reported by the checks; the defaults must not fail first
+    view = remembered_view(arguments.material, arguments.mesh, arguments.slice, FOV_DEGREES, ior)
+    guessed: tuple[str, ...] = ()
+    if view is None:
+        model = load_model(resolve_material(arguments.material))
+        view = quick_view(model, None if arguments.slice else build_mesh(arguments.mesh), arguments.slice,
+                          FOV_DEGREES, ior)
+        if view is None:  # no stored analysis to guess from: the exact defaults, now
+            fill_scene_defaults(arguments)
+            return ()
+        guessed = tuple(field for flag, fields in _VIEW_FLAGS.items() if unset[flag] for field in fields)
+    if unset["light"]:
+        arguments.light_text = f"{view['light_theta']:g},{view['light_phi']:g}"
+    if unset["camera"]:
+        arguments.camera_text = f"{view['camera_distance']:g},{view['camera_azimuth']:g},{view['camera_elevation']:g}"
+    if unset["exposure"]:
+        arguments.exposure = view["exposure"]
+    return guessed
+
+
+#: The viewer fields each view flag sets.
+_VIEW_FLAGS = {"light": ("light_theta", "light_phi"),
+               "camera": ("camera_distance", "camera_azimuth", "camera_elevation"), "exposure": ("exposure",)}
+
+
+def starting_view(arguments: argparse.Namespace) -> tuple[ViewerState, tuple[str, ...]]:
+    """The starting :class:`~viewer.state.ViewerState`, every value checked before a window opens, and the
+    fields of it that are a first guess at the default view (to be refined in the window: ``refine_view``)."""
     from gratnet.atomic import check_output_folder
     from gratnet.modelfile import load_model
     from viewer.catalog import MESHES, build_mesh, resolve_material
@@ -118,14 +167,14 @@ def starting_state(arguments: argparse.Namespace) -> ViewerState:
     if not 1 <= arguments.spp <= MAX_SAMPLES:
         raise GratNetError(f"--spp (samples per pixel) must be an integer in 1 … {MAX_SAMPLES}, got {arguments.spp}")
     _scene_numbers(with_fallback(arguments))  # the flags given are checked before the defaults read the model
-    fill_scene_defaults(arguments)  # the unset --light, --camera, --exposure, from the material and mesh
-    theta, phi, distance, azimuth, elevation = _scene_numbers(arguments)
-    if arguments.max_frames < 0:
-        raise GratNetError(f"--max-frames must be ≥ 0, got {arguments.max_frames}")
     # Read (cheaply) before a window opens: a bad model or mesh file is one line, not a broken window.
     load_model(resolve_material(arguments.material))
     if arguments.mesh not in MESHES:  # an .obj file: built now (a built-in mesh cannot fail)
         build_mesh(arguments.mesh)
+    guessed = _guess_view(arguments)  # the unset --light, --camera, --exposure, from the material and mesh
+    theta, phi, distance, azimuth, elevation = _scene_numbers(arguments)
+    if arguments.max_frames < 0:
+        raise GratNetError(f"--max-frames must be ≥ 0, got {arguments.max_frames}")
     fresnel, ior = arguments.fresnel, arguments.ior
     if ior == 0:  # as in gratnet render: --ior 0 means no Fresnel factor
         fresnel, ior = False, ViewerState.ior
@@ -133,29 +182,56 @@ def starting_state(arguments: argparse.Namespace) -> ViewerState:
               "camera_elevation": elevation, "exposure": arguments.exposure, "ior": ior}
     for name, value in values.items():
         values[name] = SLIDERS[name].clamp(value)
-    return ViewerState(material=arguments.material, mesh=arguments.mesh, fresnel=fresnel,
-                       slice_mode=arguments.slice, **values)
+    state = ViewerState(material=arguments.material, mesh=arguments.mesh, fresnel=fresnel,
+                        slice_mode=arguments.slice, **values)
+    return state, guessed
+
+
+def starting_state(arguments: argparse.Namespace) -> ViewerState:
+    """The starting :class:`~viewer.state.ViewerState` (:func:`starting_view`'s, without the guessed fields)."""
+    return starting_view(arguments)[0]
+
+
+def open_window(arguments: argparse.Namespace, **window_options: Any) -> ViewerWindow:
+    """The window of a ``gratnet view`` command line, open (the caller closes it): the compile child started
+    first, the flags checked, the first view (:func:`starting_view`), the ``--reference`` volume read.
+    ``window_options``: further :class:`~viewer.window.ViewerWindow` arguments (benchmarks/viewer_latency.py)."""
+    from viewer.scene_config import parse_size
+    from viewer.scene_supply import SceneSupply
+    from viewer.state import ViewerState
+    from viewer.window import ViewerWindow
+
+    size = parse_size(arguments.size_text)
+    # The compile child first: its Python start-up and the first shader overlap the checks, the first view and
+    # the window's set-up (a bad material is reported by the checks below).
+    worker = None
+    with contextlib.suppress(GratNetError):
+        worker = SceneSupply.start_worker(ViewerState(material=arguments.material, slice_mode=arguments.slice),
+                                          arguments.weights_path, arguments.render_path)
+    try:
+        state, guessed = starting_view(arguments)
+        reference = None
+        if arguments.reference:  # checked and read before a window opens
+            from viewer.reference_view import LoadedReference
+            from viewer.scene_config import load_reference
+
+            volume = load_reference(arguments.reference, arguments.reference_precision, arguments.material)
+            reference = LoadedReference(volume, str(arguments.reference), arguments.material,
+                                        arguments.reference_precision)
+    except BaseException:
+        if worker is not None:
+            worker.close()
+        raise
+    extra = [] if state.mesh in ("cd", "sphere", "plane") else [state.mesh]
+    return ViewerWindow(state, size, screenshot_dir=arguments.screenshot_dir, extra_meshes=extra,
+                        weights_path=arguments.weights_path, max_samples=arguments.spp,
+                        render_path=arguments.render_path, reference=reference, worker=worker, refine_view=guessed,
+                        **window_options)
 
 
 def run(arguments: argparse.Namespace) -> int:
     """Open the window and run it until it is closed (or ``--max-frames``)."""
-    from viewer.scene_config import parse_size
-    from viewer.window import ViewerWindow
-
-    size = parse_size(arguments.size_text)
-    state = starting_state(arguments)
-    reference = None
-    if arguments.reference:  # checked and read before a window opens
-        from viewer.reference_view import LoadedReference
-        from viewer.scene_config import load_reference
-
-        volume = load_reference(arguments.reference, arguments.reference_precision, arguments.material)
-        reference = LoadedReference(volume, str(arguments.reference), arguments.material,
-                                    arguments.reference_precision)
-    extra = [] if state.mesh in ("cd", "sphere", "plane") else [state.mesh]
-    with ViewerWindow(state, size, screenshot_dir=arguments.screenshot_dir, extra_meshes=extra,
-                      weights_path=arguments.weights_path, max_samples=arguments.spp,
-                      render_path=arguments.render_path, reference=reference) as window:
+    with open_window(arguments) as window:
         window.run(arguments.max_frames)
         if window.gl_errors:
             raise GratNetError(f"OpenGL reported errors: {'; '.join(window.gl_errors[:3])} (please report this)")

@@ -51,6 +51,9 @@ class ViewerWindow:
             default: the window opens, shows its panel and handles input at once, whatever compiles).
         visible: show the window (tests under Xvfb may hide it; rendering is the same).
         max_samples: as :class:`ViewerApp` (progressive anti-aliasing; here 16 by default).
+        worker: a compile child started earlier for ``state`` (``SceneSupply.start_worker``; ``gratnet view``
+            starts it first thing), adopted (closed if the window cannot open); else the window starts one.
+        refine_view: as :class:`ViewerApp` (the fields of ``state`` that are a guess at the default view).
 
     Raises:
         GratNetError: no display, or no OpenGL 4.3 core context for a window.
@@ -65,16 +68,15 @@ class ViewerWindow:
                  screenshot_dir: str | Path = ".", idle_wait_s: float = 0.25, extra_meshes: Iterable[str] = (),
                  weights_path: str = "auto", background: bool = True,
                  visible: bool = True, title: str = "GratNet viewer", max_samples: int = 16,
-                 render_path: str = "auto", reference: Any = None) -> None:
+                 render_path: str = "auto", reference: Any = None, worker: Any = None,
+                 refine_view: Iterable[str] = ()) -> None:
         from viewer.context import context_from_current
-        from viewer.scene_supply import SceneSupply, start_display_import
+        from viewer.scene_supply import SceneSupply
         from viewer.surface import check_size
 
         width, height = check_size(size)
         # The compile child first: its Python start-up and the quick shader overlap the window's set-up.
-        worker = None
-        if background:
-            start_display_import()
+        if background and worker is None:
             with contextlib.suppress(GratNetError):  # a bad material is reported by ViewerApp below
                 worker = SceneSupply.start_worker(state or ViewerState(), weights_path, render_path)
         glfw, imgui = self._glfw, self._imgui = _shell_modules()
@@ -94,6 +96,9 @@ class ViewerWindow:
         self._first_frame = False
         #: ``time.perf_counter()`` after the swap of the first frame that showed a picture.
         self.first_picture_at: float | None = None
+        #: Where the panel's controls start (window pixels from the top, by name) in the last frame, and
+        #: ``end``, where its last line ends.
+        self.panel_layout: dict[str, float] = {}
 
         # A headless renderer's EGL context may be current on this thread: unbind it for the window's
         # lifetime (restored by close()), or making the window's GLX context current kills the process.
@@ -138,7 +143,7 @@ class ViewerWindow:
             self._gl = _GLFunctions(glfw)
             self._texture = self._picture_texture(1, 1)  # drawn by the first frame: see there
             self._app = ViewerApp(self.ctx, state, self._area_pixels(), policy, clock, extra_meshes, weights_path,
-                                  background, worker, max_samples, render_path, reference)
+                                  background, worker, max_samples, render_path, reference, refine_view)
             worker = None  # the app owns it now
             # The first frame compiles imgui's own shaders and, drawing the 1×1 picture texture, their variant
             # for its format (0.3–0.5 s on llvmpipe with an empty shader cache): drawn while the window is
@@ -146,13 +151,8 @@ class ViewerWindow:
             self._first_frame = True
             self.frame()
             self._first_frame = False
-            # colour-science (the display conversion) imports on a thread from the start (scene_supply:
-            # 0.5–0.7 s without its plotting); C calls of an import hold the GIL for up to ~70 ms at a time,
-            # which stretched frames to 145 ms: the window is shown once it is done (the compile child runs on).
-            if background:
-                start_display_import().join()
-            # Python's cyclic GC then paused 60–380 ms at a time over the ~1e6 objects imgui and colour-science
-            # made: frozen out of every later collection.
+            # Python's cyclic GC paused 60–380 ms at a time over the ~1e6 objects imgui (and colour-science, which
+            # the window no longer imports: viewer.srgb) made: frozen out of every later collection.
             gc.freeze()
             if visible:
                 glfw.show_window(self._window)
@@ -293,7 +293,10 @@ class ViewerWindow:
         imgui.pop_style_var()
         area = imgui.ImVec2(max(1.0, display.x - x0), max(1.0, display.y))
         imgui.invisible_button("##orbit", area)
-        if imgui.is_item_active():
+        # The frame that releases the button still applies its motion: a quick flick (press, motion and
+        # release between two slow frames) orbits like a slow drag (issue 35; imgui processes the motion and
+        # the release in one frame, and the item is no longer active then).
+        if imgui.is_item_active() or imgui.is_item_deactivated():
             delta = imgui.get_io().mouse_delta
             if delta.x or delta.y:
                 app.orbit(delta.x, delta.y)
@@ -325,7 +328,32 @@ class ViewerWindow:
             imgui.get_background_draw_list().add_image(imgui.ImTextureRef(self._texture.glo), p0, p1,
                                                        imgui.ImVec2(0, 0), imgui.ImVec2(*self._texture_uv))
 
+    #: Lines of text the panel keeps for what is compiling or loading and for the last message, whether or not
+    #: there is any: a line that comes or goes never moves the controls under the pointer (issue 35).
+    STATUS_LINES = 3
+
+    def _mark(self, name: str) -> None:
+        """Record where the next widget starts (:attr:`panel_layout`, window pixels from the top)."""
+        self.panel_layout[name] = float(self._imgui.get_cursor_screen_pos().y)
+
+    def _status(self) -> None:
+        """The status region: a fixed number of lines (wrapped, scrolling if longer) with what is compiling or
+        loading (amber) and the last message (a screenshot written, a material refused)."""
+        imgui, app = self._imgui, self.app
+        height = self.STATUS_LINES * imgui.get_text_line_height_with_spacing()
+        imgui.begin_child("##status", imgui.ImVec2(0, height), 0, imgui.WindowFlags_.no_background)
+        status = app.status
+        if status:  # the reason the picture is old or absent
+            imgui.push_style_color(imgui.Col_.text, imgui.ImVec4(1.0, 0.8, 0.3, 1.0))
+            imgui.text_wrapped(status)
+            imgui.pop_style_color()
+        if app.message:
+            imgui.text_wrapped(app.message)
+        imgui.end_child()
+
     def _panel(self) -> None:
+        """The panel: the status region, then every control at a fixed place; it fits a 512-pixel-high window
+        (tests/test_viewer_window.py)."""
         imgui, app = self._imgui, self.app
         state = app.state
         display = imgui.get_io().display_size
@@ -334,13 +362,10 @@ class ViewerWindow:
         imgui.begin("GratNet", None, imgui.WindowFlags_.no_move | imgui.WindowFlags_.no_resize
                     | imgui.WindowFlags_.no_collapse | imgui.WindowFlags_.no_saved_settings)
         imgui.push_item_width(150)
-        status = app.status
-        if status:  # what is compiling or loading, at the top: the reason the picture is old or absent
-            imgui.push_style_color(imgui.Col_.text, imgui.ImVec4(1.0, 0.8, 0.3, 1.0))
-            imgui.text_wrapped(status)
-            imgui.pop_style_color()
-            imgui.separator()
+        self._status()
+        imgui.separator()
 
+        self._mark("material")
         materials = app.materials()
         if state.material not in materials:
             materials.append(state.material)
@@ -356,6 +381,10 @@ class ViewerWindow:
         imgui.same_line()
         if imgui.button("default view"):  # the light, camera and exposure that show this material's diffraction
             app.switch()
+        imgui.same_line()
+        self._mark("Screenshot")
+        if imgui.button("Screenshot"):
+            self.screenshot()
         if app.reference is not None:  # gratnet view --reference: network, its ground truth, or FLIP between them
             imgui.begin_disabled(not app.reference_available())
             for shading in SHADINGS:
@@ -369,6 +398,7 @@ class ViewerWindow:
                        f"ground truth: {app.reference.loaded.material}'s volume")
 
         imgui.separator_text("light")
+        self._mark("light_theta")
         self._slider("light_theta")
         self._slider("light_phi")
         imgui.separator_text("camera (drag: orbit, wheel: zoom)")
@@ -387,36 +417,44 @@ class ViewerWindow:
         changed, value = imgui.checkbox("Fresnel", state.fresnel)
         if changed:
             app.set(fresnel=value)
+        imgui.same_line()
         imgui.begin_disabled(not state.fresnel)
+        imgui.push_item_width(110)
+        self._mark("ior")
         self._slider("ior")
+        imgui.pop_item_width()
         imgui.end_disabled()
 
         imgui.separator_text("performance")
-        stats, image = app.stats, app.image
-        imgui.text(f"frame {stats.last_frame_s * 1000:.1f} ms (work, not idle)")
-        in_use = app.weights_path_in_use()
-        if in_use:
-            imgui.text(f"weights: {in_use} path")
-        width, height = stats.last_render_size
-        imgui.text(f"render {stats.last_render_s * 1000:.0f} ms at {width}×{height}")
-        if stats.last_preview_s is not None:
-            pw, ph = stats.last_preview_size
-            imgui.text(f"preview {stats.last_preview_s * 1000:.0f} ms at {pw}×{ph}")
-        if stats.last_full_s is not None:
-            imgui.text(f"full picture {stats.last_full_s * 1000:.0f} ms")
-        if image is not None:
-            status = "complete" if image.complete else f"refining {image.progress:.0%}"
-            samples = "" if state.slice_mode else f", {image.samples}/{app.max_samples} samples"
-            imgui.text(f"{image.full_size[0]}×{image.full_size[1]}: {status}{samples}")
-        imgui.text(f"renders: {stats.renders}")
-
-        imgui.separator()
-        if imgui.button("Screenshot"):
-            self.screenshot()
-        if app.message:
-            imgui.text_wrapped(app.message)
+        self._mark("performance")
+        for line in self._performance_lines():
+            imgui.text(line)
+        self._mark("end")
         imgui.pop_item_width()
         imgui.end()
+
+    def _performance_lines(self) -> list[str]:
+        """The panel's performance figures, four lines at most (the panel fits a 512-pixel window)."""
+        app = self.app
+        stats, image, state = app.stats, app.image, app.state
+        width, height = stats.last_render_size
+        lines = [f"frame {stats.last_frame_s * 1000:.0f} ms; render {stats.last_render_s * 1000:.0f} ms at "
+                 f"{width}×{height}"]
+        parts = []
+        if stats.last_preview_s is not None:
+            pw, ph = stats.last_preview_size
+            parts.append(f"preview {stats.last_preview_s * 1000:.0f} ms at {pw}×{ph}")
+        if stats.last_full_s is not None:
+            parts.append(f"full {stats.last_full_s:.1f} s")
+        if parts:
+            lines.append("; ".join(parts))
+        if image is not None:
+            progress = "complete" if image.complete else f"refining {image.progress:.0%}"
+            samples = "" if state.slice_mode else f", {image.samples}/{app.max_samples} samples"
+            lines.append(f"{image.full_size[0]}×{image.full_size[1]}: {progress}{samples}")
+        in_use = app.weights_path_in_use()
+        lines.append(f"{in_use} weights, {stats.renders} renders" if in_use else f"{stats.renders} renders")
+        return lines
 
     def screenshot(self) -> Path | None:
         """The Screenshot button: the full-resolution picture to ``screenshot_dir/gratnet-view-NNN.png``
