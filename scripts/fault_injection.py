@@ -5,8 +5,7 @@
 For each command on tiny inputs (``groundtruth``, ``train``, ``evaluate``, ``render``, ``mitsuba-render`` when
 Mitsuba is installed, ``sweep`` when Ray is): run it once to the end (the reference, which also times it, T),
 then K times in fresh folders, each killed with SIGKILL at a seeded moment after its start: [0.05 T, 0.95 T]
-cut in K equal spans, kill k at a uniformly drawn place in span k (so that a few kills cover the whole run:
-start-up, computation, writing). After each kill:
+cut in K equal spans, kill k at a uniformly drawn place in span k (:func:`kill_moments`). After each kill:
 
 - processes: no process of the command is alive 10 s later. Every process the command starts (Ray's local
   instance and workers included, whatever their process group) inherits an environment variable
@@ -72,7 +71,7 @@ wavelength_step_nm = 100.0
 parts = 2
 
 [train]
-epochs = 3
+epochs = 2
 test_slices = "2"
 batch_size = 256
 
@@ -103,6 +102,7 @@ class Kill:
     """What one kill left and what its rerun gave."""
 
     case: str
+    folder: str  # where it ran (its output folder)
     moment_s: float
     killed: bool  # False: the command ended before the moment came
     left: list[str]  # files (relative) present after the kill, temporaries included
@@ -397,7 +397,7 @@ def make_cases(inputs: Path) -> list[Case]:
     """The commands on tiny inputs; ``inputs`` receives the shared ones (volume and model: made by the
     groundtruth and train cases' references, which therefore run first)."""
     volume, model = str(inputs / "volume.exr"), str(inputs / "model.npz")
-    train = ["train", volume, "--out", ".", "--preset", "tiny", "--epochs", "4", "--batch-size", "256",
+    train = ["train", volume, "--out", ".", "--preset", "tiny", "--epochs", "3", "--batch-size", "256",
              "--test-slices", "2", "--seed", "1", "--device", "cpu", "--size", "16", "--cache-dir", "cache", "--quiet"]
     (inputs / "sweep.toml").write_text(SWEEP_FILE, encoding="utf-8")
     return [
@@ -441,7 +441,7 @@ def kill_once(case: Case, folder: Path, moment: float, reference: Path) -> Kill:
     gone_after, survivors = wait_until_gone(tag, folder)
     left = [str(path) for path in inventory(folder)]
     loaded, temporaries, broken = check_files(folder)
-    result = Kill(case.name, round(moment, 3), killed, left, len(loaded), temporaries, broken,
+    result = Kill(case.name, str(folder), round(moment, 3), killed, left, len(loaded), temporaries, broken,
                   [f"{pid} {command}" for pid, command in sorted(survivors.items())], round(gone_after, 2))
     arguments = case.rerun(folder) if case.rerun else case.arguments
     result.rerun_arguments = arguments[len(case.arguments):]
@@ -453,8 +453,8 @@ def kill_once(case: Case, folder: Path, moment: float, reference: Path) -> Kill:
     return result
 
 
-def inject(case: Case, work: Path, inputs: Path, kills: int, seed: int) -> tuple[float, list[Kill]]:
-    """The reference run and ``kills`` killed runs of ``case``; returns (T, kills)."""
+def run_reference(case: Case, work: Path, inputs: Path) -> float:
+    """The uninterrupted command in WORK/CASE/reference; its duration T (its outputs become later cases' inputs)."""
     reference = work / case.name / "reference"
     reference.mkdir(parents=True)
     status, duration = run_to_end(case.arguments, reference)
@@ -462,11 +462,21 @@ def inject(case: Case, work: Path, inputs: Path, kills: int, seed: int) -> tuple
         raise RuntimeError(f"{case.name}: the uninterrupted command exited with status {status} "
                            f"(log: {reference}.log)")
     _share_inputs(case, reference, inputs)
+    return duration
+
+
+def kill_moments(case: Case, duration: float, kills: int, seed: int) -> list[float]:
+    """[0.05 T, 0.95 T] cut in ``kills`` equal spans, one seeded moment in each (a few kills cover the whole run:
+    start-up, computation, writing)."""
     rng = random.Random(f"{seed}:{case.name}")
-    low, high = MOMENTS  # stratified: kill k of K falls in the k-th K-th of [low T, high T], at a seeded place
-    moments = [(low + (high - low) * (index + rng.random()) / kills) * duration for index in range(kills)]
-    return duration, [kill_once(case, work / case.name / f"kill{index}", moment, reference)
-                      for index, moment in enumerate(moments)]
+    low, high = MOMENTS
+    return [(low + (high - low) * (index + rng.random()) / kills) * duration for index in range(kills)]
+
+
+def kill_runs(case: Case, work: Path, duration: float, kills: int, seed: int) -> list[Kill]:
+    """``kills`` killed runs of ``case`` in WORK/CASE/killK, each checked, rerun and compared with the reference."""
+    return [kill_once(case, work / case.name / f"kill{index}", moment, work / case.name / "reference")
+            for index, moment in enumerate(kill_moments(case, duration, kills, seed))]
 
 
 def run_all(work: Path, kills: int, seed: int, names: list[str] | None = None,
@@ -483,7 +493,8 @@ def run_all(work: Path, kills: int, seed: int, names: list[str] | None = None,
             summary["commands"][case.name] = {"skipped": f"{case.needs} is not installed"}
             report(f"{case.name}: skipped ({case.needs} is not installed)")
             continue
-        duration, results = inject(case, work, inputs, kills, seed)
+        duration = run_reference(case, work, inputs)
+        results = kill_runs(case, work, duration, kills, seed)
         summary["commands"][case.name] = {"uninterrupted_s": round(duration, 2),
                                           "kills": [dataclasses.asdict(result) for result in results]}
         for result in results:

@@ -59,12 +59,19 @@ def signals_stop_the_sweep() -> Iterator[None]:
         yield
         return
 
+    received: list[int] = []
+
     def stop(signum: int, _frame: object) -> None:
+        received.append(signum)
         raise Stopped(signum)
 
     previous = {number: signal.signal(number, stop) for number in (signal.SIGTERM, signal.SIGHUP)}
     try:
         yield
+    except KeyboardInterrupt as error:  # ray.wait turns an exception raised in a handler into a plain one
+        if received and not isinstance(error, Stopped):
+            raise Stopped(received[0]) from None
+        raise
     finally:
         for number, handler in previous.items():
             signal.signal(number, handler)
@@ -240,20 +247,20 @@ def run_sweep(spec: SweepSpec, address: str | None = None, workers: int | None =
     nothing_left = all(state == "done" for state in plan.runs.values())
     owned = not ray.is_initialized() and not nothing_left
     failures: list[str] = []
-    with signals_stop_the_sweep():
-        guard = watchdog.start() if owned and not address else None  # before Ray starts any process
-        try:
-            if owned:
-                _init(ray, address, workers)
+    guard = watchdog.start() if owned and not address else None  # before Ray starts any process
+    try:
+        if owned:
+            _init(ray, address, workers)
+        with signals_stop_the_sweep():  # after ray.init, whose own SIGTERM handler would end the process at once
             labels = {} if nothing_left else _submit(ray, spec, plan, out)
             failures = _wait(ray, labels, progress)
+    finally:
+        try:
+            if owned:
+                ray.shutdown()
         finally:
-            try:
-                if owned:
-                    ray.shutdown()
-            finally:
-                if guard is not None:
-                    guard.close()
+            if guard is not None:
+                guard.close()
     rows = collect_rows(spec)
     if rows:
         from sweep.results import write_results
