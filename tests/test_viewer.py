@@ -79,7 +79,8 @@ def app(ctx) -> Iterator[ViewerApp]:
 
 
 def test_resolution_policy_chooses_the_reduction_and_the_band_height():
-    policy = ResolutionPolicy(interactive_budget_s=0.05, refine_budget_s=0.1, factors=(2, 4, 8), default_factor=4)
+    policy = ResolutionPolicy(interactive_budget_s=0.05, refine_budget_s=0.1, factors=(2, 4, 8), default_factor=4,
+                              band_multiple=4)
     assert policy.reduced_factor(None) == 4
     assert policy.reduced_factor(0.1) == 2  # 0.1 s / 4 ≤ 0.05
     assert policy.reduced_factor(0.5) == 4  # 0.5 / 16 ≤ 0.05
@@ -89,6 +90,10 @@ def test_resolution_policy_chooses_the_reduction_and_the_band_height():
     assert policy.band_rows(np.full(100, 0.5)) == 4  # over budget: still 4 rows
     assert policy.band_rows(np.array([0.5, 0.01])) == 2  # … or what is left
     assert policy.band_rows(np.full(5, 0.001)) == 5
+    assert policy.band_rows(np.full(100, 0.01), multiple=1) == 10  # the deferred path's bands: any height
+    first = ResolutionPolicy()  # nothing measured yet: the first preview has at most 1024 pixels
+    assert first.reduced_factor(None, (512, 512)) == 16 and first.reduced_factor(None, (64, 48)) == 2
+    assert first.reduced_factor(None, (4096, 4096)) == 32  # … or the largest reduction
 
 
 def test_reduced_while_moving_full_when_idle_and_nothing_rerendered(app):

@@ -376,8 +376,8 @@ class DefaultViewRequests:
 
     @property
     def pending(self) -> bool:
-        """Whether a result of the last request is still to come (the caller polls :meth:`take` meanwhile)."""
-        return self._key is not None and (self._running(self._quick) or self._running(self._exact))
+        """Whether a result of the last request is still to come or to be taken (the caller polls :meth:`take`)."""
+        return self._key is not None and (self._quick is not None or self._exact is not None)
 
     @property
     def stage(self) -> str:

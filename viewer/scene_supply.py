@@ -275,11 +275,10 @@ class SceneSupply:
         network = scene.network
         if group == "slice":
             return [lambda: network.program("brdf_slice")]
-        steps: list[Callable[[], object]] = [lambda: network.program("surface"),
-                                             lambda: network.depth_only_program("surface")]
-        if scene.render_path == "deferred":  # the cached verdict (the window never measures)
-            steps += scene.deferred.compile_steps()
-        return steps
+        steps: list[Callable[[], object]] = [lambda: network.program("surface")]  # the mesh buffers bind to it
+        if scene.render_path == "deferred":  # the window's path on a CPU, or the cached verdict on a GPU
+            return steps + scene.deferred.compile_steps()
+        return [*steps, lambda: network.depth_only_program("surface")]  # the forward path's depth pre-pass
 
     def _link(self, path: str, group: str, every_step: bool = True) -> bool:
         """Link ``group``'s programs on ``path``: all of them, or with ``every_step`` False the next one only
