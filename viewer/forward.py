@@ -8,6 +8,12 @@ several samples, each is added into RGBA32F sums on the GPU (``shaders/accumulat
 blending) and the mean is read back once; one sample is read directly (bit-identical to a render without
 anti-aliasing when its offset is the pixel centre).
 
+No GL call runs long (issue 36: a CPU rasterizer runs a whole draw inside one call, and Ctrl-C waits for it):
+each pass is drawn in pieces, scissor boxes sized by :mod:`viewer.pacing` to about 0.2 s each and finished one
+by one: the depth pass in bands of rows, the shading pass in runs of 64×4-pixel blocks weighed by the pixels the
+depth pass covered. A scissor box changes which pixels a draw computes, not how: the pieces give the one-draw
+image bit for bit.
+
 :class:`~viewer.scene.SceneRenderer` chooses between this path and :mod:`viewer.deferred`; both give the
 same image (exposed CIE XYZ and coverage, ``float32`` ``(H, W, 4)``, row 0 at the top) and share the mesh
 buffers and surface uniforms of :mod:`viewer.surface`. Only this path renders the key-vector layer
@@ -26,7 +32,7 @@ import numpy as np
 from viewer.antialias import jitter_matrix
 from viewer.camera import Camera, Light
 from viewer.glsl import compile_program
-from viewer.pacing import Pacer, Progress, covered_row_costs, read_rows
+from viewer.pacing import BLOCK, Blocks, Pacer, Progress, covered_block_costs, read_rows
 from viewer.shading import ShadingPrograms, set_uniform
 from viewer.surface import MeshBuffers, set_surface_uniforms
 
@@ -36,7 +42,6 @@ __all__ = ["SURFACE_PROGRAM", "ForwardRenderer"]
 SURFACE_PROGRAM = "surface"
 _ACCUMULATE = "accumulate"  # shaders/accumulate.glsl: adds a sample image into a float32 sum
 _SAMPLE_UNIT = 1  # texture unit of accumulate.glsl's u_sample (the weights use 0, the skip bound 3)
-_BAND_MULTIPLE = 4  # band boundaries on multiples of 4 rows (llvmpipe rasterizes 4×4 pixel blocks)
 _FIRST_DEPTH_ROWS = 256  # the depth pass's first band (rows): no MLP, cheap
 _FIRST_SHADE_PIXELS = 1024  # the shading pass's first band: ~1k covered pixels (0.1 s at 10k pixels/s on llvmpipe)
 
@@ -156,15 +161,16 @@ class ForwardRenderer:
                      depth_prepass: bool, sums: list[moderngl.Framebuffer], done: Callable[[float], None]) -> None:
         """One sample into ``framebuffer`` (colour ``targets``, cleared first), added into ``sums`` when given:
         the camera's view-projection moved by ``offset`` (pixels, x right, y up;
-        :func:`viewer.antialias.jitter_matrix`), then the depth pass and the shading pass in bands of rows. The
-        other uniforms are set by the caller.
+        :func:`viewer.antialias.jitter_matrix`), then the depth pass in bands of rows and the shading pass in
+        pieces of blocks. The other uniforms are set by the caller.
 
         The depth pass (the depth-only program: same vertex stage, no MLP, colour writes masked) is drawn first
-        over the whole image, in bands of its own: its coverage weighs the rows of the shading bands. With
-        ``depth_prepass`` it stays, and the shading pass tests ``LEQUAL`` against it: the invariant vertex stage
-        gives bit-identical depths, so exactly the visible surface passes and early fragment tests stop every
-        other fragment before the MLP. Without it the depth is cleared again before the shading pass."""
-        width, height = size = framebuffer.size
+        over the whole image, in bands of its own: its coverage weighs the blocks of the shading pieces (unless the
+        whole image fits one piece). With ``depth_prepass`` it stays, and the shading pass tests ``LEQUAL``
+        against it: the invariant vertex stage gives bit-identical depths, so exactly the visible surface passes
+        and early fragment tests stop every other fragment before the MLP. Without it the depth is cleared again
+        before the shading pass (or not drawn at all when the coverage is not needed)."""
+        width, height = framebuffer.size
         layers = len(targets)
         view_projection = camera.view_projection(width / height)
         if np.any(offset != 0.0):  # the pixel centre: the un-jittered matrix itself (bit-identical renders)
@@ -178,36 +184,37 @@ class ForwardRenderer:
             self._accumulate(framebuffer, targets, sums, (0, 0, width, height))
             done(1.0)
             return
-        self.shading.bind_material()
-        bound.use(location=unit)
-        set_uniform(self.shading.depth_only_program(SURFACE_PROGRAM), "u_view_projection", view_projection)
-        framebuffer.color_mask = _color_masks(False, layers)
-        try:
-            for first, end in self.depth_pacer.pieces(height, multiple=_BAND_MULTIPLE):
-                framebuffer.scissor = (0, first, width, end - first)
-                framebuffer.use()
-                depth_array.render(moderngl.TRIANGLES)
-        finally:
-            framebuffer.color_mask = _color_masks(True, layers)
-        costs = covered_row_costs(framebuffer, size)
-        framebuffer.scissor = None
+        blocks = Blocks(width, (0, height))
+        one_piece = self.shade_pacer.budget >= width * height  # even if every pixel is covered: no coverage needed
+        if depth_prepass or not one_piece:
+            set_uniform(self.shading.depth_only_program(SURFACE_PROGRAM), "u_view_projection", view_projection)
+            framebuffer.color_mask = _color_masks(False, layers)
+            try:
+                for first, end in self.depth_pacer.pieces(height, multiple=BLOCK[1]):
+                    framebuffer.scissor = (0, first, width, end - first)
+                    framebuffer.use()
+                    depth_array.render(moderngl.TRIANGLES)
+            finally:
+                framebuffer.color_mask = _color_masks(True, layers)
+                framebuffer.scissor = None
+        costs = np.full(blocks.count, float(BLOCK[0] * BLOCK[1])) if one_piece else covered_block_costs(
+            framebuffer, blocks)
         if depth_prepass:
             self.ctx.depth_func = "<="
-        else:
+        elif not one_piece:
             framebuffer.use()
             framebuffer.clear(0.0, 0.0, 0.0, 0.0, depth=1.0)
-        total = float(costs.sum())
-        cumulative = np.cumsum(costs)
+        cumulative = np.cumsum(costs) / costs.sum()
         try:
-            for first, end in self.shade_pacer.pieces(height, costs, _BAND_MULTIPLE,
-                                                       lambda end: done(float(cumulative[end - 1]) / total)):
-                box = (0, first, width, end - first)
-                framebuffer.scissor = box
-                framebuffer.use()
-                self.shading.bind_material()
-                bound.use(location=unit)
-                vertex_array.render(moderngl.TRIANGLES)
-                self._accumulate(framebuffer, targets, sums, box)
+            for start, end in self.shade_pacer.pieces(blocks.count, costs,
+                                                       done=lambda end: done(float(cumulative[end - 1]))):
+                for box in blocks.rectangles(start, end):
+                    framebuffer.scissor = box
+                    framebuffer.use()
+                    self.shading.bind_material()
+                    bound.use(location=unit)
+                    vertex_array.render(moderngl.TRIANGLES)
+                    self._accumulate(framebuffer, targets, sums, box)
         finally:
             self.ctx.depth_func = "<"  # moderngl's default
             framebuffer.scissor = None

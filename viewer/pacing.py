@@ -27,8 +27,8 @@ from collections.abc import Callable, Iterator
 import moderngl
 import numpy as np
 
-__all__ = ["GROWTH", "PIECE_SECONDS", "READ_BYTES", "Pacer", "Progress", "covered_row_costs", "disc_row_costs",
-           "read_depth_rows", "read_rows"]
+__all__ = ["BLOCK", "GROWTH", "PIECE_SECONDS", "READ_BYTES", "Blocks", "Pacer", "Progress", "covered_block_costs",
+           "disc_block_costs", "read_rows"]
 
 #: The time one piece of GPU work is sized to take (seconds): a Ctrl-C waits for the piece under way.
 PIECE_SECONDS = 0.2
@@ -108,6 +108,8 @@ class Pacer:
             self.budget = cost
 
 
+#: The smallest piece of a 2-D pass: columns × rows (llvmpipe bins 64×64 tiles and shades 4×4 blocks).
+BLOCK = (64, 4)
 #: Bytes one ``glReadPixels`` of :func:`read_rows` reads at most (a whole 8192² RGBA32F image is 1 GiB).
 READ_BYTES = 1 << 25
 
@@ -126,34 +128,82 @@ def read_rows(framebuffer: moderngl.Framebuffer, size: tuple[int, int], attachme
     return out
 
 
-def covered_row_costs(framebuffer: moderngl.Framebuffer, size: tuple[int, int]) -> np.ndarray:
-    """Per GL row (bottom up), the cost of shading it: 1 per pixel the depth attachment covers (depth < 1,
-    the clear value), :data:`viewer.scheduling.UNCOVERED_COST` per other pixel (the network runs where covered)."""
-    from viewer.scheduling import UNCOVERED_COST
+class Blocks:
+    """A rectangle of pixels cut into blocks of :data:`BLOCK` (the last column and row of blocks may be smaller),
+    numbered row by row: the units of a 2-D pass's pieces. Rows of blocks alone would not do: 4 rows of a
+    16384-pixel-wide image are 65536 pixels, seconds of network on llvmpipe.
 
-    width, height = size
-    costs = np.empty(height, dtype=np.float64)
-    rows = max(1, READ_BYTES // (4 * width))
-    for first in range(0, height, rows):
-        depth = read_depth_rows(framebuffer, width, first, min(rows, height - first))
-        covered = np.count_nonzero(depth < 1.0, axis=1)
-        costs[first:first + len(covered)] = covered + UNCOVERED_COST * (width - covered)
-    return costs
+    Args:
+        width: the rectangle's width (from x = 0).
+        rows: ``(first, end)`` GL rows (from the bottom) of the rectangle.
+    """
+
+    def __init__(self, width: int, rows: tuple[int, int]) -> None:
+        self.width = width
+        self.first, self.end = rows
+        self.columns = -(-width // BLOCK[0])
+        self.block_rows = -(-(self.end - self.first) // BLOCK[1])
+        self.count = self.columns * self.block_rows
+
+    def rectangles(self, start: int, end: int) -> list[tuple[int, int, int, int]]:
+        """Blocks ``start … end − 1`` as at most three scissor boxes ``(x, y, width, height)`` (GL pixels): the
+        rest of a first row of blocks, whole rows, the start of a last row."""
+        boxes = []
+        while start < end:
+            row, column = divmod(start, self.columns)
+            if column == 0 and end - start >= self.columns:  # whole rows of blocks
+                rows = (end - start) // self.columns
+                boxes.append(self._box(row, rows, 0, self.columns))
+                start += rows * self.columns
+            else:  # a part of one row of blocks
+                stop = min(end - row * self.columns, self.columns)
+                boxes.append(self._box(row, 1, column, stop))
+                start = row * self.columns + stop
+        return boxes
+
+    def _box(self, row: int, rows: int, column: int, stop: int) -> tuple[int, int, int, int]:
+        y = self.first + row * BLOCK[1]
+        x = column * BLOCK[0]
+        return x, y, min(self.width, stop * BLOCK[0]) - x, min(self.end, y + rows * BLOCK[1]) - y
+
+    def costs(self, counts: np.ndarray) -> np.ndarray:
+        """Per block (in order), the cost of shading it: 1 per pixel where the network runs,
+        :data:`viewer.scheduling.UNCOVERED_COST` per other pixel, from ``counts`` (``(rows, columns)``: per row
+        of the rectangle, its pixels where the network runs in each column of blocks)."""
+        from viewer.scheduling import UNCOVERED_COST
+
+        rows = counts.shape[0]
+        padded = np.zeros((self.block_rows * BLOCK[1], self.columns), dtype=np.float64)
+        padded[:rows] = counts
+        inside = padded.reshape(self.block_rows, BLOCK[1], self.columns).sum(axis=1)
+        heights = np.minimum(BLOCK[1], rows - BLOCK[1] * np.arange(self.block_rows))
+        widths = np.minimum(BLOCK[0], self.width - BLOCK[0] * np.arange(self.columns))
+        return (inside + UNCOVERED_COST * (heights[:, None] * widths[None, :] - inside)).ravel()
 
 
-def read_depth_rows(framebuffer: moderngl.Framebuffer, width: int, first: int, count: int) -> np.ndarray:
-    """GL rows ``first … first + count − 1`` of ``framebuffer``'s depth, ``float32`` ``(count, width)``."""
-    out = np.empty((count, width), dtype=np.float32)
-    framebuffer.read_into(out, viewport=(0, first, width, count), components=1, attachment=-1, dtype="f4")
-    return out
+def covered_block_costs(framebuffer: moderngl.Framebuffer, blocks: Blocks) -> np.ndarray:
+    """:meth:`Blocks.costs` of the pixels ``framebuffer``'s depth covers (depth < 1, the clear value), read in
+    pieces of at most :data:`READ_BYTES`."""
+    rows = max(BLOCK[1], READ_BYTES // (4 * blocks.width) // BLOCK[1] * BLOCK[1])  # whole rows of blocks each
+    padded = np.zeros((min(rows, blocks.end - blocks.first), blocks.columns * BLOCK[0]), dtype=bool)
+    counts = np.empty((blocks.end - blocks.first, blocks.columns), dtype=np.int64)
+    for first in range(blocks.first, blocks.end, rows):
+        count = min(rows, blocks.end - first)
+        depth = np.empty((count, blocks.width), dtype=np.float32)
+        framebuffer.read_into(depth, viewport=(0, first, blocks.width, count), components=1, attachment=-1,
+                              dtype="f4")
+        padded[:count, :blocks.width] = depth < 1.0
+        counts[first - blocks.first:first - blocks.first + count] = (
+            padded[:count].reshape(count, blocks.columns, BLOCK[0]).sum(axis=2))
+    return blocks.costs(counts)
 
 
-def disc_row_costs(size: int, first: int, end: int) -> np.ndarray:
-    """Per row ``first … end − 1`` of a ``size``² BRDF slice (from the top), the pixels whose centre lies in the
-    unit disc (where the material runs) plus :data:`viewer.scheduling.UNCOVERED_COST` per other pixel."""
-    from viewer.scheduling import UNCOVERED_COST
-
+def disc_block_costs(size: int, blocks: Blocks) -> np.ndarray:
+    """:meth:`Blocks.costs` of a ``size``² BRDF slice: the pixels whose centre lies in the unit disc (where the
+    material runs; the disc is symmetric, so GL rows count as rows from the top)."""
     centres = (np.arange(size, dtype=np.float64) + 0.5) / size * 2.0 - 1.0
-    reach = np.sqrt(np.maximum(0.0, 1.0 - centres[first:end] ** 2))  # |x| ≤ reach inside the disc
-    inside = np.searchsorted(centres, reach, side="right") - np.searchsorted(centres, -reach, side="left")
-    return inside + UNCOVERED_COST * (size - inside)
+    reach = np.sqrt(np.maximum(0.0, 1.0 - centres[blocks.first:blocks.end] ** 2))  # |x| ≤ reach inside the disc
+    low = np.searchsorted(centres, -reach, side="left")[:, None]  # per row, the columns [low, high) are inside
+    high = np.searchsorted(centres, reach, side="right")[:, None]
+    starts = BLOCK[0] * np.arange(blocks.columns)[None, :]
+    return blocks.costs(np.clip(np.minimum(high, starts + BLOCK[0]) - np.maximum(low, starts), 0, None))

@@ -35,7 +35,7 @@ import dataclasses
 import gc
 import signal
 import sys
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from pathlib import Path
 from typing import TYPE_CHECKING
 
@@ -72,6 +72,8 @@ _PROGRESS_STEPS = 1000
 #: XYZ, and the writer's float64 conversions (viewer.scene_config.write_render, gratnet.display).
 _CPU_BYTES_PER_PIXEL = 192
 _SIZE_LIMITS = ("GL_MAX_TEXTURE_SIZE", "GL_MAX_RENDERBUFFER_SIZE", "GL_MAX_VIEWPORT_DIMS")
+_UNPROBED_BYTES = 1 << 26  # RGBA32F render targets up to 64 MiB (2048²) are not probed
+_REFINING_PROBES = 4  # allocations that refine the largest size the driver takes, after halving found one
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
@@ -175,7 +177,11 @@ def run(arguments: argparse.Namespace) -> int:
     before = _file_state(out)
     try:
         return _render(arguments, out)
-    except KeyboardInterrupt:
+    except (KeyboardInterrupt, ImportError) as error:
+        from gratnet.cli import is_interrupt
+
+        if not is_interrupt(error):  # an ImportError of its own
+            raise
         landed = _file_state(out) not in (before, None)
         what = f"{out} and its config were written before it" if landed else "nothing was written"
         print(f"gratnet render: interrupted; {what}", file=sys.stderr)
@@ -296,22 +302,41 @@ def available_memory() -> int | None:
 def check_render_size(ctx: moderngl.Context, config: RenderConfig) -> None:
     """Refuse, in one :class:`GratNetError` naming the largest size that would do, a ``--size`` this machine
     cannot render, before any program compiles: beyond the GL limits (``GL_MAX_TEXTURE_SIZE``,
-    ``GL_MAX_RENDERBUFFER_SIZE``, ``GL_MAX_VIEWPORT_DIMS``), a float32 render target the driver does not
-    allocate (probed: llvmpipe refuses single textures over about 1.5 GiB, e.g. 12000×12000 RGBA32F), or more
-    memory than ``MemAvailable`` (:func:`render_bytes`)."""
+    ``GL_MAX_RENDERBUFFER_SIZE``, ``GL_MAX_VIEWPORT_DIMS``), more memory than ``MemAvailable``
+    (:func:`render_bytes`), or a float32 render target the driver does not allocate (probed: llvmpipe refuses
+    single textures over about 1.5 GiB, e.g. 12000×12000 RGBA32F).
+
+    The largest size is searched at the same aspect ratio: first by the limits and the memory (free to ask),
+    then by a few allocations (a refused one costs nothing; an accepted one about a second per GiB on llvmpipe,
+    which clears its textures)."""
     width, height = config.width, config.height
     problem = _size_problem(ctx, config, width, height)
     if problem is None:
+        problem = None if _allocates(ctx, width, height) else (
+            f"the GPU ({ctx.info.get('GL_RENDERER', '?')}) cannot allocate a {width}×{height} float32 RGBA render "
+            f"target ({16 * width * height / 2**30:.1f} GiB)")
+    if problem is None:
         return
-    low, high = 0, width  # the largest width (at this aspect ratio) whose size has no problem
-    while high - low > 1:
-        middle = (low + high) // 2
-        if _size_problem(ctx, config, middle, _scaled_height(width, height, middle)) is None:
-            low = middle
-        else:
-            high = middle
+    low = _largest(lambda side: _size_problem(ctx, config, side, _scaled_height(width, height, side)) is None, 0,
+                   width)
+    if low and not _allocates(ctx, low, _scaled_height(width, height, low)):
+        high = low
+        while low and not _allocates(ctx, low, _scaled_height(width, height, low)):  # halve the bytes
+            high, low = low, int(low / 2**0.5)
+        low = _largest(lambda side: _allocates(ctx, side, _scaled_height(width, height, side)), low, high,
+                       _REFINING_PROBES)
     fits = f"; at most {low},{_scaled_height(width, height, low)} at this aspect ratio" if low else ""
     raise GratNetError(f"--size {width},{height} is too large for this machine: {problem}{fits}")
+
+
+def _largest(fits: Callable[[int], bool], low: int, high: int, steps: int | None = None) -> int:
+    """The largest ``side`` in ``low … high − 1`` that ``fits`` (``low`` is known to, or is 0; ``high`` is known
+    not to), by bisection, at most ``steps`` steps (None: to the end)."""
+    while high - low > 1 and (steps is None or steps > 0):
+        middle = (low + high) // 2
+        low, high = (middle, high) if fits(middle) else (low, middle)
+        steps = None if steps is None else steps - 1
+    return low
 
 
 def _scaled_height(width: int, height: int, scaled_width: int) -> int:
@@ -339,7 +364,7 @@ def render_bytes(config: RenderConfig, width: int, height: int, software: bool) 
 
 
 def _size_problem(ctx: moderngl.Context, config: RenderConfig, width: int, height: int) -> str | None:
-    """Why a ``width`` × ``height`` render cannot be made here, or None."""
+    """Why a ``width`` × ``height`` render cannot be made here by the GL limits or the memory, or None."""
     from viewer.renderer import is_software_rasterizer
 
     for name in _SIZE_LIMITS:
@@ -347,9 +372,6 @@ def _size_problem(ctx: moderngl.Context, config: RenderConfig, width: int, heigh
         most = (value, value) if isinstance(value, int) else tuple(value) if isinstance(value, tuple) else None
         if most is not None and len(most) == 2 and (width > most[0] or height > most[1]):
             return f"{name} is {value} here"
-    if not _allocates(ctx, width, height):
-        return (f"the GPU ({ctx.info.get('GL_RENDERER', '?')}) cannot allocate a {width}×{height} float32 RGBA render "
-                f"target ({16 * width * height / 2**30:.1f} GiB)")
     available = available_memory()
     needed = render_bytes(config, width, height, is_software_rasterizer(ctx))
     if available is not None and needed > available:
@@ -360,8 +382,12 @@ def _size_problem(ctx: moderngl.Context, config: RenderConfig, width: int, heigh
 
 def _allocates(ctx: moderngl.Context, width: int, height: int) -> bool:
     """Whether the driver makes a complete framebuffer of a ``width`` × ``height`` RGBA32F texture and a depth
-    renderbuffer (what every path renders into; nothing is drawn, and llvmpipe commits no memory for it)."""
+    renderbuffer (what every path renders into; nothing is drawn). Up to :data:`_UNPROBED_BYTES` per texture
+    the answer is yes without asking (every GL 4.3 driver allocates that)."""
     import moderngl
+
+    if 16 * width * height <= _UNPROBED_BYTES:
+        return True
 
     owned: list[moderngl.Texture | moderngl.Renderbuffer | moderngl.Framebuffer] = []
     try:

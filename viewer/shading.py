@@ -22,7 +22,7 @@ from gratnet.brdf import direction
 from gratnet.display import xyz_to_display_srgb8
 from gratnet.errors import GratNetError
 from viewer.glsl import GeneratedSource, compile_program
-from viewer.pacing import Pacer, Progress, disc_row_costs, read_rows
+from viewer.pacing import Blocks, Pacer, Progress, disc_block_costs, read_rows
 
 __all__ = ["SKIP_COUNTER_BINDING", "STATISTICS_KEYS", "ShadingPrograms", "ior_uniform", "set_uniform",
            "skip_threshold_value"]
@@ -208,8 +208,8 @@ class ShadingPrograms:
                 counting variant of the program (slower: time renders without it).
             rows: ``(first, end)``: compute only these rows (from the top; a scissor box, so the time is the
                 band's); the other rows are not written. The viewer refines a slice in such bands between frames.
-            progress: called with the fraction done (0 … 1) after each band of rows: the rows are drawn in bands
-                of about :data:`viewer.pacing.PIECE_SECONDS` each (Ctrl-C is answered between them).
+            progress: called with the fraction done (0 … 1) after each piece: the rows are drawn in pieces of
+                about :data:`viewer.pacing.PIECE_SECONDS` each (Ctrl-C is answered between them).
 
         Returns:
             ``(exposed, material)``, both ``float32`` ``(size, size, 3)`` with row 0 at the top (as
@@ -238,14 +238,15 @@ class ShadingPrograms:
         targets = [self.ctx.texture((size, size), 4, dtype="f4") for _ in range(2)]
         framebuffer = self.ctx.framebuffer(color_attachments=targets)
         try:
-            # Bands of rows (scissor boxes), each finished before the next: no GL call runs long (viewer.pacing).
+            # Pieces of blocks (scissor boxes), each finished before the next: no GL call runs long (viewer.pacing).
             first, end = (0, size) if rows is None else rows
-            costs = disc_row_costs(size, first, end)
-            total = float(costs.sum())
-            cumulative = np.cumsum(costs)
-            done = None if progress is None else lambda row: progress(float(cumulative[row - 1]) / total)
-            for top, bottom in self.slice_pacer.pieces(end - first, costs, done=done):
-                self.draw(key, framebuffer, ((bound, unit),), (0, size - first - bottom, size, bottom - top))
+            blocks = Blocks(size, (size - end, size - first))  # GL rows: bottom up
+            costs = disc_block_costs(size, blocks)
+            cumulative = np.cumsum(costs) / costs.sum()
+            done = None if progress is None else lambda block: progress(float(cumulative[block - 1]))
+            for start, stop in self.slice_pacer.pieces(blocks.count, costs, done=done):
+                for box in blocks.rectangles(start, stop):
+                    self.draw(key, framebuffer, ((bound, unit),), box)
             if statistics is not None:
                 self.read_counters(statistics)
             # GL rows start at the bottom; ours at the top.
