@@ -50,6 +50,8 @@ PREVIEW_MESHES: dict[str, Callable[[], Any]] = {"cd": _preview_disc, "sphere": _
 
 #: Weights paths from slowest to fastest to draw on a CPU rasterizer (the later one takes over).
 _SPEED_ORDER = ("texture", "baked")
+#: Niceness of the child that warms the other shipped materials' quick programs while the window is idle.
+PREFETCH_NICENESS = 15
 
 
 class SceneSupply:
@@ -88,6 +90,13 @@ class SceneSupply:
         self._active: set[tuple[str, str]] = set()  # ... and drawn once: ready to render
         self._worker: CompileWorker | None = None
         self._prestarted = worker
+        #: (model file, weights path, group) that a child of this session has warmed: linked here from Mesa's
+        #: cache at once, without waiting for a new child (a switch to a prefetched material).
+        self._warm: set[tuple[str, str, str]] = set()
+        #: While the window is idle, one child at a time warms the next shipped material's quick (texture)
+        #: programs, so that a switch to it shows a picture in a few frames instead of after a compile.
+        self._prefetch: CompileWorker | None = None
+        self._prefetched: set[str] = set()  # materials a prefetch child was started for
         self._meshes: dict[str, Any] = {}  # mesh key -> Mesh, or Future of one
         self._buffers: dict[tuple[str, str], Any] = {}  # (path, mesh key) -> MeshBuffers
         self._executor = ThreadPoolExecutor(1, thread_name_prefix="gratnet-mesh") if background else None
@@ -128,6 +137,7 @@ class SceneSupply:
         if state.material == self._material:
             return
         self._release_scenes()
+        self._stop_prefetch()  # the CPU goes to the switch
         self._material = state.material
         model = self.model(state.material)
         from viewer.renderer import choose_weights_path
@@ -157,6 +167,8 @@ class SceneSupply:
         """Whether the program group can be linked here without a long compile."""
         if not self.background:
             return True
+        if self._material is not None and (str(resolve_material(self._material)), path, group) in self._warm:
+            return True
         if self._worker is None:  # no disk cache, or the child failed: the first path, compiled here
             return path == self._paths[0]
         return (path, group) in self._worker.ready
@@ -172,7 +184,7 @@ class SceneSupply:
             return None
         worker = self._worker
         if worker is not None:
-            worker.poll()
+            self._note_warm(worker)
             if worker.error is not None and "worker" not in self.errors:
                 self.errors["worker"] = f"the background compile failed ({worker.error}); compiling in the window"
                 self._worker = None  # fall back: the first path, compiled here
@@ -183,6 +195,7 @@ class SceneSupply:
                 self._paths = made or self._paths[:1]
         self._collect_meshes()
         group = _group(state)
+        self._advance_prefetch(group, idle)
         best = self._best_active(group)
         for path in reversed(self._paths):
             if best is not None and (not idle or _SPEED_ORDER.index(path) <= _SPEED_ORDER.index(best)):
@@ -195,6 +208,46 @@ class SceneSupply:
             self._first_draw(path, group)
             return "took over" if best is not None else "drawn"
         return None
+
+    def _note_warm(self, worker: CompileWorker) -> None:
+        """Read ``worker``'s reports; what it warmed is linked from the cache from now on."""
+        worker.poll()
+        self._warm.update((str(worker.model_path), path, group) for path, group in worker.ready)
+
+    def _advance_prefetch(self, group: str, idle: bool) -> None:
+        """Prefetch (see ``_prefetch``): read the running child's reports, stop it when done, and start the next
+        one while the window is idle and its own material's child has finished."""
+        prefetch = self._prefetch
+        if prefetch is not None:
+            self._note_warm(prefetch)
+            if not prefetch.running:
+                self._stop_prefetch()
+            return
+        if not idle or (self._worker is not None and self._worker.running) or not shader_cache_enabled():
+            return
+        from viewer.catalog import shipped_materials
+
+        for material in shipped_materials():
+            if material == self._material or material in self._prefetched:
+                continue
+            self._prefetched.add(material)
+            model_path = resolve_material(material)
+            if (str(model_path), "texture", group) in self._warm:
+                continue
+            self._prefetch = CompileWorker(model_path, ("texture",), (group,), material, niceness=PREFETCH_NICENESS,
+                                           render_path=self.render_path)
+            return
+
+    def _stop_prefetch(self) -> None:
+        if self._prefetch is not None:
+            self._note_warm(self._prefetch)
+            self._prefetch.close()
+            self._prefetch = None
+
+    @property
+    def warm(self) -> frozenset[tuple[str, str, str]]:
+        """``(model file, weights path, group)`` that children of this session have warmed (prefetch included)."""
+        return frozenset(self._warm)
 
     def step_due(self, state: Any, idle: bool = True) -> bool:
         """Whether :meth:`poll` (with the same ``idle``) has a GL step to do for ``state`` right now."""
@@ -390,7 +443,8 @@ class SceneSupply:
         self._material = None
 
     def release(self) -> None:
-        """Stop the worker and free the GL objects (the context belongs to the caller)."""
+        """Stop the workers and free the GL objects (the context belongs to the caller)."""
+        self._stop_prefetch()
         self._release_scenes()
         if self._prestarted is not None:
             self._prestarted.close()
