@@ -262,3 +262,44 @@ def test_a_wavelength_block_on_a_killed_node_is_computed_on_another(setup):
     assert "2 of 2 runs finished" in output
     _check(out, local, killed)
     assert not (out / "volumes" / "blazed.parts").exists()  # the blocks, once assembled, are removed
+
+
+def test_a_killed_driver_leaves_no_task_running_on_the_cluster_and_the_rerun_finishes(setup):
+    """``gratnet sweep --address`` killed with SIGKILL while a training runs on a worker node: Ray ends the dead
+    driver's tasks (the worker running the training is gone within 10 s: the cluster is not the sweep's, so no
+    watchdog of the sweep's is involved), and the same command then finishes the sweep, equal to the one-machine
+    run, resuming the training from its checkpoint."""
+    cluster, sweep_file, local = setup
+    cluster.add_worker("w4")
+    out = cluster.folder / "shared" / "driver-killed"
+    arguments = ["sweep", str(sweep_file), "--out", str(out), "--address", cluster.address, "--quiet"]
+    driver = subprocess.Popen([sys.executable, "-m", "gratnet.cli", *arguments], cwd=cluster.folder,
+                              env=cluster.environment(), stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    try:
+        deadline = time.monotonic() + 180
+        running: list[dict[str, Any]] = []
+        while not running and driver.poll() is None and time.monotonic() < deadline:
+            time.sleep(0.02)
+            running = [record for record in _running(out, "run-")
+                       if (out / "runs" / record["key"][len("run-"):] / "checkpoint.pt").is_file()]
+        assert running, "no training was seen running"
+        os.kill(driver.pid, signal.SIGKILL)
+        driver.wait()
+    finally:
+        if driver.poll() is None:
+            driver.kill()
+            driver.wait()
+    workers = {record["pid"] for record in running}
+    deadline = time.monotonic() + faults.GRACE_SECONDS
+    while any(cluster.node_of(pid) for pid in workers) and time.monotonic() < deadline:
+        time.sleep(0.1)
+    assert not any(cluster.node_of(pid) for pid in workers), "a task of the killed driver still runs"
+    result = subprocess.run([sys.executable, "-m", "gratnet.cli", *arguments], cwd=cluster.folder,
+                            env=cluster.environment(), capture_output=True, text=True, timeout=300)
+    assert result.returncode == 0, result.stderr
+    compared, differences = faults.compare(out, local)
+    assert compared > 20 and not differences, differences
+    records = read_records(out)
+    assert computed_more_than_once(records) == {}
+    resumed = [record for record in records if record["key"] == running[0]["key"] and record["outcome"] == "computed"]
+    assert len(resumed) == 1 and resumed[0].get("resumed_from_epoch", 0) >= 1, resumed
