@@ -83,6 +83,7 @@ from viewer.scheduling import (
     effective_pixels,
     effective_pixels_per_row,
     first_band_margin,
+    padded_size,
     reduced_size,
     upscale,
 )
@@ -469,8 +470,11 @@ class ViewerApp:
                 if rows is not None:
                     xyz = xyz[rows[0]:rows[1]]
             else:  # the reference draws the network's mesh buffers: the same geometry, preview or full
-                rgba = scene.render_rgba(buffers, camera or state.camera(), state.light(), size, state.exposure,
-                                         state.effective_ior, first_sample=sample)
+                target, view = size, camera or state.camera()
+                if scene.render_path == "deferred":  # power-of-two sides: the warm variant (padded_size)
+                    target, view = self._padded(view, size)
+                rgba = scene.render_rgba(buffers, view, state.light(), target, state.exposure,
+                                         state.effective_ior, first_sample=sample)[:size[1], :size[0]]
                 xyz, coverage = rgba[..., :3], rgba[..., 3]
             pictures.append(xyz)
         if shading == "flip":  # network XYZ, reference XYZ, coverage: _display shows the FLIP heat map
@@ -553,8 +557,7 @@ class ViewerApp:
             self.stats.last_kind = f"refine 1/{factor} rows {row0}-{row1}"
         else:  # the next band of rows at full resolution, over the upscaled preview
             row0 = refinement.next_row
-            rows = self.policy.band_rows(self._row_seconds(width, height)[row0:] * first_band_margin(row0),
-                                         self._band_multiple(state))
+            rows = self._band_rows(state, self._row_seconds(width, height)[row0:] * first_band_margin(row0))
             row1 = min(height, row0 + rows)
             band = self._band_camera(state, width, height, row0, row1)
             xyz = self._timed_render(state, (width, row1 - row0), band)[0]
@@ -575,6 +578,20 @@ class ViewerApp:
             self._refinement = None
         self._publish(key, refinement.pixels.copy(), rendered, done, 1.0 if done else progress)
 
+    @staticmethod
+    def _padded(camera: Camera, size: tuple[int, int]) -> tuple[tuple[int, int], Camera]:
+        """A render of ``size`` with ``camera`` (a band's, or a whole picture's) as a power-of-two target whose
+        top-left corner holds it (:func:`viewer.scheduling.padded_size`)."""
+        target = padded_size(size)
+        if target == size:
+            return size, camera
+        if not isinstance(camera, BandCamera):  # the whole picture: a band of all its rows
+            camera = BandCamera(camera.distance, camera.azimuth_deg, camera.elevation_deg, camera.target,
+                                camera.fov_deg, camera.near, camera.far, full_aspect=size[0] / size[1],
+                                height=size[1], row0=0, row1=size[1])
+        return target, dataclasses.replace(camera, width_fraction=size[0] / target[0],
+                                           height_fraction=size[1] / target[1])
+
     def _band_camera(self, state: ViewerState, width: int, height: int, row0: int, row1: int) -> BandCamera:
         camera = state.camera()
         return BandCamera(camera.distance, camera.azimuth_deg, camera.elevation_deg, camera.target, camera.fov_deg,
@@ -588,8 +605,7 @@ class ViewerApp:
         assert accumulation is not None and self.image is not None
         state, (width, height) = self.state, self.full_size()
         row0 = accumulation.next_row
-        row1 = min(height, row0 + self.policy.band_rows(self._row_seconds(width, height)[row0:],
-                                                        self._band_multiple(state)))
+        row1 = min(height, row0 + self._band_rows(state, self._row_seconds(width, height)[row0:]))
         started = time.perf_counter()
         xyz = self._timed_render(state, (width, row1 - row0), self._band_camera(state, width, height, row0, row1),
                                  sample=accumulation.samples)[0]
@@ -612,11 +628,13 @@ class ViewerApp:
         self.stats.last_sample_s = time.perf_counter() - started
         self._publish(key, pixels, (width, height), True, 1.0, accumulation.samples)
 
-    def _band_multiple(self, state: ViewerState) -> int | None:
-        """Mesh bands on the deferred path take any number of rows (the network runs per covered pixel, not
-        per 4×4 block of fragments); elsewhere the policy's multiple."""
+    def _band_rows(self, state: ViewerState, row_seconds: np.ndarray) -> int:
+        """The next mesh band's rows (:meth:`ResolutionPolicy.band_rows`): on the deferred path a power of two
+        (the network runs per covered pixel, not per block of fragments, and a power-of-two band needs no
+        padding: :func:`viewer.scheduling.padded_size`); elsewhere a multiple of the policy's."""
         supplied = self.supply.scene(state)
-        return 1 if supplied is not None and supplied[0].render_path == "deferred" else None
+        deferred = supplied is not None and supplied[0].render_path == "deferred"
+        return self.policy.band_rows(row_seconds, 1 if deferred else None, power_of_two=deferred)
 
     def _row_seconds(self, width: int, height: int) -> np.ndarray:
         """Predicted seconds of each full-resolution row, from the preview's coverage of that row."""

@@ -19,8 +19,8 @@ import numpy as np
 from viewer.camera import Camera
 
 __all__ = ["UNCOVERED_COST", "Accumulation", "BandCamera", "Frame", "Refinement", "RenderStats", "ResolutionPolicy",
-           "disc_coverage", "effective_pixels", "effective_pixels_per_row", "first_band_margin", "reduced_size",
-           "upscale"]
+           "disc_coverage", "effective_pixels", "effective_pixels_per_row", "first_band_margin", "padded_size",
+           "reduced_size", "upscale"]
 
 
 #: Cost of a pixel the mesh does not cover, relative to a covered one (the network runs only where covered).
@@ -78,15 +78,18 @@ class ResolutionPolicy:
                 return factor
         return self.factors[-1]
 
-    def band_rows(self, row_seconds: np.ndarray, multiple: int | None = None) -> int:
+    def band_rows(self, row_seconds: np.ndarray, multiple: int | None = None, power_of_two: bool = False) -> int:
         """Rows of the next refinement band: as many of the remaining rows (their predicted seconds, in
         order) as fit ``refine_budget_s``, rounded down to a multiple of ``multiple`` (default
-        ``band_multiple``; at least that many); all the remaining rows when they fit or are fewer."""
+        ``band_multiple``; at least that many) or, with ``power_of_two``, to a power of two; all the remaining
+        rows when they fit or are fewer."""
         multiple = self.band_multiple if multiple is None else max(1, int(multiple))
         remaining = len(row_seconds)
         fits = int(np.searchsorted(np.cumsum(row_seconds), self.refine_budget_s, side="right"))
         if fits >= remaining:
             return max(1, remaining)
+        if power_of_two:
+            return min(remaining, 1 << max(0, fits.bit_length() - 1))
         rows = max(multiple, fits - fits % multiple)
         return max(1, min(remaining, rows))
 
@@ -145,12 +148,18 @@ class RenderStats:
 @dataclasses.dataclass(frozen=True)
 class BandCamera(Camera):
     """The camera restricted to rows ``[row0, row1)`` of a ``height``-row image: the same pixel centres,
-    rasterized into a ``row1 − row0``-row target (a crop of clip space after the projection)."""
+    rasterized into a ``row1 − row0``-row target (a crop of clip space after the projection).
+
+    ``width_fraction`` and ``height_fraction`` < 1 put that band into the top-left corner of a larger target
+    (a ``width / width_fraction`` × ``(row1 − row0) / height_fraction`` one), its pixel centres unchanged: the
+    viewer pads its deferred renders to power-of-two sizes (:func:`padded_size`)."""
 
     full_aspect: float = 1.0
     height: int = 1
     row0: int = 0
     row1: int = 1
+    width_fraction: float = 1.0
+    height_fraction: float = 1.0
 
     def view_projection(self, aspect: float) -> np.ndarray:  # noqa: ARG002 - the band's own aspect is wrong
         full = super().view_projection(self.full_aspect)
@@ -159,7 +168,23 @@ class BandCamera(Camera):
         crop = np.eye(4, dtype=np.float64)
         crop[1, 1] = scale
         crop[3, 1] = -scale * centre  # row vectors: y' = scale · (y − centre · w)
+        if self.width_fraction != 1.0 or self.height_fraction != 1.0:  # into the target's top-left corner
+            corner = np.eye(4, dtype=np.float64)
+            corner[0, 0], corner[3, 0] = self.width_fraction, self.width_fraction - 1.0
+            corner[1, 1], corner[3, 1] = self.height_fraction, 1.0 - self.height_fraction
+            crop = crop @ corner
         return np.asarray(full.astype(np.float64) @ crop, dtype=np.float32)
+
+
+def padded_size(size: tuple[int, int]) -> tuple[int, int]:
+    """The smallest power-of-two width and height that hold ``size``. Mesa llvmpipe compiles a compute shader
+    anew for images whose sides are or are not powers of two (its variant key): the deferred path's network
+    kernel took 0.6–1.0 s (paper-cd, texture weights; ~25 s for a baked net) at the first band of a size of
+    the other kind, in the window's frame. Rendered padded, every picture uses the variant the compile child
+    warmed (issue 35). The padding shows the scene beyond the picture, rendered too where the mesh reaches
+    into it: the viewer's deferred bands take power-of-two heights (:meth:`ResolutionPolicy.band_rows`), so that
+    a band of a picture of power-of-two width needs none."""
+    return tuple(1 << max(0, int(side) - 1).bit_length() for side in size)  # type: ignore[return-value]
 
 
 @dataclasses.dataclass
