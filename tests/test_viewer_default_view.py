@@ -5,7 +5,8 @@
 - the exact defaults are remembered per model file, mesh and mode;
 - a switch in the window's background mode shows the new material at the guess before the worker's exact
   defaults arrive, and those replace it (a drag keeps the camera, not the old light and exposure);
-- gratnet view without --light, --camera or --exposure starts at the guess (or the remembered view).
+- gratnet view without --light, --camera or --exposure computes nothing before its window (the remembered
+  view, or the fallback view for the window to replace), and its first picture shows the guess.
 """
 
 from __future__ import annotations
@@ -133,21 +134,41 @@ def test_a_switch_shows_the_new_material_at_the_guess_then_at_the_exact_view(ctx
         app.release()
 
 
-def test_gratnet_view_starts_at_the_guess_and_keeps_the_flags_given(empty_cache):
+def test_gratnet_view_leaves_the_view_to_the_window_and_keeps_the_flags_given(empty_cache):
     from gratnet.cli import build_parser
+    from viewer.defaults import FALLBACK
     from viewer.view_cli import starting_view
 
     def start(*flags: str) -> tuple[ViewerState, tuple[str, ...]]:
         return starting_view(build_parser(only="view").parse_args(["view", "--material", "cd", "--mesh", "plane",
                                                                    *flags]))
 
-    guess = quick_view(load_model(resolve_material("cd")), build_mesh("plane"))
-    state, guessed = start()
-    assert guessed == VIEW_FIELDS
-    assert {name: getattr(state, name) for name in VIEW_FIELDS} == pytest.approx(guess)
+    state, guessed = start()  # nothing computed before the window: the fallback view, all of it to work out
+    assert guessed == VIEW_FIELDS and state.exposure == FALLBACK.exposure
     state, guessed = start("--exposure", "7")
     assert state.exposure == 7.0 and "exposure" not in guessed and "light_theta" in guessed
     assert start("--exposure", "7", "--light", "20,30", "--camera", "0.3,10,20")[1] == ()
     exact = state_defaults("cd", "plane")
-    state, guessed = start()  # remembered: exact at once, nothing to refine
+    state, guessed = start()  # remembered: exact at once, nothing to work out
     assert guessed == () and {name: getattr(state, name) for name in VIEW_FIELDS} == pytest.approx(exact)
+
+
+def test_the_first_picture_waits_for_the_guess_not_at_the_fallback_view(ctx):
+    """gratnet view's window starts at the fallback view with every view field to work out: its first picture
+    shows the quick guess (or the exact defaults), never the fallback view."""
+    from viewer.app import ViewerApp
+    from viewer.defaults import FALLBACK
+
+    start = ViewerState(material="cd", mesh="plane", exposure=FALLBACK.exposure)
+    app = ViewerApp(ctx, start, size=(16, 16), background=True, refine_view=VIEW_FIELDS)
+    try:
+        deadline = time.monotonic() + 120.0
+        while app.image is None and time.monotonic() < deadline:
+            app.frame()
+            time.sleep(0.02)
+        assert app.image is not None
+        shown = dict(zip(("light_theta", "light_phi", "camera_azimuth", "camera_elevation", "camera_distance"),
+                         app.image.key[2:7], strict=True))
+        assert app.image.key[8] != FALLBACK.exposure and shown["light_theta"] != FALLBACK.light_theta_degrees
+    finally:
+        app.release()

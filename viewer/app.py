@@ -392,6 +392,8 @@ class ViewerApp:
             return True
         if not self.supply.scene_ready(self.state):
             return False  # the picture on show stays until the new one can be rendered
+        if self._defaults.holding:
+            return False  # … or until its view is known (the quick guess: tenths of a second)
         if image is None or image.key != key:
             self._refinement = None
             self._preview(key)

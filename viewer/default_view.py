@@ -29,6 +29,7 @@ from __future__ import annotations
 import json
 import math
 import os
+import time
 from collections.abc import Iterable
 from pathlib import Path
 from typing import Any
@@ -36,8 +37,8 @@ from typing import Any
 from gratnet.errors import GratNetError
 from viewer.defaults import FOV_DEGREES, resolve_defaults
 
-__all__ = ["DEFAULTS_WORKER_NICENESS", "QUICK_SAMPLES", "VIEW_FIELDS", "DefaultViewRequests", "quick_view",
-           "remembered_view", "state_defaults", "view_cache_file"]
+__all__ = ["DEFAULTS_WORKER_NICENESS", "GUESS_WAIT_S", "QUICK_SAMPLES", "VIEW_FIELDS", "DefaultViewRequests",
+           "quick_view", "remembered_view", "state_defaults", "view_cache_file"]
 
 #: Niceness of the viewer's default-view worker process (os.nice increment). At 19 a busy machine starved it
 #: for 55–118 s (issue 35); at 10 it still yields the window most of the CPU when both want it.
@@ -48,6 +49,9 @@ VIEW_FIELDS = ("light_theta", "light_phi", "camera_distance", "camera_azimuth", 
 #: elevation) keeps the whole group, and the other groups still come (the light and exposure of a new material).
 _GROUPS = (("light_theta", "light_phi"), ("camera_distance", "camera_azimuth", "camera_elevation"), ("exposure",))
 _GROUP_OF = {name: group for group in _GROUPS for name in group}
+#: How long the viewer holds a new picture back for the quick guess (seconds): rather than show the material
+#: at a view about to change (the old light and exposure after a switch, the fallback view at a start).
+GUESS_WAIT_S = 2.0
 #: Surface points of the quick guess's exposure (viewer.defaults uses 4096).
 QUICK_SAMPLES = 384
 _CACHE_VERSION = 1
@@ -324,6 +328,7 @@ class DefaultViewRequests:
         self._view: tuple[float, ...] | None = None  # the view the last hand-over left (the user's since)
         self._quick: Any = None  # future or result of the quick guess
         self._exact: Any = None  # future or result of the exact defaults
+        self._requested_at = -math.inf  # time.monotonic() of the last request
 
     @staticmethod
     def _state_key(state: Any) -> tuple[Any, ...]:
@@ -352,6 +357,7 @@ class DefaultViewRequests:
         self._key, self._fields, self._view = key, tuple(name for name in VIEW_FIELDS if name in set(fields)), \
             self._state_view(state)
         self._quick = self._exact = None
+        self._requested_at = time.monotonic()
         remembered = remembered_view(*key)
         if remembered is not None:
             self._exact = remembered
@@ -398,6 +404,12 @@ class DefaultViewRequests:
             return entry.result()
         except Exception:  # noqa: BLE001 - any failure (also a lost worker) only means no default view
             return None  # the viewer reports an unusable material or mesh itself
+
+    @property
+    def holding(self) -> bool:
+        """Whether the caller should hold a new picture back: the quick guess is still on its way, for at most
+        :data:`GUESS_WAIT_S` after the request."""
+        return self.stage == "guessing" and time.monotonic() - self._requested_at < GUESS_WAIT_S
 
     def take(self, state: Any) -> dict[str, float] | None:
         """The ``ViewerApp.set(**changes)`` for the last request once something better than what was handed over

@@ -9,8 +9,8 @@
 - ``--light θ,φ``, ``--camera DIST,AZIMUTH,ELEVATION``, ``--exposure``, ``--ior``, ``--no-fresnel``,
   ``--slice``: the starting view, as in ``gratnet render``; light, camera and exposure left out are chosen
   from the material and the mesh (viewer.defaults), the same values as ``gratnet render``'s: remembered from
-  an earlier run, else a quick guess at once that the exact values replace when a worker process has them
-  (viewer.default_view), so that the window shows without waiting for them.
+  an earlier run, else a quick guess (a thread, tenths of a second) that the exact values replace when a
+  worker process has them (viewer.default_view), so that the window shows without waiting for them.
 - ``--weights-path auto|texture|baked``: where the shader reads the weights, as in ``gratnet render``.
 - ``--render-path auto|forward|deferred``: as in ``gratnet render``. In the window ``auto`` is forward on a CPU
   rasterizer (llvmpipe: the deferred path's first frames after a switch cost 0.3–0.6 s of JIT work, over the
@@ -44,7 +44,6 @@ from viewer.scene_config import (
     RENDER_PATHS,
     WEIGHT_PATHS,
     add_scene_arguments,
-    fill_scene_defaults,
     with_fallback,
 )
 
@@ -112,16 +111,14 @@ def _scene_numbers(arguments: argparse.Namespace) -> tuple[float, float, float, 
 
 
 def _guess_view(arguments: argparse.Namespace) -> tuple[str, ...]:
-    """Fill the unset ``--light``, ``--camera`` and ``--exposure`` with a first view, fast and without
-    colour-science (issue 35: the exact defaults took 4–6 s before the window showed): the exact defaults
-    remembered from an earlier start or switch (:func:`viewer.default_view.remembered_view`), else the quick
-    guess (:func:`viewer.default_view.quick_view`; the window replaces it by the exact defaults once a worker
-    process has them), else (a model file without its display analysis) the exact defaults computed now.
-    Returns the viewer fields that hold a guess."""
-    from gratnet.modelfile import load_model
-    from viewer.catalog import build_mesh, resolve_material
-    from viewer.default_view import quick_view, remembered_view
-    from viewer.defaults import FOV_DEGREES
+    """Fill the unset ``--light``, ``--camera`` and ``--exposure`` at once (issue 35: computing the exact defaults
+    here took 4–6 s, colour-science's import included, before the window showed): with the exact defaults
+    remembered from an earlier start or switch (:func:`viewer.default_view.remembered_view`), else with the
+    fallback view, which the window replaces by its quick guess and then by the exact defaults as soon as they
+    are worked out off its thread (it holds the first picture back for the guess). Returns the viewer fields
+    that the window is to work out."""
+    from viewer.default_view import remembered_view
+    from viewer.defaults import FALLBACK, FOV_DEGREES
 
     unset = {"light": arguments.light_text is None, "camera": arguments.camera_text is None,
              "exposure": arguments.exposure is None}
@@ -133,12 +130,9 @@ def _guess_view(arguments: argparse.Namespace) -> tuple[str, ...]:
     view = remembered_view(arguments.material, arguments.mesh, arguments.slice, FOV_DEGREES, ior)
     guessed: tuple[str, ...] = ()
     if view is None:
-        model = load_model(resolve_material(arguments.material))
-        view = quick_view(model, None if arguments.slice else build_mesh(arguments.mesh), arguments.slice,
-                          FOV_DEGREES, ior)
-        if view is None:  # no stored analysis to guess from: the exact defaults, now
-            fill_scene_defaults(arguments)
-            return ()
+        view = {"light_theta": FALLBACK.light_theta_degrees, "light_phi": FALLBACK.light_phi_degrees,
+                "camera_distance": FALLBACK.camera_distance, "camera_azimuth": FALLBACK.camera_azimuth_degrees,
+                "camera_elevation": FALLBACK.camera_elevation_degrees, "exposure": FALLBACK.exposure}
         guessed = tuple(field for flag, fields in _VIEW_FLAGS.items() if unset[flag] for field in fields)
     if unset["light"]:
         arguments.light_text = f"{view['light_theta']:g},{view['light_phi']:g}"
