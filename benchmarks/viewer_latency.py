@@ -129,7 +129,9 @@ def match_inputs(injected: Sequence[tuple[float, float]], frames: Sequence[Frame
 
     Returns:
         ``{"latency_s": [seconds or None per motion], "answered_by": [frame index or None], "consumed":
-        [motions consumed through each frame], "unmatched_drags": int, "negative": int}``.
+        [motions consumed through each frame], "unmatched_drags": int, "negative": int, "applied_s": [seconds
+        to the swap of the frame that consumed each motion (its state changed then; its picture may follow
+        later, e.g. while a new material's shader compiles), or None]}``.
     """
     columns = [column for _, column in injected]
     consumed: list[int] = []
@@ -143,6 +145,12 @@ def match_inputs(injected: Sequence[tuple[float, float]], frames: Sequence[Frame
             else:
                 count = found + 1
         consumed.append(count)
+    applied: list[float | None] = [None] * len(injected)  # the swap of the frame that consumed it
+    next_motion = 0
+    for index, frame in enumerate(frames):
+        while next_motion < min(consumed[index], len(injected)):
+            applied[next_motion] = frame.swapped - injected[next_motion][0]
+            next_motion += 1
     latency: list[float | None] = [None] * len(injected)
     answered_by: list[int | None] = [None] * len(injected)
     next_motion = 0
@@ -156,7 +164,7 @@ def match_inputs(injected: Sequence[tuple[float, float]], frames: Sequence[Frame
             next_motion += 1
     negative = sum(1 for value in latency if value is not None and value < 0.0)
     return {"latency_s": latency, "answered_by": answered_by, "consumed": consumed, "unmatched_drags": unmatched,
-            "negative": negative}
+            "negative": negative, "applied_s": applied}
 
 
 class Session:
@@ -423,6 +431,8 @@ def main(argv: list[str] | None = None) -> int:
     report["input_latency_by_phase_s"] = {phase: _summary(values) for phase, values in by_phase.items()}
     answered = [value for value in latencies if value is not None]
     report["max_input_latency_s"] = max(answered) if answered else None
+    applied = [value for value in matched["applied_s"] if value is not None]
+    report["input_applied_summary_s"] = _summary(applied)  # to the frame that applied it, picture or not
     works = [f["work_s"] for f in session.frames]
     report["frame_work_summary_s"] = _summary(works)
     report["frames_over_150ms"] = sum(1 for value in works if value > 0.150)

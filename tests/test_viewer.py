@@ -585,7 +585,9 @@ def test_window_never_blocks(display, tmp_path):
       more than 150 ms: while the baked shader compiles, across a material switch, while the faster baked
       program takes over, and across the switch to the BRDF slice;
     - real pointer events (XTest: a left-button drag over the picture, one motion every ~0.15 s, from
-      another process with its own time stamps) are each applied in a frame swapped ≤ 150 ms later.
+      another process with its own time stamps) are each applied in a frame swapped ≤ 150 ms later, and shown
+      in a picture swapped ≤ 150 ms later where no shader compile holds the picture back (not at the launch or
+      right after the switch: there the picture follows once the new program is linked).
 
     benchmarks/viewer_latency.py drives the session (also the measurement in docs/benchmarks.md). It
     launches on the shipped blazed model (28k MACs: its baked compile takes 25 s+, and runs on) and
@@ -621,8 +623,10 @@ def test_window_never_blocks(display, tmp_path):
     assert report["max_frame_s"] <= 0.150, summary
     if inject:
         latencies = report["input_latency_s"]
-        assert len(latencies) >= 20 and None not in latencies, summary
-        assert max(latencies) <= 0.150, summary
+        assert len(latencies) >= 20 and None not in latencies and report["input_negative"] == 0, summary
+        assert report["input_applied_summary_s"]["max"] <= 0.150, summary  # every motion applied in a frame ≤ 150 ms
+        for phase in ("interact", "slice switch"):  # … and on screen, where no shader compile holds the picture
+            assert report["input_latency_by_phase_s"][phase]["max"] <= 0.150, summary
     else:
         warnings.warn("libXtst is missing (apt-get install libxtst6): real pointer events were not injected",
                       stacklevel=1)

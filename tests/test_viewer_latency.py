@@ -20,6 +20,7 @@ def test_a_motion_is_answered_by_the_first_picture_that_reflects_it():
     assert matched["consumed"] == [0, 1, 3, 3]
     assert matched["answered_by"] == [1, 3, 3]
     assert matched["latency_s"] == pytest.approx([0.05, 0.5, 0.4])
+    assert matched["applied_s"] == pytest.approx([0.05, 0.4, 0.3])  # the frames that consumed them
     assert matched["negative"] == 0 and matched["unmatched_drags"] == 0
 
 
