@@ -453,16 +453,26 @@ def kill_once(case: Case, folder: Path, moment: float, reference: Path) -> Kill:
     return result
 
 
-def run_reference(case: Case, work: Path, inputs: Path) -> float:
-    """The uninterrupted command in WORK/CASE/reference; its duration T (its outputs become later cases' inputs)."""
-    reference = work / case.name / "reference"
-    reference.mkdir(parents=True)
-    status, duration = run_to_end(case.arguments, reference)
-    if status != 0:
-        raise RuntimeError(f"{case.name}: the uninterrupted command exited with status {status} "
-                           f"(log: {reference}.log)")
-    _share_inputs(case, reference, inputs)
-    return duration
+def run_reference(case: Case, work: Path, inputs: Path, control: bool = False) -> tuple[float, list[str]]:
+    """The uninterrupted command in WORK/CASE/reference: its duration T (its outputs become later cases' inputs),
+    and with ``control`` the differences between it and a first uninterrupted run (WORK/CASE/control), which
+    should be none (the comparison can tell runs apart only if uninterrupted ones agree); that first run also
+    fills the caches a first run fills (Mesa's shader cache), so that T is a warm run's."""
+    differences: list[str] = []
+    folders = (["control"] if control else []) + ["reference"]
+    for name in folders:
+        folder = work / case.name / name
+        folder.mkdir(parents=True)
+        status, duration = run_to_end(case.arguments, folder)
+        if status != 0:
+            raise RuntimeError(f"{case.name}: the uninterrupted command exited with status {status} "
+                               f"(log: {folder}.log)")
+    if control:
+        compared, differences = compare(work / case.name / "reference", work / case.name / "control")
+        if not compared:
+            differences.append("nothing to compare")
+    _share_inputs(case, work / case.name / "reference", inputs)
+    return duration, differences
 
 
 def kill_moments(case: Case, duration: float, kills: int, seed: int) -> list[float]:
@@ -479,9 +489,9 @@ def kill_runs(case: Case, work: Path, duration: float, kills: int, seed: int) ->
             for index, moment in enumerate(kill_moments(case, duration, kills, seed))]
 
 
-def run_all(work: Path, kills: int, seed: int, names: list[str] | None = None,
+def run_all(work: Path, kills: int, seed: int, names: list[str] | None = None, control: bool = True,
             report: Callable[[str], None] = print) -> dict[str, Any]:
-    """Every case (or those named) with ``kills`` kills each; a JSON-ready summary."""
+    """Every case (or those named) with ``kills`` kills each (and a control run each); a JSON-ready summary."""
     inputs = work / "inputs"
     inputs.mkdir(parents=True, exist_ok=True)
     summary: dict[str, Any] = {"seed": seed, "kills_per_command": kills, "commands": {}}
@@ -493,9 +503,13 @@ def run_all(work: Path, kills: int, seed: int, names: list[str] | None = None,
             summary["commands"][case.name] = {"skipped": f"{case.needs} is not installed"}
             report(f"{case.name}: skipped ({case.needs} is not installed)")
             continue
-        duration = run_reference(case, work, inputs)
+        duration, control_differences = run_reference(case, work, inputs, control)
+        if control:
+            report(f"{case.name}: two uninterrupted runs: {len(control_differences)} outputs differ "
+                   f"{control_differences[:3]}")
         results = kill_runs(case, work, duration, kills, seed)
-        summary["commands"][case.name] = {"uninterrupted_s": round(duration, 2),
+        summary["commands"][case.name] = {"uninterrupted_s": round(duration, 2), "control": control_differences
+                                          if control else None,
                                           "kills": [dataclasses.asdict(result) for result in results]}
         for result in results:
             state = "ok" if result.ok else "FAILED"
@@ -518,6 +532,7 @@ def run_all(work: Path, kills: int, seed: int, names: list[str] | None = None,
         "processes_alive_after_grace": sum(len(kill["survivors"]) for kill in every),
         "outputs_compared_after_reruns": sum(kill["compared"] for kill in every),
         "outputs_differing": sum(len(kill["differences"]) for kill in every),
+        "control_runs_differing": sum(bool(entry.get("control")) for entry in summary["commands"].values()),
         "seconds": round(time.monotonic() - started, 1),
     }
     return summary
@@ -530,17 +545,20 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--work", type=Path, default=Path("out/faults"), help="working folder (must not exist)")
     parser.add_argument("--commands", default="", help="comma-separated commands (default: all)")
     parser.add_argument("--json", type=Path, help="write the summary here")
+    parser.add_argument("--no-control", action="store_true",
+                        help="no control run (a second uninterrupted run compared with the first) per command")
     arguments = parser.parse_args(argv)
     if arguments.work.exists():
         parser.error(f"--work {arguments.work} exists; give a new folder")
     names = [name.strip() for name in arguments.commands.split(",") if name.strip()] or None
-    summary = run_all(arguments.work.resolve(), arguments.kills, arguments.seed, names)
+    summary = run_all(arguments.work.resolve(), arguments.kills, arguments.seed, names, not arguments.no_control)
     text = json.dumps(summary, indent=1) + "\n"
     if arguments.json:
         arguments.json.write_text(text, encoding="utf-8")
     print(json.dumps(summary["totals"]))
     totals = summary["totals"]
-    return 1 if totals["broken_files"] or totals["processes_alive_after_grace"] or totals["outputs_differing"] else 0
+    failed = ("broken_files", "processes_alive_after_grace", "outputs_differing", "control_runs_differing")
+    return 1 if any(totals[key] for key in failed) else 0
 
 
 if __name__ == "__main__":

@@ -2,5 +2,7 @@
 
 A tool on top of trainer/ (layers: gratnet/ ← viewer/, trainer/ ← sweep/): it calls the project's own
 functions (trainer.groundtruth, trainer.train, trainer.evaluate, bench.slices) and adds only the grid
-(sweep.spec), the task graph (sweep.runner, the only module that imports Ray) and the table (sweep.results).
+(sweep.spec), the task graph (sweep.runner, the only module that imports Ray), the table (sweep.results), one
+record per task attempt (sweep.records) and the watchdog that ends a killed sweep's local Ray instance
+(sweep.watchdog); what survives which fault: docs/robustness.md.
 """
