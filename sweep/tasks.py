@@ -184,8 +184,9 @@ def assemble_volume(out: Path, dataset: DatasetSpec, *parts: dict[str, Any]) -> 
 
     del parts
     with attempt(out, f"volume-{dataset.name}", f"{dataset.name}: assemble volume") as record:
-        if volume_state(out, dataset) == "done":
+        if volume_state(out, dataset) == "done":  # (blocks left by a kill after the volume was written: removed)
             record["outcome"] = "found"
+            shutil.rmtree(parts_folder(out, dataset), ignore_errors=True)
             return read_volume_metadata(out, dataset)
         found = [_finished_block(out, dataset, block) for block in range(dataset.parts)]
         blocks = [block for block in found if block is not None]

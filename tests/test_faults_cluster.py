@@ -303,3 +303,19 @@ def test_a_killed_driver_leaves_no_task_running_on_the_cluster_and_the_rerun_fin
     assert computed_more_than_once(records) == {}
     resumed = [record for record in records if record["key"] == running[0]["key"] and record["outcome"] == "computed"]
     assert len(resumed) == 1 and resumed[0].get("resumed_from_epoch", 0) >= 1, resumed
+
+
+def test_the_slice_tasks_know_the_evaluation_caches_file(tmp_path):
+    """sweep.tasks.brdf_cache_file names the file trainer.evaluate.ground_truth_brdf_slice writes (else a slice
+    task would compute a slice the cache holds, and count it computed)."""
+    from sweep.tasks import brdf_cache_file
+    from trainer.brdfslice import SliceConfig
+    from trainer.evaluate import ground_truth_brdf_slice
+    from trainer.fourier import OpticsConfig
+    from trainer.generators import generate
+
+    field = generate("blazed", size_um=5.0)
+    optics = OpticsConfig(sigma_s_um=1.5, wavelength_step_nm=100.0)
+    config = SliceConfig(30.0, 135.0, size=8, exposure=5000.0)
+    ground_truth_brdf_slice(field, optics, config, tmp_path, progress=False)
+    assert [path.name for path in tmp_path.iterdir()] == [brdf_cache_file(field, optics, config, tmp_path).name]
