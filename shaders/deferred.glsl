@@ -12,6 +12,9 @@
 //   RESOLVE  per pixel: the mean of its u_samples texels (sample k at row y + k * u_height) times u_scale,
 //            added to the output when u_accumulate is set (samples in several chunks).
 //
+// COMPACT and RESOLVE run in bands of rows from u_first_row (a multiple of 8: no texel twice), SHADE in
+// pieces of the list (viewer/deferred.py binds it from an entry on): no dispatch runs long (issue 36).
+//
 // So background, A = 0 and bound-dark pixels never reach the MLP: the skip rules of the forward path
 // become the list's length. Needs the defines of mlp.glsl and encoding.glsl (SHADE), skip.glsl's (COMPACT),
 // DEFERRED_LIST_BINDING and SHADE_GROUP.
@@ -39,9 +42,10 @@ layout(std430, binding = DEFERRED_LIST_BINDING) buffer DeferredList {
 
 layout(local_size_x = 8, local_size_y = 8) in;
 layout(rgba32f, binding = 0) uniform restrict image2D u_gbuffer;
+uniform int u_first_row;  // the dispatch's first texel row (bands of rows; a multiple of 8 but for the last)
 
 void main() {
-    ivec2 texel = ivec2(gl_GlobalInvocationID.xy);
+    ivec2 texel = ivec2(gl_GlobalInvocationID.xy) + ivec2(0, u_first_row);
     if (any(greaterThanEqual(texel, imageSize(u_gbuffer)))) {
         return;
     }
@@ -114,9 +118,10 @@ uniform int u_samples;     // samples in this chunk of the G-buffer
 uniform int u_height;      // image rows per sample
 uniform float u_scale;     // 1 / (all samples of the pixel)
 uniform bool u_accumulate; // add to the output (a later chunk) instead of replacing it
+uniform int u_first_row;   // the dispatch's first pixel row (bands of rows, as COMPACT)
 
 void main() {
-    ivec2 pixel = ivec2(gl_GlobalInvocationID.xy);
+    ivec2 pixel = ivec2(gl_GlobalInvocationID.xy) + ivec2(0, u_first_row);
     if (any(greaterThanEqual(pixel, imageSize(u_output)))) {
         return;
     }

@@ -171,17 +171,17 @@ def _slivers(ctx: object) -> Pacer:
 def _set_pacers(scene: object, make: object) -> None:
     scene.forward.depth_pacer = make(scene.ctx)  # type: ignore[attr-defined, operator]
     scene.forward.shade_pacer = make(scene.ctx)  # type: ignore[attr-defined, operator]
-    scene.deferred.gbuffer_pacer = make(scene.ctx)  # type: ignore[attr-defined, operator]
-    scene.deferred.shade_pacer = make(scene.ctx)  # type: ignore[attr-defined, operator]
+    for name in ("gbuffer_pacer", "compact_pacer", "shade_pacer", "resolve_pacer"):
+        setattr(scene.deferred, name, make(scene.ctx))  # type: ignore[attr-defined, operator]
     scene.shading.slice_pacer = make(scene.ctx)  # type: ignore[attr-defined, operator]
 
 
 @pytest.mark.parametrize("samples", [1, 3])
 @pytest.mark.parametrize(("path", "depth_prepass"), [("forward", True), ("forward", False), ("deferred", True)])
 def test_a_render_in_slivers_equals_the_render_in_one_piece(scenes, path, depth_prepass, samples):
-    """Pieces of one 64×4 block (the least), bands of 4 rows and list pieces of 256 entries against one piece
-    each: the same float32 image, coverage, sums and work counters; the CD disc and a sphere (overdraw without
-    the depth pre-pass)."""
+    """Pieces of one 64×4 block (the least), bands of 4 rows (8 for the compaction and the resolve) and list
+    pieces of 256 entries against one piece each: the same float32 image, coverage, sums and work counters; the
+    CD disc and a sphere (overdraw without the depth pre-pass)."""
     scene = scenes[path]
     offsets = sample_offsets(samples)
     images, counters = [], []

@@ -18,8 +18,9 @@ XYZ and coverage, ``float32`` ``(H, W, 4)``, row 0 at the top):
      ``encoding.glsl``/``mlp.glsl``/``range.glsl`` as the forward path and writes ``factor · XYZ`` into
      the G-buffer texel. The list's length is read back (4 bytes) and the list is shaded in pieces of
      entries, each one dispatch finished before the next (:mod:`viewer.pacing`: no GL call runs long, so
-     Ctrl-C is answered; each texel is computed as in one dispatch, bit for bit). The G-buffer pass is
-     drawn in bands of rows for the same reason.
+     Ctrl-C is answered; each texel is computed as in one dispatch, bit for bit). The G-buffer pass, the
+     compaction and the resolve run in bands of rows for the same reason (sized by the rows' costs estimated
+     from the mesh's projected triangles).
   4. **Resolve** (``RESOLVE``, only for several samples): the mean of a pixel's samples.
 
 Samples: ``offsets_px`` (``(N, 2)`` pixels, :func:`viewer.antialias.sample_offsets`) renders N G-buffers
@@ -57,7 +58,7 @@ from viewer.antialias import check_offsets, jitter_matrix
 from viewer.camera import Camera, Light
 from viewer.forward import SURFACE_PROGRAM
 from viewer.glsl import compile_compute, compile_program
-from viewer.pacing import Pacer, Progress, read_rows
+from viewer.pacing import BLOCK, Pacer, Progress, projected_row_costs, read_rows
 from viewer.renderer import NetworkRenderer, is_software_rasterizer, set_uniform, skip_threshold_value
 from viewer.surface import MeshBuffers, set_surface_uniforms
 
@@ -80,8 +81,9 @@ _WEIGHTS_BINDING = 6
 CHUNK_TEXELS = 1 << 26  # G-buffer texels per chunk of samples at most (1 GiB of RGBA32F)
 _MAX_GROUPS = 65535  # work groups per dimension of a dispatch (the least GL 4.3 guarantees)
 _PIECE_ENTRIES = 256  # SHADE pieces start at multiples of 256 list entries: 1 KiB-aligned SSBO offsets
-_BAND_MULTIPLE = 4  # G-buffer bands on multiples of 4 rows (llvmpipe rasterizes 4×4 pixel blocks)
-_FIRST_GBUFFER_ROWS = 256  # the G-buffer pass's first band (rows): no MLP, cheap
+_FIRST_GBUFFER_PIXELS = 1 << 16  # the first band of the G-buffer pass (no MLP; covered pixels, estimated)
+_FIRST_COMPACT_PIXELS = 1 << 16  # ... of the compaction (covered texels, estimated)
+_FIRST_RESOLVE_ROWS = 64  # ... of the resolve (rows; every pixel costs alike)
 _FIRST_SHADE_ENTRIES = 4096  # the first SHADE piece (entries: ~0.1 s of the texture-weights net on llvmpipe)
 _GBUFFER_SHARE = 0.1  # the share of a chunk's progress given to its G-buffer and compaction
 
@@ -123,10 +125,12 @@ class DeferredRenderer:
         self._output: moderngl.Texture | None = None
         #: Called with the fraction of the render done (0 … 1) after each band and piece; None: not reported.
         self.progress: Progress | None = None
-        #: The sizes of the G-buffer's bands of rows and of the SHADE pieces of the list, from the time of those
-        #: before (kept between renders).
-        self.gbuffer_pacer = Pacer(self.ctx, first_cost=_FIRST_GBUFFER_ROWS)
+        #: The sizes of the G-buffer's, COMPACT's and RESOLVE's bands of rows and of the SHADE pieces of the list,
+        #: from the time of those before (kept between renders).
+        self.gbuffer_pacer = Pacer(self.ctx, first_cost=_FIRST_GBUFFER_PIXELS)
+        self.compact_pacer = Pacer(self.ctx, first_cost=_FIRST_COMPACT_PIXELS)
         self.shade_pacer = Pacer(self.ctx, first_cost=_FIRST_SHADE_ENTRIES)
+        self.resolve_pacer = Pacer(self.ctx, first_cost=_FIRST_RESOLVE_ROWS)
 
     # ---------------------------------------------------------------------------------------------
     # Programs
@@ -258,6 +262,10 @@ class DeferredRenderer:
         list_buffer = self._list_buffer(width * height * len(chunks[0]))
         several = len(offsets) > 1
         output = self._output_texture(width, height) if several else None
+        # The rows' costs, estimated from the mesh's projected triangles: they size the G-buffer's and the
+        # compaction's bands (viewer.pacing).
+        row_costs = (np.full(height, float(width)) if uploaded.empty else
+                     projected_row_costs(uploaded.mesh.positions, uploaded.mesh.indices, view_projection, size))
         scope = self.ctx.scope(framebuffer, enable_only=moderngl.DEPTH_TEST)
         readable = None
         try:
@@ -267,14 +275,16 @@ class DeferredRenderer:
                         if self.progress is not None:
                             self.progress(min(1.0, (number + fraction) / len(chunks)))
 
-                    self._draw_gbuffer(framebuffer, gbuffer_program, vertex_array, view_projection, chunk, width,
-                                       height, lambda done: report(_GBUFFER_SHARE * done))
-                    rows = height * len(chunk)
+                    self._draw_gbuffer(framebuffer, gbuffer_program, vertex_array, view_projection, chunk, row_costs,
+                                       lambda done: report(_GBUFFER_SHARE * done))
                     list_buffer.write(np.array([0, 1, 1, 0], dtype=np.uint32).tobytes())
                     list_buffer.bind_to_storage_buffer(_LIST_BINDING)
                     texture.bind_to_image(0, read=True, write=True)
                     bound.use(location=unit)
-                    compact.run(_groups(width, _TILE), _groups(rows, _TILE))
+                    for first, end in self.compact_pacer.pieces(height * len(chunk), np.tile(row_costs, len(chunk)),
+                                                                multiple=_TILE):
+                        set_uniform(compact, "u_first_row", first)
+                        compact.run(_groups(width, _TILE), _groups(end - first, _TILE))
                     self.ctx.memory_barrier()
                     entries = int(np.frombuffer(list_buffer.read(4, offset=12), dtype=np.uint32)[0])
                     self._bind_weights()
@@ -292,7 +302,9 @@ class DeferredRenderer:
                         set_uniform(resolve, "u_accumulate", number > 0)
                         texture.bind_to_image(0, read=True, write=False)
                         output.bind_to_image(1, read=True, write=True)
-                        resolve.run(_groups(width, _TILE), _groups(height, _TILE))
+                        for first, end in self.resolve_pacer.pieces(height, multiple=_TILE):
+                            set_uniform(resolve, "u_first_row", first)
+                            resolve.run(_groups(width, _TILE), _groups(end - first, _TILE))
                         self.ctx.memory_barrier()
                     report(1.0)
                 if statistics is not None:
@@ -321,14 +333,15 @@ class DeferredRenderer:
 
     def _draw_gbuffer(self, framebuffer: moderngl.Framebuffer, program: moderngl.Program,
                       vertex_array: moderngl.VertexArray | None, view_projection: np.ndarray, chunk: np.ndarray,
-                      width: int, height: int, done: Callable[[float], None]) -> None:
+                      row_costs: np.ndarray, done: Callable[[float], None]) -> None:
         """Sample k of ``chunk`` into rows ``k·height …`` of the G-buffer, with its jittered projection, in bands
-        of rows (a scissor box inside the sample's viewport; :mod:`viewer.pacing`). ``done``: the fraction of the
-        chunk's G-buffer drawn, after each band."""
+        of rows (a scissor box inside the sample's viewport; :mod:`viewer.pacing`) sized by ``row_costs`` (per
+        GL row of one sample). ``done``: the fraction of the chunk's G-buffer drawn, after each band."""
         framebuffer.use()
         framebuffer.clear(0.0, 0.0, 0.0, -1.0, depth=1.0)  # factor −1: background
         if vertex_array is None:
             return
+        width, height = framebuffer.width, len(row_costs)
         try:
             for k, offset in enumerate(chunk):
                 matrix = view_projection
@@ -337,7 +350,8 @@ class DeferredRenderer:
                 set_uniform(program, "u_view_projection", matrix.astype(np.float32))
                 self.ctx.viewport = (0, k * height, width, height)
                 for first, end in self.gbuffer_pacer.pieces(
-                        height, multiple=_BAND_MULTIPLE, done=lambda end, k=k: done((k + end / height) / len(chunk))):
+                        height, row_costs, multiple=BLOCK[1],
+                        done=lambda end, k=k: done((k + end / height) / len(chunk))):
                     # The scissor box also clips what the viewport does not on every implementation (guard bands).
                     self.ctx.scissor = (0, k * height + first, width, end - first)
                     vertex_array.render(moderngl.TRIANGLES)

@@ -28,7 +28,7 @@ import moderngl
 import numpy as np
 
 __all__ = ["BLOCK", "GROWTH", "PIECE_SECONDS", "READ_BYTES", "Blocks", "Pacer", "Progress", "covered_block_costs",
-           "disc_block_costs", "read_rows"]
+           "disc_block_costs", "projected_row_costs", "read_rows"]
 
 #: The time one piece of GPU work is sized to take (seconds): a Ctrl-C waits for the piece under way.
 PIECE_SECONDS = 0.2
@@ -207,3 +207,39 @@ def disc_block_costs(size: int, blocks: Blocks) -> np.ndarray:
     high = np.searchsorted(centres, reach, side="right")[:, None]
     starts = BLOCK[0] * np.arange(blocks.columns)[None, :]
     return blocks.costs(np.clip(np.minimum(high, starts + BLOCK[0]) - np.maximum(low, starts), 0, None))
+
+
+def projected_row_costs(positions: np.ndarray, indices: np.ndarray, view_projection: np.ndarray,
+                        size: tuple[int, int]) -> np.ndarray:
+    """Per GL row (bottom up) of a ``size`` image of a mesh, the cost of rasterizing it, estimated on the CPU
+    before anything is drawn: 1 per pixel of the row's 64-pixel column blocks that the triangles' bounding boxes
+    (widened by a pixel for sub-pixel sample offsets) reach, :data:`viewer.scheduling.UNCOVERED_COST` per other
+    pixel. A triangle reaching behind the camera counts as covering everything. ``view_projection``: world →
+    clip, row vectors (viewer.camera's convention)."""
+    from viewer.scheduling import UNCOVERED_COST
+
+    width, height = size
+    columns = -(-width // BLOCK[0])
+    clip = np.c_[np.asarray(positions, np.float64), np.ones(len(positions))] @ np.asarray(view_projection, np.float64)
+    triangles = np.asarray(indices, dtype=np.int64).reshape(-1, 3)
+    w = clip[triangles, 3]
+    ahead = np.all(w > 1e-9, axis=1)
+    if not np.all(ahead):
+        return np.full(height, float(width))
+    x = (clip[triangles, 0] / w + 1.0) * 0.5 * width
+    y = (clip[triangles, 1] / w + 1.0) * 0.5 * height
+    x0 = (np.clip(np.floor(x.min(axis=1)) - 1, 0, width) // BLOCK[0]).astype(np.int64)
+    x1 = (-(-np.clip(np.ceil(x.max(axis=1)) + 1, 0, width) // BLOCK[0])).astype(np.int64)
+    y0 = np.clip(np.floor(y.min(axis=1)) - 1, 0, height).astype(np.int64)
+    y1 = np.clip(np.ceil(y.max(axis=1)) + 1, 0, height).astype(np.int64)
+    visible = (x1 > x0) & (y1 > y0)
+    x0, x1, y0, y1 = x0[visible], x1[visible], y0[visible], y1[visible]
+    boxes = np.zeros((height + 1, columns + 1), dtype=np.int64)  # a 2-D difference array of the boxes
+    np.add.at(boxes, (y0, x0), 1)
+    np.add.at(boxes, (y0, x1), -1)
+    np.add.at(boxes, (y1, x0), -1)
+    np.add.at(boxes, (y1, x1), 1)
+    reached = np.cumsum(np.cumsum(boxes, axis=0), axis=1)[:height, :columns] > 0
+    block_widths = np.minimum(BLOCK[0], width - BLOCK[0] * np.arange(columns))
+    covered = reached.astype(np.float64) @ block_widths
+    return covered + UNCOVERED_COST * (width - covered)
