@@ -9,13 +9,13 @@ in up to three steps (issue 35: a switch showed the new material at the old ligh
 
 1. **Remembered**: the exact defaults computed before for the same model file, mesh, mode, field of view and
    IOR (:func:`remembered_view`, a JSON file in ``$XDG_CACHE_HOME/gratnet/``): at once.
-2. **Quick guess** (:func:`quick_view`, tenths of a second on a thread, no colour-science): the steps of
+2. **Quick guess** (:func:`quick_view`, tenths of a second in a worker process, no colour-science): the steps of
    :mod:`viewer.defaults` on :data:`QUICK_SAMPLES` surface points instead of 4096, aiming only the material's
    brightest stored peak (``metadata["display"]``, :class:`gratnet.showcase.MaterialDisplay`; the exact
    defaults try four): the default camera at each elevation, the light that puts the peak (or 0.6 of it) at
    the point seen in the picture's centre, the exposure that puts the 99.5th percentile of the network's
    predicted brightness at display white, the candidate the display would show most coloured.
-3. **Exact**: :func:`state_defaults` in one worker process (started with the requests, its imports done
+3. **Exact**: :func:`state_defaults` in another worker process (started with the requests, its imports done
    ahead), which also remembers the result for next time.
 
 A result is handed over only where the view is as the last hand-over left it: a user who moved the light, the
@@ -290,7 +290,7 @@ def quick_view(model: Any, mesh: Any, slice_mode: bool = False, fov_degrees: flo
 
 def _quick_view_of(material: str, mesh: str, slice_mode: bool, fov_degrees: float,
                    ior: float | None) -> dict[str, float] | None:
-    """:func:`quick_view` by names (the model file and the mesh read here; the thread's task)."""
+    """:func:`quick_view` by names (the model file and the mesh read here; the quick worker's task)."""
     from gratnet.modelfile import load_model
     from viewer.catalog import build_mesh, resolve_material
 
@@ -298,36 +298,50 @@ def _quick_view_of(material: str, mesh: str, slice_mode: bool, fov_degrees: floa
     return quick_view(model, None if slice_mode else build_mesh(mesh), slice_mode, fov_degrees, ior)
 
 
-def _warm_imports() -> None:
-    """The worker's first task: the imports of the exact defaults (colour-science included), ahead of a request."""
-    import gratnet.display  # noqa: F401
+def _warm_imports(niceness: int) -> None:
+    """A worker's initializer: its niceness, and the imports of its tasks ahead of a request (the exact defaults'
+    colour-science at :data:`DEFAULTS_WORKER_NICENESS`; the quick guess needs none)."""
+    import gratnet.modelfile  # noqa: F401
     import viewer.catalog  # noqa: F401
     import viewer.defaults  # noqa: F401
 
-    gratnet.display.xyz_to_linear_srgb([[0.0, 0.0, 0.0]])  # colour-science's import
+    if niceness > 0:
+        os.nice(niceness)
+        import gratnet.display
+
+        gratnet.display.xyz_to_linear_srgb([[0.0, 0.0, 0.0]])  # colour-science's import
+
+
+def _pool(niceness: int) -> Any:
+    """A one-process pool, spawned (a forked copy of a process holding a GL context and threads is not safe), at
+    ``niceness``, its imports done ahead (:func:`_warm_imports`)."""
+    import multiprocessing
+
+    return multiprocessing.get_context("spawn").Pool(1, initializer=_warm_imports, initargs=(niceness,))
 
 
 class DefaultViewRequests:
     """The viewer's default view for its material, mesh and mode: remembered, guessed, then exact (see the
     module docstring).
 
-    With ``background`` the exact defaults come from one worker process (started by :meth:`start` or the first
-    request; spawned, at :data:`DEFAULTS_WORKER_NICENESS`) and the quick guess from a thread; without, the exact
+    With ``background`` the exact defaults come from one worker process (spawned, at
+    :data:`DEFAULTS_WORKER_NICENESS`) and the quick guess from another (at the window's priority: it is small),
+    both started by :meth:`start` or the first request with their imports done ahead; without, the exact
     defaults are computed in :meth:`request` itself. :meth:`take` hands over whatever has arrived (the best
-    of it), once each. A process for the exact defaults, not a thread: on a thread their numpy held the GIL
-    long enough to stretch the window's frames to 0.3 s (measured with benchmarks/viewer_latency.py); the
-    quick guess is small enough for a thread (a few numpy calls on hundreds of points).
+    of it), once each. Processes, not threads: on a thread the exact defaults' numpy held the GIL long enough to
+    stretch the window's frames to 0.3 s, and the quick guess of a feature-grid model (paper-scratches: 1.4 s
+    of numpy on a busy machine) stretched one to 1.27 s (benchmarks/viewer_latency.py).
     """
 
     def __init__(self, background: bool) -> None:
         self._background = background
-        self._executor: Any = None  # concurrent.futures.ProcessPoolExecutor, made by start()
-        self._thread: Any = None  # concurrent.futures.ThreadPoolExecutor for the quick guesses
+        self._pool: Any = None  # multiprocessing.pool.Pool of the exact defaults, made by start()
+        self._quick_pool: Any = None  # … of the quick guesses
         self._key: tuple[Any, ...] | None = None  # the pair asked for
         self._fields: tuple[str, ...] = VIEW_FIELDS  # the fields the request may set
         self._view: tuple[float, ...] | None = None  # the view the last hand-over left (the user's since)
-        self._quick: Any = None  # future or result of the quick guess
-        self._exact: Any = None  # future or result of the exact defaults
+        self._quick: Any = None  # AsyncResult or result of the quick guess
+        self._exact: Any = None  # AsyncResult or result of the exact defaults
         self._requested_at = -math.inf  # time.monotonic() of the last request
 
     @staticmethod
@@ -340,15 +354,12 @@ class DefaultViewRequests:
 
     def start(self) -> None:
         """Start the worker process and its imports now (background mode), so that a later request only computes."""
-        if not self._background or self._executor is not None:
+        if not self._background:
             return
-        import multiprocessing
-        from concurrent.futures import ProcessPoolExecutor
-
-        # spawn: a forked copy of a process holding a GL context and threads is not safe.
-        self._executor = ProcessPoolExecutor(1, mp_context=multiprocessing.get_context("spawn"),
-                                             initializer=os.nice, initargs=(DEFAULTS_WORKER_NICENESS,))
-        self._executor.submit(_warm_imports)
+        if self._quick_pool is None:
+            self._quick_pool = _pool(0)
+        if self._pool is None:
+            self._pool = _pool(DEFAULTS_WORKER_NICENESS)
 
     def request(self, state: Any, fields: Iterable[str] = VIEW_FIELDS) -> None:
         """Ask for the default view of ``state``'s material, mesh and mode (replaces an earlier request); only
@@ -368,17 +379,17 @@ class DefaultViewRequests:
             except GratNetError:
                 self._exact = None
             return
-        from concurrent.futures import ThreadPoolExecutor
-
+        for name in ("_quick_pool", "_pool"):  # a computation of an earlier request still running: stopped
+            if self._running(self._quick if name == "_quick_pool" else self._exact):
+                getattr(self, name).terminate()
+                setattr(self, name, None)
         self.start()
-        if self._thread is None:
-            self._thread = ThreadPoolExecutor(1, thread_name_prefix="gratnet-quick-view")
-        self._quick = self._thread.submit(_quick_view_of, *key)
-        self._exact = self._executor.submit(state_defaults, *key)
+        self._quick = self._quick_pool.apply_async(_quick_view_of, key)
+        self._exact = self._pool.apply_async(state_defaults, key)
 
     @staticmethod
     def _running(entry: Any) -> bool:
-        return hasattr(entry, "done") and not entry.done()
+        return hasattr(entry, "ready") and not entry.ready()
 
     @property
     def pending(self) -> bool:
@@ -395,13 +406,13 @@ class DefaultViewRequests:
 
     @staticmethod
     def _result(entry: Any) -> Any:
-        """A finished future's result (None on any failure), a plain result as it is, None while running."""
-        if not hasattr(entry, "done"):
+        """A finished computation's result (None on any failure), a plain result as it is, None while running."""
+        if not hasattr(entry, "ready"):
             return entry
-        if not entry.done():
+        if not entry.ready():
             return None
         try:
-            return entry.result()
+            return entry.get(0)
         except Exception:  # noqa: BLE001 - any failure (also a lost worker) only means no default view
             return None  # the viewer reports an unusable material or mesh itself
 
@@ -453,11 +464,9 @@ class DefaultViewRequests:
         self._quick = self._exact = None
 
     def release(self) -> None:
-        """Stop the worker process (a computation under way finishes in the background and is dropped)."""
-        if self._executor is not None:
-            self._executor.shutdown(wait=False, cancel_futures=True)
-            self._executor = None
-        if self._thread is not None:
-            self._thread.shutdown(wait=False, cancel_futures=True)
-            self._thread = None
+        """Stop the worker processes at once (a computation under way is dropped)."""
+        for pool in (self._pool, self._quick_pool):
+            if pool is not None:
+                pool.terminate()  # at once: closing the window must not wait for a computation under way
+        self._pool = self._quick_pool = None
         self.forget()

@@ -9,7 +9,7 @@
 - ``--light θ,φ``, ``--camera DIST,AZIMUTH,ELEVATION``, ``--exposure``, ``--ior``, ``--no-fresnel``,
   ``--slice``: the starting view, as in ``gratnet render``; light, camera and exposure left out are chosen
   from the material and the mesh (viewer.defaults), the same values as ``gratnet render``'s: remembered from
-  an earlier run, else a quick guess (a thread, tenths of a second) that the exact values replace when a
+  an earlier run, else a quick guess (tenths of a second) that the exact values replace when a
   worker process has them (viewer.default_view), so that the window shows without waiting for them.
 - ``--weights-path auto|texture|baked``: where the shader reads the weights, as in ``gratnet render``.
 - ``--render-path auto|forward|deferred``: as in ``gratnet render``. In the window ``auto`` is forward on a CPU
