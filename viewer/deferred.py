@@ -264,8 +264,10 @@ class DeferredRenderer:
         output = self._output_texture(width, height) if several else None
         # The rows' costs, estimated from the mesh's projected triangles: they size the G-buffer's and the
         # compaction's bands (viewer.pacing).
-        row_costs = (np.full(height, float(width)) if uploaded.empty else
-                     projected_row_costs(uploaded.mesh.positions, uploaded.mesh.indices, view_projection, size))
+        row_costs = np.full(height, float(width))
+        if not (uploaded.empty or self.gbuffer_pacer.fits(width * height) and self.compact_pacer.fits(
+                width * height * len(chunks[0]))):
+            row_costs = projected_row_costs(uploaded.mesh.positions, uploaded.mesh.indices, view_projection, size)
         scope = self.ctx.scope(framebuffer, enable_only=moderngl.DEPTH_TEST)
         readable = None
         try:

@@ -32,7 +32,7 @@ import numpy as np
 from viewer.antialias import jitter_matrix
 from viewer.camera import Camera, Light
 from viewer.glsl import compile_program
-from viewer.pacing import BLOCK, Blocks, Pacer, Progress, covered_block_costs, read_rows
+from viewer.pacing import BLOCK, Blocks, Pacer, Progress, covered_block_costs, projected_row_costs, read_rows
 from viewer.shading import ShadingPrograms, set_uniform
 from viewer.surface import MeshBuffers, set_surface_uniforms
 
@@ -42,7 +42,7 @@ __all__ = ["SURFACE_PROGRAM", "ForwardRenderer"]
 SURFACE_PROGRAM = "surface"
 _ACCUMULATE = "accumulate"  # shaders/accumulate.glsl: adds a sample image into a float32 sum
 _SAMPLE_UNIT = 1  # texture unit of accumulate.glsl's u_sample (the weights use 0, the skip bound 3)
-_FIRST_DEPTH_ROWS = 256  # the depth pass's first band (rows): no MLP, cheap
+_FIRST_DEPTH_PIXELS = 1 << 16  # the depth pass's first band (covered pixels, estimated): no MLP, cheap
 _FIRST_SHADE_PIXELS = 1024  # the shading pass's first band: ~1k covered pixels (0.1 s at 10k pixels/s on llvmpipe)
 
 
@@ -71,7 +71,7 @@ class ForwardRenderer:
         self.progress: Progress | None = None
         #: The bands' sizes, from the time of the bands before (kept between renders: the first band of the next
         #: render starts at the rate measured): the depth pass's rows, and the shading pass's (weighed by coverage).
-        self.depth_pacer = Pacer(self.ctx, first_cost=_FIRST_DEPTH_ROWS)
+        self.depth_pacer = Pacer(self.ctx, first_cost=_FIRST_DEPTH_PIXELS)
         self.shade_pacer = Pacer(self.ctx, first_cost=_FIRST_SHADE_PIXELS)
 
     @property
@@ -113,11 +113,15 @@ class ForwardRenderer:
                     target.clear(0.0, 0.0, 0.0, 0.0)
                 if statistics is not None:
                     self.shading.reset_counters()
+                row_costs = np.full(height, float(width))
                 if vertex_array is not None:
                     depth_array = self._depth_array(uploaded)
+                    if not self.depth_pacer.fits(width * height):
+                        row_costs = projected_row_costs(uploaded.mesh.positions, uploaded.mesh.indices,
+                                                        camera.view_projection(width / height), size)
                 for number, offset in enumerate(offsets):
                     self._draw_sample(framebuffer, targets, vertex_array, depth_array, program, bound, unit,
-                                      camera, offset, depth_prepass, sum_framebuffers,
+                                      camera, offset, depth_prepass, row_costs, sum_framebuffers,
                                       lambda fraction, number=number: self._report((number + fraction) / count))
                 if statistics is not None:
                     self.shading.read_counters(statistics)
@@ -158,14 +162,16 @@ class ForwardRenderer:
     def _draw_sample(self, framebuffer: moderngl.Framebuffer, targets: list[moderngl.Texture],
                      vertex_array: moderngl.VertexArray | None, depth_array: moderngl.VertexArray | None,
                      program: moderngl.Program, bound: moderngl.Texture, unit: int, camera: Camera, offset: np.ndarray,
-                     depth_prepass: bool, sums: list[moderngl.Framebuffer], done: Callable[[float], None]) -> None:
+                     depth_prepass: bool, row_costs: np.ndarray, sums: list[moderngl.Framebuffer],
+                     done: Callable[[float], None]) -> None:
         """One sample into ``framebuffer`` (colour ``targets``, cleared first), added into ``sums`` when given:
         the camera's view-projection moved by ``offset`` (pixels, x right, y up;
         :func:`viewer.antialias.jitter_matrix`), then the depth pass in bands of rows and the shading pass in
         pieces of blocks. The other uniforms are set by the caller.
 
         The depth pass (the depth-only program: same vertex stage, no MLP, colour writes masked) is drawn first
-        over the whole image, in bands of its own: its coverage weighs the blocks of the shading pieces (unless the
+        over the whole image, in bands of its own (sized by ``row_costs``, estimated from the projected mesh:
+        :func:`viewer.pacing.projected_row_costs`): its coverage weighs the blocks of the shading pieces (unless the
         whole image fits one piece). With ``depth_prepass`` it stays, and the shading pass tests ``LEQUAL``
         against it: the invariant vertex stage gives bit-identical depths, so exactly the visible surface passes
         and early fragment tests stop every other fragment before the MLP. Without it the depth is cleared again
@@ -185,12 +191,12 @@ class ForwardRenderer:
             done(1.0)
             return
         blocks = Blocks(width, (0, height))
-        one_piece = self.shade_pacer.budget >= width * height  # even if every pixel is covered: no coverage needed
+        one_piece = self.shade_pacer.fits(width * height)  # even if every pixel is covered: no coverage needed
         if depth_prepass or not one_piece:
             set_uniform(self.shading.depth_only_program(SURFACE_PROGRAM), "u_view_projection", view_projection)
             framebuffer.color_mask = _color_masks(False, layers)
             try:
-                for first, end in self.depth_pacer.pieces(height, multiple=BLOCK[1]):
+                for first, end in self.depth_pacer.pieces(height, row_costs, multiple=BLOCK[1]):
                     framebuffer.scissor = (0, first, width, end - first)
                     framebuffer.use()
                     depth_array.render(moderngl.TRIANGLES)

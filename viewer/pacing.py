@@ -60,6 +60,10 @@ class Pacer:
         self.pieces_done = 0
         self.longest = 0.0  # the longest piece so far (seconds, submission to finish)
 
+    def fits(self, cost: float) -> bool:
+        """Whether work of this cost makes one piece: then its costs per unit need not be worked out."""
+        return self.budget >= cost
+
     def pieces(self, total: int, costs: np.ndarray | None = None, multiple: int = 1,
                done: Callable[[int], None] | None = None) -> Iterator[tuple[int, int]]:
         """``(start, end)`` ranges covering ``0 … total``; the caller submits the GPU work of each before asking
@@ -234,12 +238,11 @@ def projected_row_costs(positions: np.ndarray, indices: np.ndarray, view_project
     y1 = np.clip(np.ceil(y.max(axis=1)) + 1, 0, height).astype(np.int64)
     visible = (x1 > x0) & (y1 > y0)
     x0, x1, y0, y1 = x0[visible], x1[visible], y0[visible], y1[visible]
-    boxes = np.zeros((height + 1, columns + 1), dtype=np.int64)  # a 2-D difference array of the boxes
-    np.add.at(boxes, (y0, x0), 1)
-    np.add.at(boxes, (y0, x1), -1)
-    np.add.at(boxes, (y1, x0), -1)
-    np.add.at(boxes, (y1, x1), 1)
-    reached = np.cumsum(np.cumsum(boxes, axis=0), axis=1)[:height, :columns] > 0
+    stride, cells = columns + 1, (height + 1) * (columns + 1)  # a 2-D difference array of the boxes
+    corners = np.concatenate((y0 * stride + x0, y1 * stride + x1, y0 * stride + x1, y1 * stride + x0))
+    signs = np.repeat([1, 1, -1, -1], len(x0))
+    boxes = np.bincount(corners, weights=signs, minlength=cells).reshape(height + 1, stride)
+    reached = np.cumsum(np.cumsum(boxes, axis=0), axis=1)[:height, :columns] > 0.5
     block_widths = np.minimum(BLOCK[0], width - BLOCK[0] * np.arange(columns))
     covered = reached.astype(np.float64) @ block_widths
     return covered + UNCOVERED_COST * (width - covered)
