@@ -360,7 +360,9 @@ class ViewerApp:
         if not self.supply.scene_ready(self.state):
             return self.POLL_SECONDS  # waiting for a shader or a mesh: look again soon
         if image is None or image.key != key or key != self._seen_key:
-            return 0.0
+            # A picture held back for the quick guess (frame): look again soon, not in a busy loop that takes
+            # the CPU from the guess's worker and the compile child.
+            return self.GUESS_POLL_SECONDS if self.default_view_stage == "guessing" else 0.0
         if not self.supply.scene_ready(self.state, preview=False):
             return self.POLL_SECONDS  # the refinement waits for the full-resolution mesh
         now = self.clock() if now is None else float(now)
@@ -392,7 +394,7 @@ class ViewerApp:
             return True
         if not self.supply.scene_ready(self.state):
             return False  # the picture on show stays until the new one can be rendered
-        if self._defaults.holding:
+        if self._defaults.hold():
             return False  # … or until its view is known (the quick guess: tenths of a second)
         if image is None or image.key != key:
             self._refinement = None
@@ -405,6 +407,8 @@ class ViewerApp:
 
     #: How often the window looks at background work in progress (seconds).
     POLL_SECONDS = 0.1
+    #: … and for the quick guess of a default view while a new picture waits for it.
+    GUESS_POLL_SECONDS = 0.02
 
     def _idle(self, now: float | None = None) -> bool:
         """No state change for ``policy.idle_seconds`` (the moment for a faster program to take over)."""

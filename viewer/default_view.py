@@ -37,8 +37,8 @@ from typing import Any
 from gratnet.errors import GratNetError
 from viewer.defaults import FOV_DEGREES, resolve_defaults
 
-__all__ = ["DEFAULTS_WORKER_NICENESS", "GUESS_WAIT_S", "QUICK_SAMPLES", "VIEW_FIELDS", "DefaultViewRequests",
-           "quick_view", "remembered_view", "state_defaults", "view_cache_file"]
+__all__ = ["DEFAULTS_WORKER_NICENESS", "GUESS_WAIT_S", "QUICK_SAMPLES", "QUICK_WORKER_NICENESS", "VIEW_FIELDS",
+           "DefaultViewRequests", "quick_view", "remembered_view", "state_defaults", "view_cache_file"]
 
 #: Niceness of the viewer's default-view worker process (os.nice increment). At 19 a busy machine starved it
 #: for 55–118 s (issue 35); at 10 it still yields the window most of the CPU when both want it.
@@ -49,9 +49,13 @@ VIEW_FIELDS = ("light_theta", "light_phi", "camera_distance", "camera_azimuth", 
 #: elevation) keeps the whole group, and the other groups still come (the light and exposure of a new material).
 _GROUPS = (("light_theta", "light_phi"), ("camera_distance", "camera_azimuth", "camera_elevation"), ("exposure",))
 _GROUP_OF = {name: group for group in _GROUPS for name in group}
-#: How long the viewer holds a new picture back for the quick guess (seconds): rather than show the material
-#: at a view about to change (the old light and exposure after a switch, the fallback view at a start).
+#: How long the viewer holds a new picture back for the quick guess (seconds from the first picture held):
+#: rather than show the material at a view about to change (the old light and exposure after a switch, the
+#: fallback view at a start).
 GUESS_WAIT_S = 2.0
+#: Niceness of the quick guess's worker: below the window and a new material's compile child (5), above the
+#: exact defaults' worker.
+QUICK_WORKER_NICENESS = 5
 #: Surface points of the quick guess's exposure (viewer.defaults uses 4096).
 QUICK_SAMPLES = 384
 _CACHE_VERSION = 1
@@ -298,26 +302,27 @@ def _quick_view_of(material: str, mesh: str, slice_mode: bool, fov_degrees: floa
     return quick_view(model, None if slice_mode else build_mesh(mesh), slice_mode, fov_degrees, ior)
 
 
-def _warm_imports(niceness: int) -> None:
-    """A worker's initializer: its niceness, and the imports of its tasks ahead of a request (the exact defaults'
-    colour-science at :data:`DEFAULTS_WORKER_NICENESS`; the quick guess needs none)."""
+def _warm_imports(niceness: int, exact: bool) -> None:
+    """A worker's initializer: its niceness, and the imports of its tasks ahead of a request (colour-science for
+    the exact defaults; the quick guess needs none)."""
+    if niceness > 0:
+        os.nice(niceness)
     import gratnet.modelfile  # noqa: F401
     import viewer.catalog  # noqa: F401
     import viewer.defaults  # noqa: F401
 
-    if niceness > 0:
-        os.nice(niceness)
+    if exact:
         import gratnet.display
 
         gratnet.display.xyz_to_linear_srgb([[0.0, 0.0, 0.0]])  # colour-science's import
 
 
-def _pool(niceness: int) -> Any:
+def _pool(niceness: int, exact: bool) -> Any:
     """A one-process pool, spawned (a forked copy of a process holding a GL context and threads is not safe), at
     ``niceness``, its imports done ahead (:func:`_warm_imports`)."""
     import multiprocessing
 
-    return multiprocessing.get_context("spawn").Pool(1, initializer=_warm_imports, initargs=(niceness,))
+    return multiprocessing.get_context("spawn").Pool(1, initializer=_warm_imports, initargs=(niceness, exact))
 
 
 class DefaultViewRequests:
@@ -325,7 +330,7 @@ class DefaultViewRequests:
     module docstring).
 
     With ``background`` the exact defaults come from one worker process (spawned, at
-    :data:`DEFAULTS_WORKER_NICENESS`) and the quick guess from another (at the window's priority: it is small),
+    :data:`DEFAULTS_WORKER_NICENESS`) and the quick guess from another (at :data:`QUICK_WORKER_NICENESS`),
     both started by :meth:`start` or the first request with their imports done ahead; without, the exact
     defaults are computed in :meth:`request` itself. :meth:`take` hands over whatever has arrived (the best
     of it), once each. Processes, not threads: on a thread the exact defaults' numpy held the GIL long enough to
@@ -342,7 +347,7 @@ class DefaultViewRequests:
         self._view: tuple[float, ...] | None = None  # the view the last hand-over left (the user's since)
         self._quick: Any = None  # AsyncResult or result of the quick guess
         self._exact: Any = None  # AsyncResult or result of the exact defaults
-        self._requested_at = -math.inf  # time.monotonic() of the last request
+        self._held_since: float | None = None  # time.monotonic() when a picture was first held for the guess
 
     @staticmethod
     def _state_key(state: Any) -> tuple[Any, ...]:
@@ -357,9 +362,9 @@ class DefaultViewRequests:
         if not self._background:
             return
         if self._quick_pool is None:
-            self._quick_pool = _pool(0)
+            self._quick_pool = _pool(QUICK_WORKER_NICENESS, exact=False)
         if self._pool is None:
-            self._pool = _pool(DEFAULTS_WORKER_NICENESS)
+            self._pool = _pool(DEFAULTS_WORKER_NICENESS, exact=True)
 
     def request(self, state: Any, fields: Iterable[str] = VIEW_FIELDS) -> None:
         """Ask for the default view of ``state``'s material, mesh and mode (replaces an earlier request); only
@@ -368,7 +373,7 @@ class DefaultViewRequests:
         self._key, self._fields, self._view = key, tuple(name for name in VIEW_FIELDS if name in set(fields)), \
             self._state_view(state)
         self._quick = self._exact = None
-        self._requested_at = time.monotonic()
+        self._held_since = None
         remembered = remembered_view(*key)
         if remembered is not None:
             self._exact = remembered
@@ -416,11 +421,15 @@ class DefaultViewRequests:
         except Exception:  # noqa: BLE001 - any failure (also a lost worker) only means no default view
             return None  # the viewer reports an unusable material or mesh itself
 
-    @property
-    def holding(self) -> bool:
-        """Whether the caller should hold a new picture back: the quick guess is still on its way, for at most
-        :data:`GUESS_WAIT_S` after the request."""
-        return self.stage == "guessing" and time.monotonic() - self._requested_at < GUESS_WAIT_S
+    def hold(self) -> bool:
+        """Whether the caller, about to render a new picture, should hold it back: the quick guess is still on
+        its way, for at most :data:`GUESS_WAIT_S` from the first picture held."""
+        if self.stage != "guessing":
+            return False
+        now = time.monotonic()
+        if self._held_since is None:
+            self._held_since = now
+        return now - self._held_since < GUESS_WAIT_S
 
     def take(self, state: Any) -> dict[str, float] | None:
         """The ``ViewerApp.set(**changes)`` for the last request once something better than what was handed over
