@@ -27,7 +27,7 @@ from gratnet.errors import GratNetError
 from viewer.catalog import build_mesh, check_mesh_spec, resolve_material
 from viewer.compile_worker import GROUPS, CompileWorker, shader_cache_enabled, warm_group, window_render_path
 
-__all__ = ["PREVIEW_MESHES", "SceneSupply"]
+__all__ = ["PREVIEW_MESHES", "SceneSupply", "load_material"]
 
 
 def _preview_disc() -> Any:
@@ -52,6 +52,28 @@ PREVIEW_MESHES: dict[str, Callable[[], Any]] = {"cd": _preview_disc, "sphere": _
 _SPEED_ORDER = ("texture", "baked")
 #: Niceness of the child that warms the other shipped materials' quick programs while the window is idle.
 PREFETCH_NICENESS = 15
+
+
+_LOADED: dict[tuple[str, int, int], Any] = {}  # (model file, mtime, size) -> ModelFile, for this process
+
+
+def load_material(material: str) -> Any:
+    """The ``ModelFile`` of a shipped material or a model-file path, read once per process (and again when the
+    file changes): ``gratnet view`` checks it before its window opens, and the window's supply renders it (a
+    feature-grid model's arrays take 0.3–0.6 s to decompress, twice that on a busy machine)."""
+    import os
+
+    from gratnet.modelfile import load_model
+
+    path = resolve_material(material)
+    try:
+        status = os.stat(path)
+    except OSError:
+        return load_model(path)  # its own error
+    key = (str(path), status.st_mtime_ns, status.st_size)
+    if key not in _LOADED:
+        _LOADED[key] = load_model(path)
+    return _LOADED[key]
 
 
 class SceneSupply:
@@ -115,11 +137,9 @@ class SceneSupply:
     # -- checks (cheap, on the caller's thread) ----------------------------------------------------
 
     def model(self, material: str) -> Any:
-        """The material's model (loaded once; ~10 ms for a shipped one)."""
-        from gratnet.modelfile import load_model
-
+        """The material's model (:func:`load_material`: read once per process)."""
         if material not in self._models:
-            self._models[material] = load_model(resolve_material(material))
+            self._models[material] = load_material(material)
         return self._models[material]
 
     def check(self, state: Any) -> None:

@@ -152,17 +152,18 @@ def starting_view(arguments: argparse.Namespace) -> tuple[ViewerState, tuple[str
     """The starting :class:`~viewer.state.ViewerState`, every value checked before a window opens, and the
     fields of it that are a first guess at the default view (to be refined in the window: ``refine_view``)."""
     from gratnet.atomic import check_output_folder
-    from gratnet.modelfile import load_model
-    from viewer.catalog import MESHES, build_mesh, resolve_material
+    from viewer.catalog import MESHES, build_mesh
     from viewer.scene_config import MAX_SAMPLES
+    from viewer.scene_supply import load_material
     from viewer.state import SLIDERS, ViewerState
 
     check_output_folder(arguments.screenshot_dir, "--screenshot-dir")
     if not 1 <= arguments.spp <= MAX_SAMPLES:
         raise GratNetError(f"--spp (samples per pixel) must be an integer in 1 … {MAX_SAMPLES}, got {arguments.spp}")
     _scene_numbers(with_fallback(arguments))  # the flags given are checked before the defaults read the model
-    # Read (cheaply) before a window opens: a bad model or mesh file is one line, not a broken window.
-    load_model(resolve_material(arguments.material))
+    # Read before a window opens (once: the window renders this copy): a bad model or mesh file is one line,
+    # not a broken window.
+    load_material(arguments.material)
     if arguments.mesh not in MESHES:  # an .obj file: built now (a built-in mesh cannot fail)
         build_mesh(arguments.mesh)
     guessed = _guess_view(arguments)  # the unset --light, --camera, --exposure, from the material and mesh
