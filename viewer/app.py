@@ -21,19 +21,27 @@ never compiles a shader that has not been compiled already. :class:`~viewer.scen
 material's programs on its own EGL context, which fills Mesa's disk shader cache; the window then links
 the same program text as a cache hit, one short step per frame. The quick texture path (about a second
 to compile) gives the first picture; on a CPU rasterizer the faster baked program (25–60 s to compile)
-takes over when its compile is done. Until then the panel's status line says what is compiling
-("compiling the shader for cd… 12 s") and the picture on show stays. Meshes are built on a thread,
-colour-science is imported on a thread, and the first frame (imgui's own shaders) is drawn before the
-window is shown. Each frame's work, the figure the panel shows as "frame", is its events, panel, at most
-one preview or band, and drawing; the idle wait for input is not counted.
+takes over when its compile is done; while idle, a child at a low priority warms the other shipped
+materials' quick programs, so that a switch to one links them at once. Until then the panel's status line
+says what is compiling ("compiling the shader for cd… 12 s") and the picture on show stays. Meshes are
+built on a thread, the first frame (imgui's own shaders) is drawn before the window is shown, and a
+switch's (or a start's) default view is guessed in a worker process and refined in another
+(:mod:`viewer.default_view`; a new picture waits up to 2 s for the guess). Each frame's work, the figure the
+panel shows as "frame", is its events, panel, at most one preview or band, and drawing; the idle wait for
+input is not counted.
 
-Staying responsive on a CPU rasterizer (Mesa llvmpipe: a full 320×240 CD-disc picture takes 1–3 s):
+Staying responsive on a CPU rasterizer (issue 35: Mesa llvmpipe, 2 cores; a covered pixel of a shipped
+feature-grid network costs 30–75 µs, so a 512² disc holds ~9 s of work):
 
+- The window renders on the deferred path there (:func:`viewer.compile_worker.window_render_path`: the
+  network once per covered pixel), its renders padded to power-of-two sizes
+  (:func:`viewer.scheduling.padded_size`: the compute kernels' variant the compile child warmed).
 - While the state keeps changing (a slider or the mouse moving, and for ``idle_seconds`` after the last
-  change), every new state is rendered at a reduced resolution: the smallest of 1/2, 1/4, 1/8 whose
+  change), every new state is rendered at a reduced resolution: the smallest of 1/2 … 1/32 whose
   predicted cost fits ``interactive_budget_s`` (the cost model: measured seconds per covered pixel × the
-  covered pixels of the last preview). Previews of the built-in disc and sphere use coarser
-  tessellations (llvmpipe's cost per triangle dominates at low resolution).
+  covered pixels of the last preview; before any measurement a preview of at most 1024 pixels).
+  Previews of the built-in disc and sphere use coarser tessellations (on the forward path llvmpipe's
+  cost per triangle dominates at low resolution).
 - Once the state has stood still, the full-resolution picture is built in horizontal bands (the same
   camera with clip space cropped to the band's rows: the same pixel centres as one full render), one
   band per frame sized to ``refine_budget_s``; the window keeps handling input between bands, the
@@ -51,8 +59,9 @@ Staying responsive on a CPU rasterizer (Mesa llvmpipe: a full 320×240 CD-disc p
 - When the picture is complete (and has its samples) and nothing changes, nothing is rendered, and the
   window sleeps in ``glfw.wait_events_timeout`` instead of spinning.
 
-Every pixel comes from :class:`SceneRenderer` (``render`` / ``render_brdf_slice``), converted with its
-``display_srgb8`` (``gratnet.display``), so the window shows exactly what ``gratnet render`` writes.
+Every pixel comes from :class:`SceneRenderer` (``render_rgba`` / ``render_brdf_slice``), converted by
+:mod:`viewer.srgb` (``gratnet.display``'s bytes without importing colour-science), so the window shows
+exactly what ``gratnet render`` writes.
 """
 
 from __future__ import annotations

@@ -3,7 +3,10 @@
 :class:`ViewerWindow` opens the window (OpenGL 4.3 core), wraps its context with
 :func:`viewer.context.context_from_current`, draws the panel (material, mesh, light, camera, exposure,
 Fresnel/IOR, BRDF-slice mode, frame times, screenshot), turns mouse drags and the wheel into camera moves,
-and shows :attr:`ViewerApp.image` as an imgui image. The state, the scheduling and every render are the
+and shows :attr:`ViewerApp.image` as an imgui image. No input is lost: the frame that releases the button
+still applies the drag's last motion (a flick between two slow frames orbits). The panel keeps a fixed
+number of lines for its status (what compiles, the last message), so that nothing moves under the pointer,
+and fits a 512-pixel-high window. The state, the scheduling and every render are the
 app's (:mod:`viewer.app`): this module only draws and forwards input. glfw and imgui are imported only
 here, and only when a window is made (``imgui_bundle`` first: glfw then loads imgui_bundle's GLFW library,
 so both sides share one GLFW).
