@@ -44,6 +44,7 @@ from viewer.scene_config import (
     RENDER_PATHS,
     WEIGHT_PATHS,
     add_scene_arguments,
+    fill_scene_defaults,
     with_fallback,
 )
 
@@ -148,9 +149,11 @@ _VIEW_FLAGS = {"light": ("light_theta", "light_phi"),
                "camera": ("camera_distance", "camera_azimuth", "camera_elevation"), "exposure": ("exposure",)}
 
 
-def starting_view(arguments: argparse.Namespace) -> tuple[ViewerState, tuple[str, ...]]:
+def starting_view(arguments: argparse.Namespace, exact: bool = False) -> tuple[ViewerState, tuple[str, ...]]:
     """The starting :class:`~viewer.state.ViewerState`, every value checked before a window opens, and the
-    fields of it that are a first guess at the default view (to be refined in the window: ``refine_view``)."""
+    fields of it that the window is to work out (``refine_view``: :func:`_guess_view`). With ``exact`` the
+    unset view flags take the exact defaults now (``viewer.scene_config.fill_scene_defaults``, seconds) and
+    nothing is left to the window."""
     from gratnet.atomic import check_output_folder
     from viewer.catalog import MESHES, build_mesh
     from viewer.scene_config import MAX_SAMPLES
@@ -166,7 +169,11 @@ def starting_view(arguments: argparse.Namespace) -> tuple[ViewerState, tuple[str
     load_material(arguments.material)
     if arguments.mesh not in MESHES:  # an .obj file: built now (a built-in mesh cannot fail)
         build_mesh(arguments.mesh)
-    guessed = _guess_view(arguments)  # the unset --light, --camera, --exposure, from the material and mesh
+    guessed: tuple[str, ...] = ()  # the unset --light, --camera, --exposure, from the material and mesh:
+    if exact:
+        fill_scene_defaults(arguments)
+    else:
+        guessed = _guess_view(arguments)
     theta, phi, distance, azimuth, elevation = _scene_numbers(arguments)
     if arguments.max_frames < 0:
         raise GratNetError(f"--max-frames must be ≥ 0, got {arguments.max_frames}")
@@ -183,8 +190,9 @@ def starting_view(arguments: argparse.Namespace) -> tuple[ViewerState, tuple[str
 
 
 def starting_state(arguments: argparse.Namespace) -> ViewerState:
-    """The starting :class:`~viewer.state.ViewerState` (:func:`starting_view`'s, without the guessed fields)."""
-    return starting_view(arguments)[0]
+    """The starting :class:`~viewer.state.ViewerState` with the exact defaults for the unset view flags (those of
+    ``gratnet render``; computed now): :func:`starting_view` with ``exact``."""
+    return starting_view(arguments, exact=True)[0]
 
 
 def open_window(arguments: argparse.Namespace, **window_options: Any) -> ViewerWindow:
