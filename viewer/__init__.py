@@ -27,5 +27,6 @@ The interactive viewer:
 - ``reference_view``: the ground truth beside the network (network / reference / FLIP heat map).
 - ``scene_supply``, ``compile_worker``, ``default_view``: models, meshes and shaders compiled off the
   window's thread; a switch's default view in a worker process.
+- ``srgb``: the window's XYZ → display sRGB in numpy (the same bytes as ``gratnet.display``, no colour-science).
 - ``window``: ``ViewerWindow``, the glfw/imgui/EGL shell (the only module that imports glfw or imgui).
 """
