@@ -177,7 +177,7 @@ def test_reproduce_script_replays_every_shipped_paper_models_recorded_training(t
     from tests.conftest import REPO
 
     names = sorted(path.parent.name for path in (REPO / "assets").glob("paper-*/train_command.json"))
-    assert len(names) == 7
+    assert len(names) == 8
     result = subprocess.run(["bash", str(REPO / "scripts" / "reproduce_paper_models.sh")], capture_output=True,
                             text=True, env={"DRY_RUN": "1", "OUT": str(tmp_path), "PATH": "/usr/bin:/bin"},
                             check=True)

@@ -14,7 +14,7 @@ from tests.conftest import REPO
 # The paper's table, typed here independently of benchmarks/results_table.py: each dataset's own column (paper-snake
 # is the corn snake, Elaphe; 0.0318 is the sunbeam snake's column, another dataset).
 PAPER = {"paper-blazed": 0.0021, "paper-cd": 0.0178, "paper-snake": 0.0221, "paper-scratches": 0.0123,
-         "paper-pits": 0.0878, "paper-corner-cubes": 0.0751}
+         "paper-pits": 0.0878, "paper-corner-cubes": 0.0751, "paper-sunbeam": 0.0318}
 
 
 def _cells(line: str) -> list[str]:
@@ -41,7 +41,7 @@ def page(tmp_path_factory) -> str:
 def test_every_paper_row_is_its_metrics_with_the_verdicts_that_follow(page):
     column, rows = _paper_table(page)
     names = sorted(path.name for path in (REPO / "assets").glob("paper-*") if (path / "metrics.json").exists())
-    assert sorted(rows) == names and len(names) == 7
+    assert sorted(rows) == names and len(names) == 8
     for name, cells in rows.items():
         slices = json.loads((REPO / "assets" / name / "metrics.json").read_text())["brdf_slices"]
         normal = next(row for row in slices if row["slice"] == "(0°, 0°) 2000 RU")
