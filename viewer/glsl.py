@@ -35,6 +35,7 @@ import moderngl
 
 from gratnet.errors import GratNetError
 from shaders import SHADER_ROOT as PACKAGED_SHADER_ROOT
+from viewer.pacing import sigint_deferred
 
 __all__ = [
     "LINE_STRIDE",
@@ -289,7 +290,8 @@ def compile_program(
     """
     stages = {stage: preprocess(name, stage, defines, shader_root, overrides) for stage in _STAGES}
     try:
-        return ctx.program(vertex_shader=stages["vertex"].text, fragment_shader=stages["fragment"].text)
+        with sigint_deferred():  # a Ctrl-C inside moderngl's program creation crashed the process
+            return ctx.program(vertex_shader=stages["vertex"].text, fragment_shader=stages["fragment"].text)
     except moderngl.Error as error:
         log = str(error)
         failed = "linking"
@@ -315,7 +317,8 @@ def compile_compute(
     """
     source = preprocess(name, "compute", defines, shader_root, overrides)
     try:
-        return ctx.compute_shader(source.text)
+        with sigint_deferred():  # as compile_program's
+            return ctx.compute_shader(source.text)
     except moderngl.Error as error:
         messages = map_error_log(str(error), source.files) or [" ".join(str(error).split())]
         shown = "; ".join(messages[:5]) + (f"; … ({len(messages) - 5} more)" if len(messages) > 5 else "")

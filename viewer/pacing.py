@@ -20,7 +20,9 @@ Rendering only: no glfw, no imgui, no torch.
 
 from __future__ import annotations
 
+import contextlib
 import math
+import signal
 import time
 from collections.abc import Callable, Iterator
 
@@ -28,7 +30,7 @@ import moderngl
 import numpy as np
 
 __all__ = ["BLOCK", "GROWTH", "PIECE_SECONDS", "READ_BYTES", "Blocks", "Pacer", "Progress", "covered_block_costs",
-           "disc_block_costs", "projected_row_costs", "read_rows"]
+           "disc_block_costs", "projected_row_costs", "read_rows", "sigint_deferred"]
 
 #: The time one piece of GPU work is sized to take (seconds): a Ctrl-C waits for the piece under way.
 PIECE_SECONDS = 0.2
@@ -246,3 +248,28 @@ def projected_row_costs(positions: np.ndarray, indices: np.ndarray, view_project
     block_widths = np.minimum(BLOCK[0], width - BLOCK[0] * np.arange(columns))
     covered = reached.astype(np.float64) @ block_widths
     return covered + UNCOVERED_COST * (width - covered)
+
+
+@contextlib.contextmanager
+def sigint_deferred() -> Iterator[None]:
+    """A SIGINT (Ctrl-C) inside the block is handled right after it, by the handler that was in place (Python's
+    raises KeyboardInterrupt); outside the main thread nothing is deferred.
+
+    For calls that must not see a KeyboardInterrupt half-way: moderngl's program creation calls back into Python
+    after the link, and a KeyboardInterrupt raised there crashed the process (segmentation fault, seen 0.3–2 s
+    after Ctrl-C during a baked shader's compile on llvmpipe); tqdm's refresh leaves its bar on the screen.
+    (Blocking the signal would not do: the process's other threads, e.g. llvmpipe's, would take it.)"""
+    held: list[int] = []
+    try:
+        previous = signal.signal(signal.SIGINT, lambda number, _frame: held.append(number))
+    except ValueError:  # not the main thread
+        yield
+        return
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGINT, previous)
+        if held and callable(previous):
+            previous(signal.SIGINT, None)
+        elif held and previous == signal.SIG_DFL:
+            raise KeyboardInterrupt

@@ -33,7 +33,6 @@ import atexit
 import contextlib
 import dataclasses
 import gc
-import signal
 import sys
 from collections.abc import Callable, Iterator
 from pathlib import Path
@@ -124,34 +123,15 @@ def _progress_bar(quiet: bool) -> Iterator[Progress]:
     :data:`PROGRESS_DELAY` seconds, cleared when it ends; ``quiet``: none. Yields the renderers' report."""
     from tqdm import tqdm
 
+    from viewer.pacing import sigint_deferred
+
     with tqdm(total=_PROGRESS_STEPS, desc="gratnet render", delay=PROGRESS_DELAY, leave=False, disable=quiet,
               file=sys.stderr, bar_format="{desc}: {percentage:3.0f}%|{bar}| {elapsed}<{remaining}") as bar:
         def report(fraction: float) -> None:
-            with _sigint_deferred():  # a Ctrl-C inside tqdm's refresh would leave the bar on the screen
+            with sigint_deferred():  # a Ctrl-C inside tqdm's refresh would leave the bar on the screen
                 bar.update(max(0, round(_PROGRESS_STEPS * min(1.0, fraction)) - bar.n))
 
         yield report
-
-
-@contextlib.contextmanager
-def _sigint_deferred() -> Iterator[None]:
-    """A SIGINT (Ctrl-C) inside the block is handled right after it, by the handler that was in place (Python's
-    raises KeyboardInterrupt); outside the main thread nothing is deferred. (Blocking the signal would not do:
-    the process's other threads, e.g. llvmpipe's, would take it.)"""
-    held: list[int] = []
-    try:
-        previous = signal.signal(signal.SIGINT, lambda number, _frame: held.append(number))
-    except ValueError:  # not the main thread
-        yield
-        return
-    try:
-        yield
-    finally:
-        signal.signal(signal.SIGINT, previous)
-        if held and callable(previous):
-            previous(signal.SIGINT, None)
-        elif held and previous == signal.SIG_DFL:
-            raise KeyboardInterrupt
 
 
 def _auto_exposure(xyz: np.ndarray) -> float:
