@@ -6,6 +6,8 @@
   be caught rendering (Mesa llvmpipe): where the render ends first, the test is skipped.
 - The work behind it (viewer.pacing): a render drawn in many small bands or pieces equals the render drawn in
   one, bit for bit, on both mesh paths and for slices.
+- Ctrl-C inside a shader's compile is raised once the program is made (a KeyboardInterrupt inside moderngl's
+  program creation crashed the process).
 - ``--size``: a size beyond the GL limits, the driver's largest render target or the memory available is
   refused in one line naming the largest size that fits, before any work, and nothing is written.
 """
@@ -138,6 +140,28 @@ def test_ctrl_c_while_writing_leaves_nothing_and_after_writing_says_so(tmp_path,
     assert capsys.readouterr().err == (f"gratnet render: interrupted; {tmp_path / 'x.png'} and its config were "
                                        f"written before it\n")
     assert sorted(os.listdir(tmp_path)) == ["x.config.json", "x.png"]
+
+
+def test_ctrl_c_during_a_shader_compile_is_raised_once_the_program_is_made(ctx, monkeypatch):
+    """moderngl's program creation calls back into Python after the link: a KeyboardInterrupt raised there
+    crashed the process (segmentation fault, Ctrl-C during a baked shader's compile). The compile holds SIGINT
+    and raises it once the program exists (and its GL object is left to the context's release)."""
+    from viewer.glsl import compile_program
+
+    made: list[object] = []
+    real = type(ctx).program
+
+    def program(self: object, *arguments: object, **options: object) -> object:
+        os.kill(os.getpid(), signal.SIGINT)  # Python's handler runs at the next bytecode: here, unless held
+        time.sleep(0.05)
+        made.append(real(self, *arguments, **options))
+        return made[-1]
+
+    monkeypatch.setattr(type(ctx), "program", program)
+    with pytest.raises(KeyboardInterrupt):
+        compile_program(ctx, "accumulate", {})
+    assert len(made) == 1
+    made[0].release()  # type: ignore[attr-defined]
 
 
 # -------------------------------------------------------------------------------------------------
