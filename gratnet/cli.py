@@ -125,7 +125,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     try:
         parser = build_parser(only=command if command in commands else None, commands=commands)
     except (KeyboardInterrupt, ImportError) as error:  # Ctrl-C while the subcommand's modules load
-        return _interrupted(error, "gratnet" + (f" {command}" if command in commands else ""))
+        if not is_interrupt(error):
+            raise
+        return _interrupted("gratnet" + (f" {command}" if command in commands else ""))
     try:
         arguments = parser.parse_args(argv)
     except SystemExit as exit_:  # --help, --version, or a one-line argparse error (GratNetParser.error)
@@ -153,7 +155,9 @@ def main(argv: Sequence[str] | None = None) -> int:
               f"or resolutions (see gratnet {arguments.command} --help)", file=sys.stderr)
         return 2
     except (KeyboardInterrupt, ImportError) as error:
-        return _interrupted(error, f"gratnet {arguments.command}")
+        if not is_interrupt(error):
+            raise
+        return _interrupted(f"gratnet {arguments.command}")
 
 
 def is_interrupt(error: BaseException) -> bool:
@@ -163,12 +167,9 @@ def is_interrupt(error: BaseException) -> bool:
         isinstance(error, ImportError) and isinstance(error.__cause__ or error.__context__, KeyboardInterrupt))
 
 
-def _interrupted(error: BaseException, prefix: str) -> int:
+def _interrupted(prefix: str) -> int:
     """Ctrl-C's answer (a subcommand with outputs of its own to report, such as train or render, answers itself):
-    one line, exit status 130. The writers are atomic, so nothing half-written is left; any other ImportError
-    is raised again."""
-    if not is_interrupt(error):
-        raise error
+    one line, exit status 130. The writers are atomic, so nothing half-written is left."""
     print(f"{prefix}: interrupted; no output was written", file=sys.stderr)
     # The interpreter's teardown would then spend ~0.4 s collecting the objects of big libraries
     # (colour-science; measured on llvmpipe's 2-core machine); frozen at exit, nothing is collected.

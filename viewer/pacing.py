@@ -11,9 +11,18 @@ together give the unsplit result bit for bit.
 
 :class:`Pacer` sizes the pieces from measured time: each piece is predicted to take :data:`PIECE_SECONDS`
 from the rate (seconds per unit of cost) of the piece before, starting small and growing at most
-:data:`GROWTH` times per piece (a cheap piece, e.g. rows of background, must not predict a huge one).
-Costs are per unit (per row, per list entry) and may differ between units: the forward path weighs a row by
-the pixels its depth pre-pass covered, a BRDF slice's row by its pixels inside the unit disc.
+:data:`GROWTH` times per piece. Costs are per unit and differ between units, since the network runs only where
+the mesh covers a pixel: a uniform guess grew over cheap background into pieces of seconds once it reached the
+mesh. So the units are weighed: the forward path's shading pass by the pixels its depth pass covered, per
+:class:`Blocks` of 64×4 pixels (rows alone would not do: 4 rows of a 16384-pixel-wide image are seconds of
+network on llvmpipe); a BRDF slice's blocks by their pixels inside the unit disc; the passes before any
+coverage is known (the depth pass, the deferred G-buffer and compaction) by rows, from the mesh's triangles
+projected on the CPU (:func:`projected_row_costs`). Read-backs go in pieces too (:func:`read_rows`).
+
+Two calls must not be interrupted half-way at all (:func:`sigint_deferred`): moderngl's program creation, which
+calls back into Python (a KeyboardInterrupt there crashed the process), and tqdm's refresh. A shader's first
+compile on llvmpipe is one long call that cannot be split (~25 s for a baked 28k-MAC network on a cold Mesa
+cache): Ctrl-C is answered once it ends.
 
 Rendering only: no glfw, no imgui, no torch.
 """
