@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import signal
 from collections.abc import Callable, Iterator
 from pathlib import Path
 
@@ -18,6 +19,14 @@ def coarse_spectrum() -> SpectralWeights:
     """Nine wavelengths, 380…780 nm every 50 nm, D65 × CIE 1931 2° weights."""
     return spectral_weights(380.0, 780.0, 50.0)
 
+
+
+def pytest_configure(config: pytest.Config) -> None:
+    """Let SIGINT through in xdist workers: they ignore it (the controller handles Ctrl-C), a child inherits an
+    ignored signal across exec, and Python then installs no KeyboardInterrupt handler, so the Ctrl-C tests'
+    commands (and the in-process ones) would never see their signal."""
+    if signal.getsignal(signal.SIGINT) is signal.SIG_IGN:
+        signal.signal(signal.SIGINT, signal.default_int_handler)
 
 
 def pytest_addoption(parser: pytest.Parser) -> None:

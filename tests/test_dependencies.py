@@ -33,7 +33,7 @@ else:  # pragma: no cover - Python 3.10
 
 REPO = Path(__file__).resolve().parents[1]
 PYPROJECT = tomllib.loads((REPO / "pyproject.toml").read_text(encoding="utf-8"))
-OWN_PACKAGES = set(PYPROJECT["tool"]["setuptools"]["packages"]) | {"tests", "benchmarks"}
+OWN_PACKAGES = set(PYPROJECT["tool"]["setuptools"]["packages"]) | {"tests", "benchmarks", "scripts"}
 
 
 def _normalize(name: str) -> str:
