@@ -332,3 +332,11 @@ def test_view_refuses_a_foreign_volume_before_any_window(tmp_path, monkeypatch, 
     assert main(["view", "--material", "cd", "--reference", str(volume), "--screenshot-dir", str(tmp_path)]) == 2
     error = capsys.readouterr().err.strip()
     assert len(error.splitlines()) == 1 and "not the ground truth of cd" in error, error
+
+
+def test_reference_refuses_the_deferred_path_in_one_line(tmp_path, capsys):
+    volume = cd_volume(tmp_path / "cd.exr")
+    out = tmp_path / "x.png"
+    assert main(["render", "--material", "cd", "--reference", str(volume), "--render-path", "deferred", "--size",
+                 "16,16", "--out", str(out)]) == 2
+    assert "takes the forward path" in capsys.readouterr().err and not out.exists()

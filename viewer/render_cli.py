@@ -121,6 +121,9 @@ def resolve_config(arguments: argparse.Namespace) -> RenderConfig:
     if config.reference and config.skip_dark:
         raise GratNetError("--skip-dark skips the network by its output bound; a --reference render looks up every "
                            "pixel")
+    if config.reference and config.render_path == "deferred":
+        raise GratNetError("--render-path deferred evaluates the network in a compute pass; a --reference render "
+                           "takes the forward path (auto or forward)")
     return config
 
 
