@@ -141,42 +141,6 @@ def state_defaults(material: str, mesh: str, slice_mode: bool = False, fov_degre
     return view
 
 
-def _significant(value: float, digits: int = 3) -> float:
-    return float(f"{value:.{digits}g}")
-
-
-def _exposure(brightness: Any, weights: Any, suggested: float) -> float:
-    """viewer.defaults' step 3: the weighted 99.5th percentile of the predicted brightness at display white (at
-    most ``MAX_EXPOSURE_RATIO`` × the material's suggestion), raised until ``VISIBLE_PERCENT`` % of the picture
-    is ``VISIBLE_MARGIN`` display steps above black (at most ``MAX_VISIBLE_RATIO`` × the suggestion)."""
-    import numpy as np
-
-    from gratnet.bounds import DISPLAY_SKIP_THRESHOLD
-    from viewer.defaults import (
-        EXPOSURE_PERCENTILE,
-        MAX_EXPOSURE_RATIO,
-        MAX_VISIBLE_RATIO,
-        VISIBLE_MARGIN,
-        VISIBLE_PERCENT,
-    )
-
-    order = np.argsort(brightness, kind="stable")
-    cumulative = np.cumsum(weights[order])
-    if cumulative.size == 0 or not cumulative[-1] > 0:
-        return suggested
-
-    def percentile(value: float) -> float:
-        position = int(np.searchsorted(cumulative, value / 100.0 * cumulative[-1]))
-        return float(brightness[order][min(position, len(order) - 1)])
-
-    top = percentile(EXPOSURE_PERCENTILE)
-    exposure = min(1.0 / top, MAX_EXPOSURE_RATIO * suggested) if top > 0 else suggested
-    visible = percentile(100.0 - VISIBLE_PERCENT)
-    if visible > 0 and exposure * visible < VISIBLE_MARGIN * DISPLAY_SKIP_THRESHOLD:
-        exposure = min(VISIBLE_MARGIN * DISPLAY_SKIP_THRESHOLD / visible, MAX_VISIBLE_RATIO * suggested)
-    return exposure
-
-
 def _colour(model: Any, light: Any, view: Any, ior: float | None) -> Any:
     """Unexposed linear sRGB of A · XYZ ``(N, 3)`` for unit ``light`` and ``view`` directions ``(N, 3)`` in the
     tangent frame (0 where either is below the surface)."""
@@ -193,27 +157,6 @@ def _colour(model: Any, light: Any, view: Any, ior: float | None) -> Any:
         xyz = evaluate_keys(model, key[lit, 0], key[lit, 1], key[lit, 2])
         colour[lit] = linear_srgb(xyz) * a_term(light[lit], view[lit], ior)[:, None]
     return colour
-
-
-def _score(colour: Any, weights: Any, exposure: float) -> float:
-    """viewer.defaults' step 4: the weight the display shows coloured (display sRGB chroma ≥ ``COLOURFUL_CHROMA``,
-    not white) plus ``SHOWN_WEIGHT`` × the weight it shows at all (≥ ``VISIBLE_MARGIN`` display steps)."""
-    import numpy as np
-
-    from gratnet.bounds import DISPLAY_SKIP_THRESHOLD
-    from viewer.defaults import COLOURFUL_CHROMA, SHOWN_WEIGHT, VISIBLE_MARGIN
-
-    linear = np.clip(colour * exposure, 0.0, 1.0)
-    encoded = np.where(linear <= 0.0031308, 12.92 * linear, 1.055 * np.power(linear, 1.0 / 2.4) - 0.055)
-    shown = linear.max(axis=1) >= VISIBLE_MARGIN * DISPLAY_SKIP_THRESHOLD
-    coloured = shown & (encoded.max(axis=1) - encoded.min(axis=1) >= COLOURFUL_CHROMA) & (linear.min(axis=1) < 0.98)
-    return float(np.sum(weights[coloured]) + SHOWN_WEIGHT * np.sum(weights[shown]))
-
-
-def _light_angles(world: Any) -> tuple[float, float]:
-    theta = math.degrees(math.acos(max(-1.0, min(1.0, float(world[2])))))
-    phi = math.degrees(math.atan2(float(world[1]), float(world[0]))) if math.hypot(world[0], world[1]) > 1e-12 else 0.0
-    return round(theta, 1) + 0.0, round(phi, 1) + 0.0  # + 0.0: no "-0"
 
 
 def quick_view(model: Any, mesh: Any, slice_mode: bool = False, fov_degrees: float = FOV_DEGREES,
@@ -234,7 +177,11 @@ def quick_view(model: Any, mesh: Any, slice_mode: bool = False, fov_degrees: flo
         SCORE_TIE,
         SLICE_LIGHT_DEGREES,
         aim_light,
+        display_score,
         framing_distance,
+        light_angles,
+        predicted_exposure,
+        significant,
         surface_samples,
     )
 
@@ -251,10 +198,10 @@ def quick_view(model: Any, mesh: Any, slice_mode: bool = False, fov_degrees: flo
         views = views[inside]
         light = np.broadcast_to(direction(SLICE_LIGHT_DEGREES, phi), views.shape)
         colour = _colour(model, light, views, ior)
-        exposure = _exposure(colour.max(axis=1).clip(0.0), np.ones(len(views)), display.exposure)
+        exposure = predicted_exposure(colour.max(axis=1).clip(0.0), np.ones(len(views)), display.exposure)
         return {"light_theta": SLICE_LIGHT_DEGREES, "light_phi": phi, "camera_distance": FALLBACK.camera_distance,
                 "camera_azimuth": FALLBACK.camera_azimuth_degrees,
-                "camera_elevation": FALLBACK.camera_elevation_degrees, "exposure": _significant(exposure)}
+                "camera_elevation": FALLBACK.camera_elevation_degrees, "exposure": significant(exposure)}
     samples = surface_samples(mesh, QUICK_SAMPLES)
     distance = round(framing_distance(mesh, fov_degrees), 3)
     positions = samples["positions"]
@@ -278,18 +225,18 @@ def quick_view(model: Any, mesh: Any, slice_mode: bool = False, fov_degrees: flo
             if world is None:
                 continue
             colour = _colour(model, np.einsum("nij,j->ni", frames[visible], world), view[visible], ior)
-            exposure = _exposure(colour.max(axis=1).clip(0.0), weights, display.exposure)
-            score = _score(colour, weights, exposure)  # the solid angle shown coloured (same field for all)
+            exposure = predicted_exposure(colour.max(axis=1).clip(0.0), weights, display.exposure)
+            score = display_score(colour, weights, exposure)  # solid angles shown coloured (same field for all)
             if best is None or score > best[0] + SCORE_TIE:
-                theta, phi = _light_angles(world)
+                theta, phi = light_angles(world)
                 best = (score, {"light_theta": theta, "light_phi": phi, "camera_distance": distance,
                                 "camera_azimuth": CAMERA_AZIMUTH_DEGREES, "camera_elevation": elevation,
-                                "exposure": _significant(exposure)})
+                                "exposure": significant(exposure)})
     if best is not None:
         return best[1]
     return {"light_theta": FALLBACK.light_theta_degrees, "light_phi": FALLBACK.light_phi_degrees,
             "camera_distance": distance, "camera_azimuth": CAMERA_AZIMUTH_DEGREES,
-            "camera_elevation": FALLBACK.camera_elevation_degrees, "exposure": _significant(display.exposure)}
+            "camera_elevation": FALLBACK.camera_elevation_degrees, "exposure": significant(display.exposure)}
 
 
 def _quick_view_of(material: str, mesh: str, slice_mode: bool, fov_degrees: float,

@@ -67,9 +67,13 @@ __all__ = [
     "FOV_DEGREES",
     "SceneDefaults",
     "aim_light",
+    "display_score",
     "framing_distance",
+    "light_angles",
+    "predicted_exposure",
     "resolve_defaults",
     "scene_defaults",
+    "significant",
     "slice_defaults",
     "surface_samples",
 ]
@@ -154,7 +158,8 @@ FALLBACK = SceneDefaults(light_theta_degrees=45.0, light_phi_degrees=90.0, camer
                          exposure=1.0)
 
 
-def _significant(value: float, digits: int = 3) -> float:
+def significant(value: float, digits: int = 3) -> float:
+    """``value`` rounded to ``digits`` significant digits (reads well in a config file and on a slider)."""
     return float(f"{value:.{digits}g}")
 
 
@@ -248,7 +253,8 @@ def aim_light(key_uv: tuple[float, float], view_local: np.ndarray, samples: dict
     return world
 
 
-def _light_angles(world: np.ndarray) -> tuple[float, float]:
+def light_angles(world: np.ndarray) -> tuple[float, float]:
+    """A unit direction (world) as ``(θ, φ)`` in degrees, rounded to 0.1°: the ``--light`` flag's angles."""
     theta = math.degrees(math.acos(max(-1.0, min(1.0, float(world[2])))))
     phi = math.degrees(math.atan2(float(world[1]), float(world[0]))) if math.hypot(world[0], world[1]) > 1e-12 else 0.0
     return round(theta, 1) + 0.0, round(phi, 1) + 0.0  # + 0.0: no "-0" in a config file
@@ -278,11 +284,11 @@ def _predicted_colour(model: ModelFile, samples: dict[str, np.ndarray], visible:
     return colour, view[:, 2] * samples["area"][index] / np.square(distance)
 
 
-def _score(colour: np.ndarray, weights: np.ndarray, exposure: float, field_sr: float) -> float:
+def display_score(colour: np.ndarray, weights: np.ndarray, exposure: float, field_sr: float = 1.0) -> float:
     """How well a predicted picture shows diffraction: the fraction of the picture (``field_sr``: its solid
     angle, steradians; ``weights``: each sample's) that the display shows coloured (chroma ≥
     ``COLOURFUL_CHROMA`` in display sRGB, not white), plus ``SHOWN_WEIGHT`` × the fraction it shows at all
-    (≥ ``VISIBLE_MARGIN`` display steps)."""
+    (≥ ``VISIBLE_MARGIN`` display steps). ``field_sr`` = 1: the solid angles themselves."""
     import numpy as np
 
     from gratnet.bounds import DISPLAY_SKIP_THRESHOLD
@@ -305,15 +311,16 @@ def _weighted_percentile(values: np.ndarray, weights: np.ndarray, percentile: fl
     return float(values[order][min(position, len(order) - 1)])
 
 
-def _exposure(values: np.ndarray, weights: np.ndarray, display: MaterialDisplay) -> float:
-    """The exposure of step 3 (module docstring) from the predicted brightness and pixel weights."""
+def predicted_exposure(values: np.ndarray, weights: np.ndarray, suggested: float) -> float:
+    """The exposure of step 3 (module docstring) from the predicted brightness and pixel weights; ``suggested``:
+    the material's own (``MaterialDisplay.exposure``), which bounds it."""
     from gratnet.bounds import DISPLAY_SKIP_THRESHOLD
 
     reference = _weighted_percentile(values, weights, EXPOSURE_PERCENTILE)
-    exposure = min(1.0 / reference, MAX_EXPOSURE_RATIO * display.exposure) if reference > 0 else display.exposure
+    exposure = min(1.0 / reference, MAX_EXPOSURE_RATIO * suggested) if reference > 0 else suggested
     visible = _weighted_percentile(values, weights, 100.0 - VISIBLE_PERCENT)
     if visible > 0 and exposure * visible < VISIBLE_MARGIN * DISPLAY_SKIP_THRESHOLD:
-        exposure = min(VISIBLE_MARGIN * DISPLAY_SKIP_THRESHOLD / visible, MAX_VISIBLE_RATIO * display.exposure)
+        exposure = min(VISIBLE_MARGIN * DISPLAY_SKIP_THRESHOLD / visible, MAX_VISIBLE_RATIO * suggested)
     return exposure
 
 
@@ -354,16 +361,16 @@ def scene_defaults(model: ModelFile, mesh: Mesh, fov_degrees: float = FOV_DEGREE
                 if light is None:
                     continue
                 colour, weights = _predicted_colour(model, samples, scoring, camera, light, ior)
-                exposure = _exposure(np.max(colour, axis=1).clip(0.0), weights, display)
-                score = _score(colour, weights * (len(visible) / SCORE_SAMPLES), exposure, field_sr)
+                exposure = predicted_exposure(np.max(colour, axis=1).clip(0.0), weights, display.exposure)
+                score = display_score(colour, weights * (len(visible) / SCORE_SAMPLES), exposure, field_sr)
                 if best is None or score > best[0] + SCORE_TIE:
                     best = (score, (elevation, camera, visible, light, aim))
     if best is None:
-        return dataclasses.replace(FALLBACK, camera_distance=distance, exposure=_significant(display.exposure))
+        return dataclasses.replace(FALLBACK, camera_distance=distance, exposure=significant(display.exposure))
     elevation, camera, visible, light, aim = best[1]
     colour, weights = _predicted_colour(model, samples, visible, camera, light, ior)  # every sample, for the exposure
-    exposure = _significant(_exposure(np.max(colour, axis=1).clip(0.0), weights, display))
-    theta, phi = _light_angles(light)
+    exposure = significant(predicted_exposure(np.max(colour, axis=1).clip(0.0), weights, display.exposure))
+    theta, phi = light_angles(light)
     return SceneDefaults(theta, phi, distance, CAMERA_AZIMUTH_DEGREES, elevation, exposure,
                          (round(aim[0], 4), round(aim[1], 4)))
 
@@ -389,9 +396,9 @@ def slice_defaults(model: ModelFile, display: MaterialDisplay | None = None, ior
     key = -(light[None, :] + views)
     colour = xyz_to_linear_srgb(evaluate_keys(model, key[:, 0], key[:, 1], key[:, 2]))
     colour *= a_term(light[None, :], views, ior)[:, None]
-    exposure = _exposure(np.max(colour, axis=1).clip(0.0), np.ones(len(views)), display)
+    exposure = predicted_exposure(np.max(colour, axis=1).clip(0.0), np.ones(len(views)), display.exposure)
     return dataclasses.replace(FALLBACK, light_theta_degrees=SLICE_LIGHT_DEGREES, light_phi_degrees=phi,
-                               exposure=_significant(exposure), aimed_key_uv=(u, v))
+                               exposure=significant(exposure), aimed_key_uv=(u, v))
 
 
 @functools.lru_cache(maxsize=64)
