@@ -234,22 +234,11 @@ def _slice_config(metadata: dict[str, Any], evaluate: Any, index: int) -> tuple[
             OpticsConfig.from_volume_metadata(metadata))
 
 
-def brdf_cache_file(field: Any, optics: Any, config: Any, cache_dir: str | Path) -> Path:
-    """The file trainer.evaluate.ground_truth_brdf_slice caches a slice in (its key: source, optics, slice
-    config); tests/test_faults_cluster.py checks that the two agree."""
-    import hashlib
-
-    from gratnet.config import config_to_dict
-
-    key = json.dumps([field.source, config_to_dict(optics), config_to_dict(config)], sort_keys=True)
-    return Path(cache_dir) / f"brdf_{hashlib.sha256(key.encode()).hexdigest()[:20]}.npy"
-
-
 def evaluation_slice(out: Path, dataset: DatasetSpec, metadata: dict[str, Any], evaluate: Any, index: int,
                      device: str | None = None) -> None:
     """Fill the evaluation cache with ground-truth BRDF slice ``index`` (trainer.evaluate.STANDARD_SLICES),
     with the optics the evaluation will read back from the volume, so that no run computes it again."""
-    from trainer.evaluate import ground_truth_brdf_slice
+    from trainer.evaluate import brdf_cache_file, ground_truth_brdf_slice
 
     with attempt(out, f"slice-{dataset.name}-{index + 1}", f"{dataset.name}: BRDF slice {index + 1}") as record:
         config, optics = _slice_config(metadata, evaluate, index)

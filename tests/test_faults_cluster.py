@@ -306,11 +306,10 @@ def test_a_killed_driver_leaves_no_task_running_on_the_cluster_and_the_rerun_fin
 
 
 def test_the_slice_tasks_know_the_evaluation_caches_file(tmp_path):
-    """sweep.tasks.brdf_cache_file names the file trainer.evaluate.ground_truth_brdf_slice writes (else a slice
+    """trainer.evaluate.brdf_cache_file names the file trainer.evaluate.ground_truth_brdf_slice writes (else a slice
     task would compute a slice the cache holds, and count it computed)."""
-    from sweep.tasks import brdf_cache_file
     from trainer.brdfslice import SliceConfig
-    from trainer.evaluate import ground_truth_brdf_slice
+    from trainer.evaluate import brdf_cache_file, ground_truth_brdf_slice
     from trainer.fourier import OpticsConfig
     from trainer.generators import generate
 

@@ -84,6 +84,13 @@ def network_brdf_slice(model: ModelFile, config: SliceConfig) -> np.ndarray:
     return expose_slice(config, light, views, inside, xyz)
 
 
+def brdf_cache_file(field: HeightField, optics: OpticsConfig, config: SliceConfig, cache_dir: str | Path) -> Path:
+    """The file :func:`ground_truth_brdf_slice` caches a slice in, named by its key (source, optics, slice config):
+    a sweep asks whether a slice is there before computing it."""
+    key = json.dumps([field.source, config_to_dict(optics), config_to_dict(config)], sort_keys=True)
+    return Path(cache_dir) / f"brdf_{hashlib.sha256(key.encode()).hexdigest()[:20]}.npy"
+
+
 def ground_truth_brdf_slice(
     field: HeightField,
     optics: OpticsConfig,
@@ -92,10 +99,9 @@ def ground_truth_brdf_slice(
     progress: bool = True,
     device: str | None = None,
 ) -> np.ndarray:
-    """Ground-truth slice (exact key vectors), cached by (source, optics, slice config); ``device`` as
-    :class:`trainer.fourier.FTerm`'s (None: numpy; the cache holds either)."""
-    key = json.dumps([field.source, config_to_dict(optics), config_to_dict(config)], sort_keys=True)
-    path = Path(cache_dir) / f"brdf_{hashlib.sha256(key.encode()).hexdigest()[:20]}.npy" if cache_dir else None
+    """Ground-truth slice (exact key vectors), cached by (source, optics, slice config) in
+    :func:`brdf_cache_file`; ``device`` as :class:`trainer.fourier.FTerm`'s (None: numpy; the cache holds either)."""
+    path = brdf_cache_file(field, optics, config, cache_dir) if cache_dir else None
     if path is not None and path.exists():
         return np.load(path)
     xyz = brdf_slice_xyz(prepare_surface(field, optics), config, optics, progress=progress, device=device)
