@@ -36,7 +36,7 @@ from gratnet.atomic import atomic_path, write_text_atomic
 from gratnet.modelfile import load_model
 from gratnet.reference import texture_bytes
 from gratnet.volume import Volume, read_volume
-from trainer.evaluate import STANDARD_SLICES, slice_label
+from trainer.evaluate import STANDARD_SLICE_LABELS
 from viewer.camera import Camera, Light
 from viewer.catalog import build_mesh, resolve_material
 from viewer.context import create_headless_context
@@ -68,7 +68,7 @@ def measure(material: str, volume_path: Path, strides: list[int], size: tuple[in
     """One row for the network, one per stride for the look-up table."""
     model_path = resolve_material(material)
     metrics = json.loads((model_path.parent / "metrics.json").read_text(encoding="utf-8"))
-    paper_slices = {slice_label(theta, phi, exposure) for theta, phi, exposure in STANDARD_SLICES}
+    paper_slices = set(STANDARD_SLICE_LABELS)
     network_flip = [entry["flip"] for entry in metrics["brdf_slices"] if entry["slice"] in paper_slices]
     if len(network_flip) != len(paper_slices):  # like for like: the oracle scores exactly these five
         raise SystemExit(f"lut_baseline: {model_path.parent / 'metrics.json'} lacks some of the paper's five slices")

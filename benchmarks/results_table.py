@@ -15,6 +15,7 @@ from pathlib import Path
 
 from gratnet.atomic import write_text_atomic
 from trainer.datasets import PRESETS
+from trainer.evaluate import STANDARD_SLICE_LABELS
 
 # The paper's mean FLIP at the (0°, 0°) 2000 RU BRDF slice (issue 3's targets); None where it gives none.
 PAPER_FLIP_0_0 = {
@@ -25,13 +26,7 @@ PAPER_FLIP_0_0 = {
     "pits": 0.0878,
     "sinusoidal": None,
 }
-SLICE_ORDER = [
-    "(0°, 0°) 2000 RU",
-    "(30°, 135°) 5000 RU",
-    "(30°, 0°) 5000 RU",
-    "(72°, 30°) 5000 RU",
-    "(72°, 270°) 5000 RU",
-]
+SLICE_ORDER = list(STANDARD_SLICE_LABELS)
 
 
 def _number(value: object, digits: int = 4) -> str:

@@ -20,10 +20,7 @@ from typing import Any
 
 from gratnet.atomic import write_text_atomic
 from trainer.datasets import PRESETS
-from trainer.evaluate import STANDARD_SLICES, slice_label
-
-#: The paper's five BRDF slices, (0°, 0°) first.
-SLICE_ORDER = [slice_label(theta, phi, exposure) for theta, phi, exposure in STANDARD_SLICES]
+from trainer.evaluate import STANDARD_SLICE_LABELS as SLICE_ORDER
 
 
 def summarise(runs: Path) -> list[dict[str, Any]]:

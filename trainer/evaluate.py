@@ -126,6 +126,10 @@ def slice_label(theta: float, phi: float, exposure: float) -> str:
     return f"({theta:g}°, {phi:g}°) {exposure:g} RU"
 
 
+#: The labels of the paper's five slices (gratnet.brdf.STANDARD_SLICES), (0°, 0°) first, as metrics.json names them.
+STANDARD_SLICE_LABELS: tuple[str, ...] = tuple(slice_label(*view) for view in STANDARD_SLICES)
+
+
 def evaluate_brdf_slices(
     model: ModelFile,
     field: HeightField,
