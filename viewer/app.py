@@ -474,10 +474,9 @@ class ViewerApp:
         renderer, buffers = supplied
         started = time.perf_counter()
         shading = state.shading if self.reference_available(state.material) else "network"
+        truth = self.reference.scene() if shading != "network" and self.reference is not None else None
         pictures = []
-        for scene in ((renderer,) if shading == "network" else
-                      (self.reference.scene(),) if shading == "reference" else  # type: ignore[union-attr]
-                      (renderer, self.reference.scene())):  # type: ignore[union-attr]
+        for scene in {"network": (renderer,), "reference": (truth,), "flip": (renderer, truth)}[shading]:
             if state.slice_mode:
                 xyz = scene.render_brdf_slice(state.light_theta, state.light_phi, size[0], state.exposure,
                                               state.effective_ior, rows=rows)
