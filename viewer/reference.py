@@ -121,12 +121,6 @@ class ReferenceRenderer(ShadingPrograms):
             self._warned_skip = True
         return self._texture, REFERENCE_UNIT
 
-    def __enter__(self) -> ReferenceRenderer:
-        return self
-
-    def __exit__(self, *exc_info: object) -> None:
-        self.release()
-
     def release(self) -> None:
         """Free the GL objects (the context itself belongs to the caller)."""
         self.release_programs()

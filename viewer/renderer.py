@@ -487,12 +487,6 @@ class NetworkRenderer(ShadingPrograms):
             source.release()
         return np.frombuffer(data, dtype=np.float32).reshape(height, width, 4)[::-1, :, :3].copy()
 
-    def __enter__(self) -> NetworkRenderer:
-        return self
-
-    def __exit__(self, *exc_info: object) -> None:
-        self.release()
-
     def release(self) -> None:
         """Free the GL objects (the context itself belongs to the caller)."""
         self.release_programs()

@@ -14,6 +14,7 @@ from __future__ import annotations
 import math
 from collections.abc import Mapping
 from pathlib import Path
+from typing import TypeVar
 
 import moderngl
 import numpy as np
@@ -63,6 +64,9 @@ def skip_threshold_value(threshold: float | None) -> float:
     if not (math.isfinite(value) and value >= 0.0):
         raise GratNetError(f"skip threshold must be a finite number ≥ 0 (0 or None: off), got {threshold!r}")
     return value
+
+
+ShadingT = TypeVar("ShadingT", bound="ShadingPrograms")
 
 
 class ShadingPrograms:
@@ -282,6 +286,12 @@ class ShadingPrograms:
         return xyz_to_display_srgb8(np.asarray(xyz, dtype=np.float64), 1.0)
 
     # ---------------------------------------------------------------------------------------------
+
+    def __enter__(self: ShadingT) -> ShadingT:
+        return self
+
+    def __exit__(self, *exc_info: object) -> None:
+        self.release()
 
     def release(self) -> None:
         """Free the GL objects (subclasses add their textures)."""
