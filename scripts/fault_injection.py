@@ -13,8 +13,10 @@ cut in K equal spans, kill k at a uniformly drawn place in span k (:func:`kill_m
   working folder (the command's own: a process that retitled itself has overwritten its environment);
 - files: every file left in its folder loads as what it is (a volume with gratnet.volume.read_volume, a model
   with gratnet.modelfile.load_model, a checkpoint, an EXR or PNG image, JSON, CSV, ``.npy``), or is a
-  temporary of gratnet.atomic (a hidden ``.NAME.RANDOM.tmp.EXT`` or ``.NAME.PID.backup``), which no command
-  reads: a broken file is a finding;
+  temporary of gratnet.atomic (a hidden ``.NAME.HOST-PID-RANDOM.tmp.EXT`` or ``.NAME.EXT.HOST-PID.backup``;
+  before issue 36's last change ``.NAME.RANDOM.tmp.EXT`` and ``.NAME.PID.backup``), which no command reads: a
+  broken file is a finding; the rerun must have removed the killed writer's temporaries from the folders it
+  writes in (those left after it are counted);
 - the rerun: the same command (``train``: with ``--resume`` when a checkpoint was left) to the end; every output
   then equals the reference's, arrays bit for bit, JSON and tables with their timings (keys naming seconds, a
   render path's measured reason), the folder's own path and the sweep's task records left out.
@@ -52,8 +54,10 @@ TAG_VARIABLE = "GRATNET_FAULT_TAG"
 GRACE_SECONDS = 10.0
 #: Kill moments, as fractions of the uninterrupted run's duration.
 MOMENTS = (0.05, 0.95)
-#: gratnet.atomic's temporaries (``.NAME.RANDOM.tmp.EXT``) and backups (``.NAME.PID.backup``): hidden files.
-TEMPORARY = re.compile(r"^\..+(\.tmp(\.[A-Za-z0-9]+)?|\.\d+\.backup)$")
+#: gratnet.atomic's temporaries and backups, hidden files: ``.NAME.HOST-PID-RANDOM.tmp.EXT`` and
+#: ``.NAME.EXT.HOST-PID.backup`` (gratnet.atomic.TEMPORARY_NAME), and the older ``.NAME.RANDOM.tmp.EXT`` and
+#: ``.NAME.PID.backup``.
+TEMPORARY = re.compile(r"^\..+(\.tmp(\.[A-Za-z0-9]+)?|\.([0-9a-f]{6}-)?\d+\.backup)$")
 #: Folders of a sweep that only it reads: its task records (one file per task attempt; they differ by design).
 RECORDS = "records"
 
@@ -115,6 +119,7 @@ class Kill:
     rerun_arguments: list[str] = dataclasses.field(default_factory=list)
     differences: list[str] = dataclasses.field(default_factory=list)
     compared: int = 0  # output files compared with the reference's after the rerun
+    temporaries_after_rerun: list[str] = dataclasses.field(default_factory=list)  # the kill's, still there
 
     @property
     def ok(self) -> bool:
@@ -446,6 +451,7 @@ def kill_once(case: Case, folder: Path, moment: float, reference: Path) -> Kill:
     arguments = case.rerun(folder) if case.rerun else case.arguments
     result.rerun_arguments = arguments[len(case.arguments):]
     result.rerun_status, _ = run_to_end(arguments, folder)
+    result.temporaries_after_rerun = [name for name in temporaries if (folder / name).exists()]
     if result.rerun_status == 0:
         result.compared, result.differences = compare(folder, reference)
     else:
@@ -516,7 +522,8 @@ def run_all(work: Path, kills: int, seed: int, names: list[str] | None = None, c
             flags = " ".join(["rerun", *result.rerun_arguments])
             report(f"{case.name}: kill at {result.moment_s:6.2f} s of {duration:.1f} s "
                    f"({'killed' if result.killed else 'had ended'}): {len(result.left)} files left, "
-                   f"{result.checked} load, {len(result.temporaries)} temporaries, {len(result.broken)} broken; "
+                   f"{result.checked} load, {len(result.temporaries)} temporaries "
+                   f"({len(result.temporaries_after_rerun)} left after the rerun), {len(result.broken)} broken; "
                    f"processes gone after {result.gone_after_s} s, {len(result.survivors)} alive at "
                    f"{GRACE_SECONDS:g} s; {flags}: {result.compared} outputs compared, "
                    f"{len(result.differences)} differ: {state}")
@@ -528,6 +535,7 @@ def run_all(work: Path, kills: int, seed: int, names: list[str] | None = None, c
         "runs": len(every),
         "files_checked_after_kills": sum(kill["checked"] for kill in every),
         "temporaries_left": sum(len(kill["temporaries"]) for kill in every),
+        "temporaries_left_after_reruns": sum(len(kill.get("temporaries_after_rerun", [])) for kill in every),
         "broken_files": sum(len(kill["broken"]) for kill in every),
         "processes_alive_after_grace": sum(len(kill["survivors"]) for kill in every),
         "outputs_compared_after_reruns": sum(kill["compared"] for kill in every),
