@@ -9,6 +9,10 @@
 //   SHADE    one invocation per list entry: encoding -> MLP -> inverse range (the same encoding.glsl,
 //            mlp.glsl and range.glsl as the forward path's surface.glsl) and the texel becomes
 //            (factor * XYZ, 1): exposed CIE XYZ and coverage, as the forward path writes.
+//   SHADE_TILED  SHADE as a tiled matrix product (mlp_tiled.glsl, issue 32): one work group per TILED_PIXELS
+//            list entries, each layer's weights staged in shared memory once per tile, the activations kept
+//            there between layers; the same texels written. With TILED_HALF, half-precision arithmetic
+//            (GL_NV_gpu_shader5 or GL_AMD_gpu_shader_half_float, enabled here: TILED_HALF_NV / TILED_HALF_AMD).
 //   RESOLVE  per pixel: the mean of its u_samples texels (sample k at row y + k * u_height) times u_scale,
 //            added to the output when u_accumulate is set (samples in several chunks).
 //
@@ -17,9 +21,15 @@
 //
 // So background, A = 0 and bound-dark pixels never reach the MLP: the skip rules of the forward path
 // become the list's length. Needs the defines of mlp.glsl and encoding.glsl (SHADE), skip.glsl's (COMPACT),
-// DEFERRED_LIST_BINDING and SHADE_GROUP.
+// DEFERRED_LIST_BINDING and SHADE_GROUP (SHADE_TILED: mlp_tiled.glsl's TILED_* instead of SHADE_GROUP).
 
 #ifdef COMPUTE_SHADER
+// An #extension must come before any declaration.
+#if defined(TILED_HALF_NV)
+#extension GL_NV_gpu_shader5 : require
+#elif defined(TILED_HALF_AMD)
+#extension GL_AMD_gpu_shader_half_float : require
+#endif
 precision highp float;
 precision highp int;
 
@@ -84,14 +94,23 @@ void main() {
 }
 #endif
 
+#if defined(SHADE) || defined(SHADE_TILED)
+// Both shading kernels' includes, once (see above): the work group's size first (mlp.glsl's shared-memory copy
+// reads gl_WorkGroupSize), featuregrid.glsl before mlp.glsl (its baked stand-in includes nothing),
+// mlp_tiled.glsl compiles to nothing without its TILED_* defines.
 #ifdef SHADE
-layout(local_size_x = SHADE_GROUP) in;  // before mlp.glsl, whose shared-memory copy reads gl_WorkGroupSize
-#include "featuregrid.glsl"  // before mlp.glsl: its baked stand-in includes nothing
-#include "mlp.glsl"
-#include "range.glsl"
-
+layout(local_size_x = SHADE_GROUP) in;
+#else
+layout(local_size_x = TILED_GROUP) in;
+#endif
 layout(rgba32f, binding = 0) uniform restrict image2D u_gbuffer;
+#include "featuregrid.glsl"
+#include "mlp.glsl"
+#include "mlp_tiled.glsl"
+#include "range.glsl"
+#endif
 
+#ifdef SHADE
 void main() {
 #ifdef WEIGHTS_SHARED
     mlp_load_shared_weights();  // the whole group, before any invocation leaves
@@ -107,6 +126,29 @@ void main() {
     encoding_set_key(value.xyz);
     vec3 xyz = range_inverse(mlp_evaluate());
     imageStore(u_gbuffer, texel, vec4(value.w * xyz, 1.0));  // value.w: exposure * irradiance * A
+}
+#endif
+
+#ifdef SHADE_TILED
+uint g_tile_first;  // the tile's first list entry
+
+void tiled_store(int pixel, vec3 outputs) {
+    uint entry = g_tile_first + uint(pixel);
+    if (entry < entry_count) {
+        uint position = entries[entry];
+        ivec2 texel = ivec2(int(position & 0xffffu), int(position >> 16));
+        float factor = imageLoad(u_gbuffer, texel).w;  // exposure * irradiance * A, as SHADE
+        imageStore(u_gbuffer, texel, vec4(factor * range_inverse(outputs), 1.0));
+    }
+}
+
+void main() {
+    g_tile_first = (gl_WorkGroupID.y * gl_NumWorkGroups.x + gl_WorkGroupID.x) * uint(TILED_PIXELS);
+    if (g_tile_first >= entry_count) {
+        return;  // the whole group alike: no barrier is left waiting
+    }
+    tiled_encode(g_tile_first, entry_count);
+    tiled_layers();
 }
 #endif
 

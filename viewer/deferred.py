@@ -35,6 +35,14 @@ group's shared memory: only nets whose texels fit the driver's shared memory, 32
 not the shipped 28k-MAC nets) or ``baked`` (viewer/baked.py's literals, the fastest form on llvmpipe).
 ``ssbo-fp16`` / ``shared-fp16``: the same with each weight stored as an IEEE half (``unpackHalf2x16``, GL
 4.3 core; the sums stay float32): half the memory traffic, at an error measured in docs/benchmarks.md.
+``tiled``, ``tiled-fp16``: the same buffer (float32, or halves as ``ssbo-fp16``) read by another kernel,
+``SHADE_TILED`` (``shaders/mlp_tiled.glsl``, issue 32): a work group evaluates a tile of list entries as a
+matrix product, each layer's weights staged in shared memory once per tile (in chunks of input columns when
+they do not fit), the activations kept there between layers, each invocation 4 outputs × 4 pixels in
+registers; tile and blocking from the layer widths and the driver's shared memory (:mod:`viewer.tiled`).
+Same list, same includes (encoding, feature grid, eq. 7), same texels written. ``tiled-half``: that kernel
+with half-precision arithmetic (f16vec4; needs GL_NV_gpu_shader5 or GL_AMD_gpu_shader_half_float, refused
+elsewhere, e.g. on llvmpipe; half storage, float32 sums across chunks).
 ``auto``: ``baked`` when the :class:`~viewer.renderer.NetworkRenderer` bakes; else ``texture`` on a
 software rasterizer (llvmpipe: 1.2–1.3× faster than ``ssbo``, docs/benchmarks.md "Render paths") and
 ``ssbo`` on a GPU (the fastest form of the H100 micro-benchmark, shared/notes/opengl-on-a-gpu.md; the
@@ -61,12 +69,16 @@ from viewer.glsl import compile_compute, compile_program
 from viewer.pacing import BLOCK, Pacer, Progress, projected_row_costs, read_rows
 from viewer.renderer import NetworkRenderer, is_software_rasterizer, set_uniform, skip_threshold_value
 from viewer.surface import MeshBuffers, set_surface_uniforms
+from viewer.tiled import HALF_EXTENSIONS, TilePlan, half_extension, max_compute_shared_bytes, plan_tiles
 
-__all__ = ["CHUNK_TEXELS", "DEFERRED_WEIGHTS", "FP16_MAX", "FP16_RELATIVE_ERROR", "DeferredRenderer"]
+__all__ = ["CHUNK_TEXELS", "DEFERRED_WEIGHTS", "FP16_MAX", "FP16_RELATIVE_ERROR", "TILED_WEIGHTS", "DeferredRenderer"]
 
 _LOG = logging.getLogger("gratnet.deferred")  # the gratnet command shows its INFO lines (gratnet/cli.py)
 #: Where the compute pass reads the weights (see the module docstring).
-DEFERRED_WEIGHTS = ("auto", "texture", "ssbo", "shared", "baked", "ssbo-fp16", "shared-fp16")
+DEFERRED_WEIGHTS = ("auto", "texture", "ssbo", "shared", "baked", "ssbo-fp16", "shared-fp16", "tiled", "tiled-fp16",
+                    "tiled-half")
+#: The weights forms of the tiled kernel (SHADE_TILED).
+TILED_WEIGHTS = ("tiled", "tiled-fp16", "tiled-half")
 #: Largest finite IEEE half: a weight beyond it cannot be stored as fp16.
 FP16_MAX = 65504.0
 #: The documented error of the fp16 weight sources against fp32: relative, per XYZ channel, on pixels at
@@ -112,11 +124,28 @@ class DeferredRenderer:
             weights = "baked" if network.weights_path == "baked" else "texture" if software else "ssbo"
         if weights == "baked" and network.weights_path != "baked":
             raise GratNetError("deferred weights 'baked' need a SceneRenderer with weights_path='baked'")
-        if weights.endswith("-fp16") and not np.all(np.abs(network.packed_weights) <= FP16_MAX):
+        #: Weights stored as IEEE halves in the buffer (``*-fp16``, ``tiled-half``).
+        self.fp16_storage = weights.endswith("-fp16") or weights == "tiled-half"
+        if self.fp16_storage and not np.all(np.abs(network.packed_weights) <= FP16_MAX):
             raise GratNetError(f"deferred weights {weights!r}: the net has weights beyond fp16's range (±{FP16_MAX:g})")
         self.ctx = network.ctx
         self.network = network
         self.weights = weights
+        #: The tiled kernel's plan (:mod:`viewer.tiled`; ``None`` for the per-entry SHADE kernel).
+        self.tile_plan: TilePlan | None = None
+        self._half_extension: str | None = None
+        if weights in TILED_WEIGHTS:
+            if weights == "tiled-half":
+                self._half_extension = half_extension(network.ctx)
+                if self._half_extension is None:
+                    renderer = network.ctx.info.get("GL_RENDERER", "this driver")
+                    raise GratNetError(f"deferred weights 'tiled-half' need half-precision arithmetic in GLSL "
+                                       f"({' or '.join(HALF_EXTENSIONS)}), which {renderer} lacks: use tiled or "
+                                       f"tiled-fp16")
+            invocations = int(network.ctx.info.get("GL_MAX_COMPUTE_WORK_GROUP_INVOCATIONS", 1024))
+            self.tile_plan = plan_tiles(network.layout, max_compute_shared_bytes(network.ctx), invocations,
+                                        half=weights == "tiled-half")
+            _LOG.debug("deferred weights %s: %s", weights, self.tile_plan.describe(network.layout))
         self._programs: dict[str, moderngl.Program | moderngl.ComputeShader] = {}
         self._weight_buffer: moderngl.Buffer | None = None
         self._list: moderngl.Buffer | None = None
@@ -154,12 +183,17 @@ class DeferredRenderer:
                 if self.weights not in ("texture", "baked"):
                     defines["WEIGHTS_BINDING"] = _WEIGHTS_BINDING
                     texels = int(np.prod(self.network.packed_weights.shape[:2]))
-                    if self.weights.startswith("ssbo"):
-                        defines["WEIGHTS_SSBO"] = 1
-                    else:
+                    if self.weights.startswith("shared"):
                         defines["WEIGHTS_SHARED"] = texels
-                    if self.weights.endswith("-fp16"):
+                    else:
+                        defines["WEIGHTS_SSBO"] = 1  # ssbo*, and the tiled kernel's staging reads
+                    if self.fp16_storage:
                         defines["WEIGHTS_FP16"] = 1
+                if self.tile_plan is not None:  # the tiled kernel in SHADE's place
+                    del defines["SHADE"], defines["SHADE_GROUP"]
+                    defines.update(SHADE_TILED=1, **self.tile_plan.defines())
+                    if self._half_extension is not None:
+                        defines.update({"TILED_HALF": 1, HALF_EXTENSIONS[self._half_extension]: 1})
                 if self.weights == "baked":
                     _LOG.info("deferred shading program with baked weights (%d MACs per pixel): the first dispatch "
                               "JIT-compiles it (~25 s at 28k MACs on llvmpipe; Mesa's shader cache keeps it)",
@@ -176,7 +210,8 @@ class DeferredRenderer:
                                        f"the GPU's compute shared memory (32 KiB on llvmpipe): {error}") from error
                 raise
             if kernel == "SHADE":
-                self.network.model_uniforms(program, "ssbo" if self.weights.endswith("-fp16") else self.weights)
+                uniforms = "ssbo" if self.fp16_storage or self.tile_plan is not None else self.weights
+                self.network.model_uniforms(program, uniforms)
             self._programs[key] = program
         return self._programs[key]  # type: ignore[return-value]
 
@@ -186,7 +221,7 @@ class DeferredRenderer:
         if self.weights not in ("texture", "baked"):
             if self._weight_buffer is None:
                 texels = self.network.packed_weights
-                if self.weights.endswith("-fp16"):  # four halves per texel, in packHalf2x16 order (little-endian)
+                if self.fp16_storage:  # four halves per texel, in packHalf2x16 order (little-endian)
                     texels = texels.astype("<f2")
                 self._weight_buffer = self.ctx.buffer(np.ascontiguousarray(texels).tobytes())
             self._weight_buffer.bind_to_storage_buffer(_WEIGHTS_BINDING)
@@ -330,8 +365,41 @@ class DeferredRenderer:
         offset = 4 * first
         list_buffer.write(np.array([0, 0, 1, count], dtype=np.uint32).tobytes(), offset=offset)
         list_buffer.bind_to_storage_buffer(_LIST_BINDING, offset=offset, size=16 + 4 * count)
-        groups = _groups(count, _SHADE_GROUP)
+        groups = _groups(count, _SHADE_GROUP if self.tile_plan is None else self.tile_plan.pixels)
         shade.run(min(groups, _MAX_GROUPS), _groups(groups, _MAX_GROUPS))
+
+    def shade_keys(self, keys: np.ndarray, factor: float = 1.0, piece_entries: int | None = None) -> np.ndarray:
+        """The SHADE kernel of this renderer's weights on key vectors ``keys`` (``(N, 3)``): ``factor · XYZ``,
+        ``float32`` ``(N, 3)``. The list holds exactly these N entries in order (no G-buffer pass, no
+        compaction), so tests choose its length: tile edges, 1, 0. ``piece_entries`` (a multiple of 256):
+        shade in pieces of that many entries, as :meth:`render` does (default: one dispatch)."""
+        keys = np.asarray(keys, dtype=np.float32).reshape(-1, 3)
+        count = len(keys)
+        width = max(1, min(count, 1024))
+        rows = max(1, -(-count // width))
+        texels = np.zeros((rows * width, 4), dtype=np.float32)
+        texels[:count, :3] = keys
+        texels[:count, 3] = factor
+        index = np.arange(count, dtype=np.uint32)
+        packed = (index % width) | ((index // width) << 16)
+        header = np.array([0, 1, 1, count], dtype=np.uint32)
+        piece = count if piece_entries is None else piece_entries
+        if piece_entries is not None and (piece_entries <= 0 or piece_entries % _PIECE_ENTRIES):
+            raise GratNetError(f"piece_entries must be a positive multiple of {_PIECE_ENTRIES}, got {piece_entries}")
+        texture = self.ctx.texture((width, rows), 4, texels.tobytes(), dtype="f4")
+        list_buffer = self.ctx.buffer(np.concatenate([header, packed]).tobytes())
+        try:
+            shade = self._compute("SHADE")
+            self._bind_weights()
+            texture.bind_to_image(0, read=True, write=True)
+            for first in range(0, max(count, 1), max(piece, 1)):
+                self._shade(shade, list_buffer, first, min(count, first + piece))
+            self.ctx.memory_barrier()
+            result = np.frombuffer(texture.read(), dtype=np.float32).reshape(-1, 4)
+        finally:
+            list_buffer.release()
+            texture.release()
+        return result[:count, :3].copy()
 
     def _draw_gbuffer(self, framebuffer: moderngl.Framebuffer, program: moderngl.Program,
                       vertex_array: moderngl.VertexArray | None, view_projection: np.ndarray, chunk: np.ndarray,
