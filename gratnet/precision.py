@@ -50,9 +50,10 @@ class DriverErrors:
         sinusoid_error: absolute error of each sin/cos feature. NVIDIA's sin/cos approximation errs by
             2^−21.4 on [−π, π] (the shader reduces the argument to that range exactly, shaders/encoding.glsl);
             GLSL sets no bound, so 2^−20 with a margin.
-        grid_texel_error: error of a feature-grid lookup position in texels: the manual eight-fetch path
-            computes p = (c + 1)(N − 1)/2 in float32 (≈ N·u); a texture unit's filter quantises the fraction
-            to 8 bits (half a step, 2⁻⁹), so ``HARDWARE_FILTER`` for ``grid_filter="hardware"``.
+        grid_texel_error: error of a feature-grid lookup position in texels; ``None``: the manual eight-fetch
+            path's, p = (clamp(c) + 1)·(N − 1)/2 in float32 from a c rounded once: 4·u·N per level of N nodes.
+            A texture unit's filter quantises the fraction to 8 bits (2⁻⁸ whether it rounds or truncates):
+            ``HARDWARE_FILTER`` for ``grid_filter="hardware"``.
         arithmetic_ulps: ulps per hidden activation (SiLU's exp and division) on top of its input's error.
         samples: seeded random perturbations evaluated (besides the 8 sign corners of the key box).
         seed: their seed (deterministic bounds).
@@ -61,7 +62,7 @@ class DriverErrors:
 
     key_error: float = 16.0 * UNIT_ROUNDOFF
     sinusoid_error: float = 2.0**-20
-    grid_texel_error: float = 2.0**-12
+    grid_texel_error: float | None = None
     arithmetic_ulps: float = 4.0
     samples: int = 8
     seed: int = 0
@@ -155,28 +156,30 @@ def _range_arithmetic(model: ModelFile, y: np.ndarray) -> np.ndarray:
     return math.log(2.0) * spec.bits * root * root_relative + (3.0 + 2.0 * np.abs(argument)) * u
 
 
-def _grid_inputs(model: ModelFile, coordinates: np.ndarray, texel_shift: np.ndarray | None) -> list[np.ndarray]:
-    """Each grid level's features at ``coordinates`` (N, 3), its lookup moved by ``texel_shift`` (levels, N, 3)
-    texels (converted to each level's spacing 2/(nodes − 1))."""
+def _grid_inputs(model: ModelFile, coordinates: np.ndarray, texel_shift: np.ndarray | None,
+                 texel_error: float | None) -> list[np.ndarray]:
+    """Each grid level's features at ``coordinates`` (N, 3), its lookup moved by ``texel_shift`` (levels, N, 3;
+    in [−1, 1]) times the texel error (``None``: 4·u·nodes per axis), converted to the level's spacing."""
     parts = []
     for level, grid in enumerate(model.grids):
         t_nodes, v_nodes, u_nodes = (int(n) for n in np.shape(grid)[:3])
         at = coordinates
         if texel_shift is not None:
-            spacing = 2.0 / (np.array([u_nodes, v_nodes, t_nodes], dtype=np.float64) - 1.0)
-            at = coordinates + texel_shift[level] * spacing
+            nodes = np.array([u_nodes, v_nodes, t_nodes], dtype=np.float64)
+            texels = texel_shift[level] * (4.0 * UNIT_ROUNDOFF * nodes if texel_error is None else texel_error)
+            at = coordinates + texels * 2.0 / (nodes - 1.0)
         parts.append(grid_features([grid], at, model.grid_interpolation))
     return parts
 
 
 def _inputs(model: ModelFile, keys: np.ndarray, sinusoid_shift: np.ndarray | None,
-            texel_shift: np.ndarray | None) -> np.ndarray:
+            texel_shift: np.ndarray | None, texel_error: float | None = None) -> np.ndarray:
     coordinates = network_coordinates(keys[:, 0], keys[:, 1], keys[:, 2], model.scheme)  # type: ignore[arg-type]
     encoded = encode(coordinates, model.encoding)
     if sinusoid_shift is not None:
         encoded = encoded.copy()
         encoded[:, 3:] += sinusoid_shift
-    return np.concatenate([*_grid_inputs(model, coordinates, texel_shift), encoded], axis=-1)
+    return np.concatenate([*_grid_inputs(model, coordinates, texel_shift, texel_error), encoded], axis=-1)
 
 
 def driver_bound(model: ModelFile, u: Any, v: Any, w: Any, errors: DriverErrors = DriverErrors(),
@@ -217,8 +220,8 @@ def driver_bound(model: ModelFile, u: Any, v: Any, w: Any, errors: DriverErrors 
         key_shift = rng.uniform(-1.0, 1.0, (count, 3)) if random else np.broadcast_to(corners[trial], (count, 3))
         sinusoid = errors.sinusoid_error * rng.uniform(-1.0, 1.0, (count, valid.encoding.features - 3)) \
             if random else None
-        texel = errors.grid_texel_error * rng.uniform(-1.0, 1.0, (levels, count, 3)) if random and levels else None
-        perturbed = _forward(valid, _inputs(valid, keys + eta * key_shift, sinusoid, texel),
+        texel = rng.uniform(-1.0, 1.0, (levels, count, 3)) if random and levels else None
+        perturbed = _forward(valid, _inputs(valid, keys + eta * key_shift, sinusoid, texel, errors.grid_texel_error),
                              rng if random else None)
         spread = np.maximum(spread, np.abs(perturbed - outputs))
         deviation = np.maximum(deviation, np.abs(range_inverse(perturbed, valid.range) - xyz))
@@ -275,7 +278,7 @@ def assert_within(actual: np.ndarray, expected: np.ndarray, bound: np.ndarray, w
     if not over.any():
         return
     excess = np.where(over, np.abs(actual - expected) / (np.asarray(bound) + floor + 1e-300), 0.0)
-    worst = np.unravel_index(np.argsort(excess, axis=None)[::-1][:5], excess.shape)
+    worst = np.unravel_index(np.argsort(excess, axis=None)[::-1][:min(5, int(over.sum()))], excess.shape)
     lines = [f"at {tuple(int(i) for i in index)}: {actual[index]:.6g} against {expected[index]:.6g} "
              f"(bound {np.broadcast_to(bound, actual.shape)[index] + floor:.3g})" for index in zip(*worst, strict=True)]
     raise AssertionError(f"{int(over.sum())} of {over.size} {what} beyond the float32 driver bound; worst: "
