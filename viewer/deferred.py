@@ -85,6 +85,8 @@ FP16_MAX = 65504.0
 #: least 1e-3 of the image's peak. Measured ≤ 0.41 % on the shipped cd and blazed nets
 #: (docs/benchmarks.md); tests/test_deferred.py holds it for a random net.
 FP16_RELATIVE_ERROR = 0.01
+_HALF_AS_FLOAT = "float"  # tiled-half's code path in float types (half_as_float)
+_HALF_DEFINES = {**HALF_EXTENSIONS, _HALF_AS_FLOAT: "TILED_HALF_AS_FLOAT"}  # deferred.glsl enables the extension
 _PROGRAM = "deferred"
 _SHADE_GROUP = 64  # invocations per SHADE work group
 _TILE = 8  # COMPACT / RESOLVE work groups: 8×8 texels
@@ -111,12 +113,15 @@ class DeferredRenderer:
         network: the owner's :class:`~viewer.renderer.NetworkRenderer`: the defines, model uniforms, weights
             and skip bound (:mod:`viewer.surface` sets the camera and light).
         weights: one of :data:`DEFERRED_WEIGHTS`.
+        half_as_float: with ``tiled-half``, compile its half-precision code path with float types
+            (``TILED_HALF_AS_FLOAT``): the kernel's structure checked where no driver has half arithmetic
+            (llvmpipe; tests/test_tiled.py). Not faster than ``tiled``.
 
     Attributes:
         weights: the weights source chosen (never ``auto``).
     """
 
-    def __init__(self, network: NetworkRenderer, weights: str = "auto") -> None:
+    def __init__(self, network: NetworkRenderer, weights: str = "auto", half_as_float: bool = False) -> None:
         if weights not in DEFERRED_WEIGHTS:
             raise GratNetError(f"deferred weights must be one of {', '.join(DEFERRED_WEIGHTS)}, got {weights!r}")
         if weights == "auto":
@@ -135,7 +140,9 @@ class DeferredRenderer:
         self.tile_plan: TilePlan | None = None
         self._half_extension: str | None = None
         if weights in TILED_WEIGHTS:
-            if weights == "tiled-half":
+            if weights == "tiled-half" and half_as_float:
+                self._half_extension = _HALF_AS_FLOAT
+            elif weights == "tiled-half":
                 self._half_extension = half_extension(network.ctx)
                 if self._half_extension is None:
                     renderer = network.ctx.info.get("GL_RENDERER", "this driver")
@@ -144,7 +151,7 @@ class DeferredRenderer:
                                        f"tiled-fp16")
             invocations = int(network.ctx.info.get("GL_MAX_COMPUTE_WORK_GROUP_INVOCATIONS", 1024))
             self.tile_plan = plan_tiles(network.layout, max_compute_shared_bytes(network.ctx), invocations,
-                                        half=weights == "tiled-half")
+                                        half=self._half_extension not in (None, _HALF_AS_FLOAT))
             _LOG.debug("deferred weights %s: %s", weights, self.tile_plan.describe(network.layout))
         self._programs: dict[str, moderngl.Program | moderngl.ComputeShader] = {}
         self._weight_buffer: moderngl.Buffer | None = None
@@ -193,7 +200,7 @@ class DeferredRenderer:
                     del defines["SHADE"], defines["SHADE_GROUP"]
                     defines.update(SHADE_TILED=1, **self.tile_plan.defines())
                     if self._half_extension is not None:
-                        defines.update({"TILED_HALF": 1, HALF_EXTENSIONS[self._half_extension]: 1})
+                        defines.update({"TILED_HALF": 1, _HALF_DEFINES[self._half_extension]: 1})
                 if self.weights == "baked":
                     _LOG.info("deferred shading program with baked weights (%d MACs per pixel): the first dispatch "
                               "JIT-compiles it (~25 s at 28k MACs on llvmpipe; Mesa's shader cache keeps it)",
