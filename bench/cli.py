@@ -3,6 +3,7 @@ not a test).
 
     gratnet bench assets/*/model.npz out/sweep/*/model.npz --out out/bench
     gratnet bench cd --no-slices --scene-sizes 1920x1080 --spp 1,4 --out out/bench-scenes
+    gratnet bench cd --no-slices --render-paths deferred --deferred-weights auto,tiled --out out/bench-tiled
 
 Each MATERIAL is a shipped material name (``assets/NAME/model.npz``) or a model-file path; the error
 figures come from the ``metrics.json`` beside each model file. Writes OUT/bench.json, OUT/bench.md and
@@ -52,7 +53,7 @@ def run(arguments: argparse.Namespace) -> int:
 
     config = from_arguments(BenchConfig, arguments)
     config.size_list(), config.path_list()  # validate before any work
-    config.scene_size_list(), config.render_path_list(), config.spp_list()
+    config.scene_size_list(), config.render_path_list(), config.spp_list(), config.deferred_weights_list()
     check_mesh_spec(config.scene_mesh)
     check_exposure(config.exposure)
     if not (config.slices or config.scenes):

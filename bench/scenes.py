@@ -9,7 +9,13 @@ frame is one ``render_rgba`` call, read-back of the float image included (a wind
 after a warm-up frame at the same size that pays for compilation, Mesa's JIT and allocations. Two times
 per frame: the wall time (the read-back waits for the GPU, so it includes all GPU work) and the GL timer
 query's GPU time of the same commands (none for frames over ~3.9 s: moderngl reads the timer as 32 bits of
-nanoseconds). Every row records ``GL_RENDERER``.
+nanoseconds). Every row records ``GL_RENDERER``. The deferred path is timed per ``--deferred-weights`` form
+(its network kernel and weights: the per-entry SHADE kernel, or the tiled one, issue 32).
+
+Throughput: ``MACs/pixel × evaluations / frame time`` in TMAC/s (the GPU timer's time where there is one, else
+the wall time; the whole frame, G-buffer and compaction included), and its share of the device's peak FP32
+multiply-add rate (:mod:`bench.devices`: datasheet figures keyed by ``GL_RENDERER``; blank for llvmpipe and
+unknown devices).
 
 Skip-work is off (no ``skip_threshold``): every covered pixel runs the network, as for an EXR file.
 """
@@ -100,14 +106,17 @@ def _warm_up(frame: Any, ctx: Any) -> Any:
 
 def scene_frame_times(ctx: Any, model: Any, model_path: str, view: SceneView, weights_path: str,
                       render_path: str, sizes: list[tuple[int, int]], samples: list[int], repeats: int,
-                      max_seconds: float) -> list[dict[str, Any]]:
-    """One row per (size, samples) for one model on one weights path and render path (see the module
-    docstring); ``model_path`` only labels the rows."""
+                      max_seconds: float, deferred_weights: str = "auto") -> list[dict[str, Any]]:
+    """One row per (size, samples) for one model on one weights path, render path and deferred weights form
+    (see the module docstring); ``model_path`` only labels the rows."""
+    from bench.devices import fp32_tmac_per_s
     from viewer.catalog import build_mesh
     from viewer.scene import SceneRenderer
 
     start = time.perf_counter()
-    renderer = SceneRenderer(ctx, model, weights_path=weights_path, render_path=render_path)
+    peak = fp32_tmac_per_s(str(ctx.info.get("GL_RENDERER", "")))
+    renderer = SceneRenderer(ctx, model, weights_path=weights_path, render_path=render_path,
+                             deferred_weights=deferred_weights)
     buffers = None
     rows: list[dict[str, Any]] = []
     try:
@@ -124,16 +133,24 @@ def scene_frame_times(ctx: Any, model: Any, model_path: str, view: SceneView, we
                 coverage = _warm_up(lambda size=size, count=count: frame(size, count), ctx)[..., 3]
                 walls, gpus = _timed(lambda size=size, count=count: frame(size, count), ctx, repeats, max_seconds)
                 seconds = statistics.median(walls)
+                gpu_seconds = statistics.median(gpus) if None not in gpus else None  # type: ignore[type-var]
                 evaluations = float(np.sum(coverage)) * count  # samples that hit the mesh, each one evaluation
+                path = str(getattr(renderer, "render_path", render_path))
+                tmacs = model.macs_per_evaluation * evaluations / (gpu_seconds or seconds) / 1e12
                 rows.append({
                     "kind": "scene", "mesh": view.mesh, "width": size[0], "height": size[1], "spp": count,
                     "requested_weights_path": weights_path, "weights_path": renderer.network.weights_path,
-                    "requested_render_path": render_path,
-                    "render_path": str(getattr(renderer, "render_path", render_path)),
+                    "requested_render_path": render_path, "render_path": path,
+                    "requested_deferred_weights": deferred_weights,
+                    "deferred_weights": renderer.deferred.weights if path == "deferred" else None,
+                    "tile_plan": (renderer.deferred.tile_plan.describe(renderer.network.layout)
+                                  if path == "deferred" and renderer.deferred.tile_plan is not None else None),
                     "setup_s": setup_seconds, "times_s": walls, "seconds": seconds, "gpu_times_s": gpus,
-                    "gpu_seconds": statistics.median(gpus) if None not in gpus else None, "fps": 1.0 / seconds,
+                    "gpu_seconds": gpu_seconds, "fps": 1.0 / seconds,
                     "covered_pixels": int(np.count_nonzero(coverage)), "evaluations": evaluations,
                     "gmac_per_s": model.macs_per_evaluation * evaluations / seconds / 1e9,
+                    "tmac_per_s": tmacs, "fp32_tmac_per_s": peak,
+                    "fp32_share": tmacs / peak if peak else None,
                     "model_file": model_path,
                 })
     finally:
@@ -152,17 +169,22 @@ def _milliseconds(seconds: float | None) -> str:
 
 def markdown_table(rows: list[dict[str, Any]]) -> str:
     """One row per (model, size, weights path, render path, samples per pixel)."""
-    header = ("| model | MACs/pixel | mesh | size | weights | render path | spp | frame (ms, wall) | GPU (ms, timer) "
-              "| fps | covered pixels | GMAC/s | GL_RENDERER |")
+    header = ("| model | MACs/pixel | mesh | size | weights | render path | deferred weights | spp | frame (ms, wall) "
+              "| GPU (ms, timer) | fps | covered pixels | TMAC/s | of FP32 peak | GL_RENDERER |")
     lines = [header, "|" + "---|" * (header.count("|") - 1)]
     for row in rows:
         render_path = row["render_path"]
         if row["requested_render_path"] != render_path:
             render_path = f"{row['requested_render_path']} → {render_path}"
+        deferred = row.get("deferred_weights")
+        if deferred is not None and row.get("requested_deferred_weights", deferred) != deferred:
+            deferred = f"{row['requested_deferred_weights']} → {deferred}"
+        share = row.get("fp32_share")
         lines.append("| " + " | ".join(format_cell(value) for value in (
             row["model"], row["macs_per_pixel"], row["mesh"], f"{row['width']}×{row['height']}", row["weights_path"],
-            render_path, row["spp"], _milliseconds(row["seconds"]), _milliseconds(row["gpu_seconds"]), row["fps"],
-            row["covered_pixels"], row["gmac_per_s"], row["gl_renderer"])) + " |")
+            render_path, deferred, row["spp"], _milliseconds(row["seconds"]), _milliseconds(row["gpu_seconds"]),
+            row["fps"], row["covered_pixels"], row.get("tmac_per_s"), None if share is None else f"{100 * share:.1f} %",
+            row["gl_renderer"])) + " |")
     return "\n".join(lines) + "\n"
 
 
@@ -182,13 +204,18 @@ def check_render_paths(requested: list[str]) -> None:
                            f"not {', '.join(missing)}")
 
 
+def _path_forms(render_paths: list[str], forms: list[str]) -> list[tuple[str, str]]:
+    """(render path, deferred weights) pairs: the deferred path once per form, the others with ``auto``."""
+    return [(path, form) for path in render_paths for form in (forms if path == "deferred" else ["auto"])]
+
+
 def run_scene_bench(ctx: Any, entries: list[Any], config: Any, progress: bool = True) -> list[dict[str, Any]]:
     """Every model (``bench.slices.ModelEntry``) × weights path × render path × size × samples per pixel of
     ``config`` (``bench.slices.BenchConfig``); nets above ``baked_max_macs`` skip the baked path."""
     from tqdm import tqdm
 
     sizes, paths, samples = config.scene_size_list(), config.path_list(), config.spp_list()
-    render_paths = config.render_path_list()
+    render_paths, forms = config.render_path_list(), config.deferred_weights_list()
     gl_renderer = str(ctx.info.get("GL_RENDERER", "unknown"))
     gl_version = str(ctx.info.get("GL_VERSION", "unknown"))
     rows: list[dict[str, Any]] = []
@@ -198,16 +225,18 @@ def run_scene_bench(ctx: Any, entries: list[Any], config: Any, progress: bool = 
         for weights_path in paths:
             if weights_path == "baked" and macs > config.baked_max_macs:
                 continue
-            for render_path in render_paths:
+            for render_path, deferred_weights in _path_forms(render_paths, forms):
+                if deferred_weights == "baked" and weights_path != "baked":
+                    continue  # the baked kernel needs the baked weights path (and is auto's choice there)
                 for row in scene_frame_times(ctx, entry.model, str(entry.path), view, weights_path, render_path, sizes,
-                                             samples, config.repeats, config.max_seconds):
+                                             samples, config.repeats, config.max_seconds, deferred_weights):
                     row = {"model": entry.label, "material": entry.material, "macs_per_pixel": macs,
                            "gl_renderer": gl_renderer, "gl_version": gl_version, **row}
                     rows.append(row)
                     if progress:
                         tqdm.write(json.dumps({key: row[key] for key in (
-                            "model", "width", "height", "weights_path", "render_path", "spp", "seconds",
-                            "gpu_seconds")}))
+                            "model", "width", "height", "weights_path", "render_path", "deferred_weights", "spp",
+                            "seconds", "gpu_seconds", "tmac_per_s")}))
     return rows
 
 

@@ -76,6 +76,9 @@ class BenchConfig:
         "renderer offers)")
     spp: str = config_field("1,4", "scene samples per pixel (anti-aliasing), comma-separated, each 1 … 1024",
                             aliases=("--samples",))
+    deferred_weights: str = config_field(
+        "auto", "deferred render path only: its network kernels and weight forms to time, comma-separated, as gratnet "
+        "render's --deferred-weights (e.g. auto,tiled,tiled-fp16); other render paths take auto")
 
     def scene_size_list(self) -> list[tuple[int, int]]:
         sizes = []
@@ -101,6 +104,15 @@ class BenchConfig:
             raise GratNetError(f"--render-paths takes forward, deferred, auto or all; got {self.render_paths!r}")
         check_render_paths(paths)
         return paths
+
+    def deferred_weights_list(self) -> list[str]:
+        from viewer.scene_config import DEFERRED_WEIGHTS
+
+        forms = [part.strip() for part in self.deferred_weights.split(",") if part.strip()]
+        bad = [form for form in forms if form not in DEFERRED_WEIGHTS]
+        if not forms or bad:
+            raise GratNetError(f"--deferred-weights takes {', '.join(DEFERRED_WEIGHTS)}; got {self.deferred_weights!r}")
+        return forms
 
     def spp_list(self) -> list[int]:
         counts = _int_list(self.spp, "--spp")

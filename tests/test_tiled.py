@@ -243,3 +243,41 @@ def test_renders_with_the_tiled_kernel_equal_the_per_entry_kernel(ctx):
     finally:
         for scene in scenes.values():
             scene.release()
+
+
+def test_render_and_bench_take_the_tiled_kernel(ctx, tmp_path):
+    import json
+
+    from bench.devices import fp32_tmac_per_s
+    from gratnet.cli import main
+    from tests.test_bench import _tiny_model
+    from viewer.deferred import DEFERRED_WEIGHTS
+    from viewer.scene_config import DEFERRED_WEIGHTS as FLAG_CHOICES
+
+    assert FLAG_CHOICES == DEFERRED_WEIGHTS  # the flag's copy (scene_config defers moderngl)
+    model = _tiny_model(tmp_path / "tiny" / "model.npz")
+    out = tmp_path / "disc.exr"
+    assert main(["render", "--material", str(model), "--mesh", "cd", "--size", "9,7", "--weights-path", "texture",
+                 "--render-path", "deferred", "--deferred-weights", "tiled", "--out", str(out)]) == 0
+    config = json.loads((tmp_path / "disc.config.json").read_text())
+    assert config["render"]["deferred_weights"] == "tiled"
+    assert config["render_path"] == {"path": "deferred", "reason": "requested", "deferred_weights": "tiled"}
+    bench = tmp_path / "bench"
+    assert main(["bench", str(model), "--out", str(bench), "--no-slices", "--scene-sizes", "12x12", "--spp", "1",
+                 "--weights-paths", "texture", "--render-paths", "forward,deferred", "--deferred-weights",
+                 "ssbo,tiled", "--repeats", "1", "--quiet"]) == 0
+    rows = [json.loads(line) for line in (bench / "scenes.jsonl").read_text().splitlines()]
+    assert [(row["render_path"], row["deferred_weights"]) for row in rows] == [
+        ("forward", None), ("deferred", "ssbo"), ("deferred", "tiled")]
+    assert rows[2]["tile_plan"].startswith("tile ") and rows[1]["tile_plan"] is None
+    for row in rows:
+        assert row["tmac_per_s"] > 0 and row["fp32_share"] is None  # llvmpipe: no FP32 figure
+    table = (bench / "scenes.md").read_text()
+    assert "| TMAC/s | of FP32 peak |" in table and "| tiled |" in table
+    assert fp32_tmac_per_s("NVIDIA H100 80GB HBM3/PCIe/SSE2") == pytest.approx(33.45)
+    assert fp32_tmac_per_s("NVIDIA H100 PCIe/PCIe/SSE2") == pytest.approx(25.6)
+    assert fp32_tmac_per_s("llvmpipe (LLVM 15.0.6, 256 bits)") is None
+    with pytest.raises(GratNetError, match="--deferred-weights takes"):
+        from bench.slices import BenchConfig
+
+        BenchConfig(deferred_weights="tiled,fast").deferred_weights_list()

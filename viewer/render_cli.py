@@ -229,10 +229,13 @@ def _render(arguments: argparse.Namespace, out: Path) -> int:
     try:
         check_render_size(ctx, config)  # before any program compiles: a size this machine cannot render is refused
         with SceneRenderer(ctx, model, weights_path=config.weights_path, render_path=config.render_path,
+                           deferred_weights=config.deferred_weights,
                            reference_precision=config.reference_precision) as renderer:
             # A BRDF slice has one path (a full-screen fragment pass); a mesh takes the one chosen.
             resolved = ({"path": "forward", "reason": "BRDF slices are rendered by the fragment pass only"}
                         if config.slice else {"path": renderer.render_path, "reason": renderer.render_path_reason})
+            if resolved["path"] == "deferred" and renderer.deferred is not None:
+                resolved["deferred_weights"] = renderer.deferred.weights  # auto resolved
             with _progress_bar(arguments.quiet) as progress:
                 if config.slice:
                     xyz = renderer.shading.render_brdf_slice(config.light_theta_degrees, config.light_phi_degrees,

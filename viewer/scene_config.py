@@ -33,7 +33,8 @@ from viewer.defaults import FALLBACK, FOV_DEGREES, SceneDefaults, resolve_defaul
 
 ConfigT = TypeVar("ConfigT")
 
-__all__ = ["DEFAULT_MATERIAL", "MAX_SAMPLES", "RENDER_PATHS", "RENDER_PATH_HELP", "WEIGHT_PATHS", "RenderConfig",
+__all__ = ["DEFAULT_MATERIAL", "DEFERRED_WEIGHTS", "DEFERRED_WEIGHTS_HELP", "MAX_SAMPLES", "RENDER_PATHS",
+           "RENDER_PATH_HELP", "WEIGHT_PATHS", "RenderConfig",
            "SceneConfig", "add_scene_arguments", "check_scene", "check_scene_numbers", "fill_scene_defaults",
            "load_reference", "parse_size",
            "resolve_scene_command", "scene_fields", "warn_if_black", "with_fallback", "write_render"]
@@ -44,6 +45,17 @@ MAX_SAMPLES = 1024
 WEIGHT_PATHS = ("auto", "texture", "baked")
 #: ``--render-path`` choices: viewer.scene.RENDER_PATHS (repeated here for the same reason).
 RENDER_PATHS = ("auto", "forward", "deferred")
+#: ``--deferred-weights`` choices: viewer.deferred.DEFERRED_WEIGHTS (repeated here for the same reason).
+DEFERRED_WEIGHTS = ("auto", "texture", "ssbo", "shared", "baked", "ssbo-fp16", "shared-fp16", "tiled", "tiled-fp16",
+                    "tiled-half")
+#: ``--deferred-weights`` help, shared by gratnet render and gratnet bench (there a comma-separated list).
+DEFERRED_WEIGHTS_HELP = (
+    "the deferred path's network kernel and where it reads the weights: texture, ssbo, shared, baked (one "
+    "invocation per pixel, weights from the texture, a buffer, shared memory or baked literals), ssbo-fp16, "
+    "shared-fp16 (weights stored as halves), tiled, tiled-fp16 (a work group per tile of pixels, each layer's "
+    "weights staged in shared memory: a matrix product), tiled-half (that in half-precision arithmetic; needs "
+    "GL_NV_gpu_shader5 or GL_AMD_gpu_shader_half_float) or auto (baked with baked weights, texture on a CPU "
+    "rasterizer, else ssbo)")
 #: ``--render-path`` help, shared by every command that renders a mesh.
 RENDER_PATH_HELP = ("mesh renders: forward (the network in the fragment shader), deferred (a G-buffer pass, then the "
                     "network in a compute shader for the pixels that need it) or auto (the faster on this GPU for "
@@ -100,6 +112,7 @@ class RenderConfig(SceneConfig):
         "nets up to 32k multiply-adds (the shipped size) on a CPU rasterizer such as Mesa llvmpipe, else texture)",
         choices=WEIGHT_PATHS)
     render_path: str = config_field("auto", RENDER_PATH_HELP, choices=RENDER_PATHS)
+    deferred_weights: str = config_field("auto", DEFERRED_WEIGHTS_HELP, choices=DEFERRED_WEIGHTS)
     skip_dark: bool = config_field(
         False, "PNG only: skip the network where exposure · A · (the model's cached output bound) cannot reach the "
         "display's smallest step; the first use per model builds the bound (minutes on a CPU)")
