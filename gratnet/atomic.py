@@ -30,6 +30,7 @@ import tempfile
 from collections.abc import Iterator
 from pathlib import Path
 
+from gratnet import interrupts
 from gratnet.errors import GratNetError
 
 #: Longest file name (bytes) that the usual file systems accept.
@@ -41,17 +42,17 @@ TEMPORARY_NAME = re.compile(r"^\..+\.(?P<host>[0-9a-f]{6})-(?P<pid>[0-9]+)"
                             r"(?:-[a-z0-9_]{8}\.tmp(?:\.[^/]{0,19})?|\.backup)$")
 
 
-def _host_tag() -> str:
+def host_tag() -> str:
     """This host's 6 hex digits in temporary names (a hash: host names may hold any character)."""
     return hashlib.sha1(socket.gethostname().encode("utf-8", "replace")).hexdigest()[:6]
 
 
 def _writer_tag() -> str:
     """``HOST-PID`` of this process (read on each call: a forked child has its own PID)."""
-    return f"{_host_tag()}-{os.getpid()}"
+    return f"{host_tag()}-{os.getpid()}"
 
 
-def _alive(pid: int) -> bool:
+def process_alive(pid: int) -> bool:
     """Whether a process ``pid`` exists on this host (another user's counts: EPERM)."""
     if pid <= 0:
         return True  # not a PID we wrote: leave its file alone
@@ -69,14 +70,14 @@ def remove_stale_temporaries(folder: str | os.PathLike[str]) -> list[Path]:
     are gone (killed during a write); the paths removed. Nothing else is touched: other names, other hosts'
     temporaries, those of live processes (a reused PID keeps a stale one until that process ends too)."""
     removed: list[Path] = []
-    host = _host_tag()
+    host = host_tag()
     try:
         entries = list(os.scandir(folder))
     except OSError:
         return removed
     for entry in entries:
         match = TEMPORARY_NAME.match(entry.name) if entry.name.startswith(".") else None
-        if match is None or match["host"] != host or _alive(int(match["pid"])):
+        if match is None or match["host"] != host or process_alive(int(match["pid"])):
             continue
         try:
             if not entry.is_file(follow_symlinks=False):
@@ -220,6 +221,7 @@ def _temporary_beside(target: Path) -> Path:
         name = _make_temporary(folder, target)
     except OSError as error:
         raise GratNetError(f"cannot write {target}: {_reason(target, error)}") from error
+    interrupts.pending(name, added=True)  # a supervisor that must kill a stuck command removes it
     # mkstemp makes the file private (0600); give it the permissions a plain open() would.
     umask = os.umask(0)
     os.umask(umask)
@@ -285,10 +287,13 @@ def atomic_paths(*targets: str | os.PathLike[str]) -> Iterator[tuple[Path, ...]]
             names = " and ".join(map(str, paths))
             raise GratNetError(f"cannot write {names}: {error.strerror or error}") from error
         _commit(paths, temporaries)
+        for path in paths:
+            interrupts.written(path)
     finally:
         for temporary in temporaries:
             with contextlib.suppress(OSError):
                 temporary.unlink()
+            interrupts.pending(temporary, added=False)
 
 
 @contextlib.contextmanager

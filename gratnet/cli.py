@@ -19,7 +19,7 @@ import sys
 import typing
 from collections.abc import Sequence
 
-from gratnet import __version__
+from gratnet import __version__, interrupts
 from gratnet.errors import GratNetError
 
 #: The entry-point group in which packages register subcommands: name = "module:register".
@@ -114,9 +114,16 @@ def build_parser(only: str | None = None,
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    """Run the ``gratnet`` command; bad input exits with one clear line and a non-zero status."""
+    """Run the ``gratnet`` command; bad input exits with one clear line and a non-zero status. As the process's
+    own command (``argv`` None), it runs under gratnet.interrupts' supervisor: Ctrl-C is answered within a
+    second even inside a long C call that holds the GIL (a shader's first compile)."""
+    supervised = argv is None
     argv = list(sys.argv[1:] if argv is None else argv)
     command = next((word for word in argv if not word.startswith("-")), None)
+    if supervised:
+        status = interrupts.supervise("gratnet" + (f" {command}" if command else ""))
+        if status is not None:  # the supervisor: the command ran in its child
+            return status
     try:
         commands = subcommands()
     except GratNetError as error:

@@ -26,7 +26,7 @@ def _dead_pid() -> int:
 
 
 def _stale_name(stem: str, pid: int, suffix: str = ".exr") -> str:
-    return f".{stem}.{atomic._host_tag()}-{pid}-abcd_123.tmp{suffix}"
+    return f".{stem}.{atomic.host_tag()}-{pid}-abcd_123.tmp{suffix}"
 
 
 def test_the_temporary_names_its_writer(tmp_path: Path) -> None:
@@ -36,23 +36,23 @@ def test_the_temporary_names_its_writer(tmp_path: Path) -> None:
         temporary.write_text("{}")
     match = atomic.TEMPORARY_NAME.match(seen[0])
     assert match is not None, seen[0]
-    assert int(match["pid"]) == os.getpid() and match["host"] == atomic._host_tag()
+    assert int(match["pid"]) == os.getpid() and match["host"] == atomic.host_tag()
     assert seen[0].startswith(".volume.config.") and seen[0].endswith(".tmp.json")
     assert sorted(path.name for path in tmp_path.iterdir()) == ["volume.config.json"]
 
 
 def test_a_write_removes_dead_writers_temporaries_and_nothing_else(tmp_path: Path) -> None:
     dead = _dead_pid()
-    other_host = "000000" if atomic._host_tag() != "000000" else "ffffff"
+    other_host = "000000" if atomic.host_tag() != "000000" else "ffffff"
     stale = [_stale_name("volume", dead), _stale_name("volume.config", dead, ".json"),
-             f".volume.exr.{atomic._host_tag()}-{dead}.backup", _stale_name("other", dead, "")]
+             f".volume.exr.{atomic.host_tag()}-{dead}.backup", _stale_name("other", dead, "")]
     kept = [
         _stale_name("volume", os.getpid()),  # a live writer (this process)
         _stale_name("volume", os.getppid(), ".png"),  # another live one
         f".volume.{other_host}-{dead}-abcd_123.tmp.exr",  # another host's: its processes are not visible here
         f".volume.{dead}.tmp.exr",  # not our pattern (no host)
         ".volume.x1y2z3a4.tmp.exr",  # the old unnamed pattern: the writer is unknown
-        "volume.exr", "notes.txt", f"{atomic._host_tag()}-{dead}-abcd_123.tmp.exr",  # not hidden
+        "volume.exr", "notes.txt", f"{atomic.host_tag()}-{dead}-abcd_123.tmp.exr",  # not hidden
     ]
     for name in stale + kept:
         (tmp_path / name).write_bytes(b"x")
@@ -89,7 +89,7 @@ def test_a_killed_writers_temporary_is_removed_by_the_next_write(tmp_path: Path)
         writer.send_signal(signal.SIGKILL)
         writer.wait()
     deadline = time.monotonic() + 5.0
-    while atomic._alive(writer.pid) and time.monotonic() < deadline:  # reaped already; a PID reuse is unlikely
+    while atomic.process_alive(writer.pid) and time.monotonic() < deadline:  # reaped already; a PID reuse is unlikely
         time.sleep(0.05)
     assert left.exists()
     atomic.write_text_atomic(tmp_path / "volume.exr", "{}")

@@ -1,0 +1,175 @@
+"""Ctrl-C within a second, even inside a long C call that holds the GIL (issue 36).
+
+Python runs a SIGINT handler only between bytecodes, in the main thread. moderngl holds the GIL through each
+GL call, and on a CPU rasterizer a shader's first compile or first draw is one such call of 10–40 s (a baked
+network on llvmpipe with a cold Mesa cache): no Python code runs in *any* thread of the process meanwhile, so
+neither the handler nor an in-process watchdog thread can answer the signal.
+
+So the ``gratnet`` command runs under a small supervisor: :func:`supervise` forks before any heavy import; the
+child runs the command, the parent waits for it and exits with its status. The parent takes the termination
+signals (SIGINT, SIGTERM, SIGHUP, SIGQUIT) and passes on those sent to it alone (a terminal's Ctrl-C already
+reached the whole process group). The child writes a heartbeat from a thread, which needs the GIL, and tells the
+parent which of gratnet.atomic's temporaries are pending. After a SIGINT the child normally answers by itself
+(one line, exit 130); if its heartbeat then stops for :data:`GRACE` seconds, the GIL is held by a call that
+will not return soon: the parent kills the child (SIGKILL), removes its pending temporaries, prints the one
+line and exits 130. A ``kill -9`` of the parent takes the child with it (``PR_SET_PDEATHSIG``).
+
+Linux only (``PR_SET_PDEATHSIG``); elsewhere, with ``GRATNET_NO_SUPERVISOR=1``, or when threads already run
+(forking them is unsafe), the command runs in the one process as before.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import ctypes
+import os
+import signal
+import sys
+import threading
+import time
+
+__all__ = ["GRACE", "HEARTBEAT", "SIGNALS", "pending", "supervise", "written"]
+
+#: Seconds without a heartbeat after a SIGINT before the child counts as stuck in a call that holds the GIL.
+GRACE = 0.5
+#: Seconds between the child's heartbeats.
+HEARTBEAT = 0.1
+#: The signals the supervisor takes and passes on to the command.
+SIGNALS = (signal.SIGINT, signal.SIGTERM, signal.SIGHUP, signal.SIGQUIT)
+#: ``si_code`` of a signal the kernel sent (a terminal's Ctrl-C, a hangup): the whole process group has it.
+_SI_KERNEL = 0x80
+_PR_SET_PDEATHSIG = 1
+
+#: In the supervised child: the pipe's write end to the supervisor (heartbeats and temporaries), else None.
+_channel: int | None = None
+
+
+def pending(path: str | os.PathLike[str], added: bool) -> None:
+    """Tell the supervisor, if any, that ``path`` (a temporary of gratnet.atomic) now exists (``added``) or is
+    gone (renamed onto its target, or removed): it removes those still pending if it must kill the command."""
+    _tell(b"+" if added else b"-", path)
+
+
+def written(path: str | os.PathLike[str]) -> None:
+    """Tell the supervisor, if any, that an output is complete (its line then says that finished files are kept)."""
+    _tell(b"=", path)
+
+
+def _tell(kind: bytes, path: str | os.PathLike[str]) -> None:
+    if _channel is None:
+        return
+    message = kind + os.fsencode(os.path.abspath(path)) + b"\0"
+    if len(message) <= 4096:  # PIPE_BUF: one write, not interleaved with a heartbeat
+        with contextlib.suppress(OSError):  # the supervisor is gone, or its pipe is full: nothing to do
+            os.write(_channel, message)
+
+
+def _heartbeat(channel: int) -> None:
+    """The child's heartbeat: one byte every :data:`HEARTBEAT` seconds while Python can run (needs the GIL)."""
+    while True:
+        try:
+            os.write(channel, b".")
+        except BlockingIOError:
+            pass
+        except OSError:  # the supervisor is gone
+            return
+        time.sleep(HEARTBEAT)
+
+
+def _enabled() -> bool:
+    return (sys.platform.startswith("linux") and hasattr(os, "fork") and not os.environ.get("GRATNET_NO_SUPERVISOR")
+            and threading.active_count() == 1)
+
+
+def supervise(command: str) -> int | None:
+    """Fork the command under a supervisor (see the module docstring). Returns None in the child, which goes on
+    with the command (and when no supervisor is used); in the parent, the command's exit status once it ended
+    (a signal's death as 128 + the signal's number). ``command``: ``gratnet SUBCOMMAND``, for the line printed
+    when the supervisor has to stop a stuck child."""
+    global _channel
+    if not _enabled():
+        return None
+    try:
+        libc = ctypes.CDLL(None, use_errno=True)
+        prctl = libc.prctl
+    except (OSError, AttributeError):
+        return None
+    taken = [number for number in SIGNALS if signal.getsignal(number) is not signal.SIG_IGN]
+    reader, writer = os.pipe()
+    os.set_blocking(writer, False)  # a heartbeat is dropped rather than wait for a busy supervisor
+    parent = os.getpid()
+    sys.stdout.flush()
+    sys.stderr.flush()
+    before = signal.pthread_sigmask(signal.SIG_BLOCK, [*taken, signal.SIGCHLD])  # no signal lost around the fork
+    child = os.fork()
+    if child == 0:
+        os.close(reader)
+        prctl(_PR_SET_PDEATHSIG, signal.SIGKILL, 0, 0, 0)
+        if os.getppid() != parent:  # the supervisor died before the line above
+            os._exit(128 + signal.SIGKILL)
+        signal.pthread_sigmask(signal.SIG_SETMASK, before)
+        _channel = writer
+        threading.Thread(target=_heartbeat, args=(writer,), name="gratnet-heartbeat", daemon=True).start()
+        return None
+    os.close(writer)
+    # The signals stay blocked here to the end: one pending when the child ends (a second Ctrl-C) must not
+    # become a KeyboardInterrupt in the supervisor.
+    return _wait(child, reader, taken, command)
+
+
+def _wait(child: int, reader: int, taken: list[int], command: str) -> int:
+    """The supervisor's loop: pass signals on, read the child's messages, stop it if it is stuck after a SIGINT;
+    the child's exit status."""
+    os.set_blocking(reader, False)
+    temporaries: set[bytes] = set()
+    finished = False
+    buffer = b""
+    last_beat = time.monotonic()
+    interrupted_at: float | None = None
+    while True:
+        info = signal.sigtimedwait([*taken, signal.SIGCHLD], HEARTBEAT / 2)
+        now = time.monotonic()
+        if info is not None and info.si_signo != signal.SIGCHLD:
+            if info.si_code != _SI_KERNEL:  # sent to this process alone: the child has not seen it
+                with contextlib.suppress(ProcessLookupError):
+                    os.kill(child, info.si_signo)
+            if info.si_signo == signal.SIGINT:
+                interrupted_at = now
+        with contextlib.suppress(BlockingIOError):
+            while chunk := os.read(reader, 65536):
+                buffer += chunk
+                last_beat = now  # any byte: the child's Python ran (a heartbeat or a message, written atomically)
+        *messages, buffer = buffer.split(b"\0")
+        for message in messages:
+            message = message.lstrip(b".")  # heartbeats come between messages, never inside one
+            if message[:1] == b"+":
+                temporaries.add(message[1:])
+            elif message[:1] == b"-":
+                temporaries.discard(message[1:])
+            elif message[:1] == b"=":
+                finished = True
+        buffer = buffer.lstrip(b".")
+        done, status = os.waitpid(child, os.WNOHANG)
+        if done:
+            return os.WEXITSTATUS(status) if os.WIFEXITED(status) else 128 + os.WTERMSIG(status)
+        if interrupted_at is not None and now - max(interrupted_at, last_beat) > GRACE:
+            return _stop(child, temporaries, finished, command)
+
+
+def _stop(child: int, temporaries: set[bytes], finished: bool, command: str) -> int:
+    """Kill the stuck child, remove its pending temporaries, say so in one line: exit status 130."""
+    with contextlib.suppress(ProcessLookupError):
+        os.kill(child, signal.SIGKILL)
+    try:
+        _, status = os.waitpid(child, 0)
+    except ChildProcessError:
+        status = 0
+    if os.WIFEXITED(status):  # it answered by itself just before the kill (and said so): its status
+        return os.WEXITSTATUS(status)
+    for path in temporaries:
+        with contextlib.suppress(OSError):
+            os.unlink(path)
+    clear = "\r\033[K" if sys.stderr.isatty() else "\r"  # over a progress bar left on the line
+    outcome = "files finished before it are kept, none is half-written" if finished else "nothing was written"
+    print(f"{clear}{command}: interrupted; {outcome}", file=sys.stderr, flush=True)
+    return 130

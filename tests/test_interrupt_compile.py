@@ -1,0 +1,168 @@
+"""Ctrl-C within a second even inside a long C call that holds the GIL (issue 36; gratnet/interrupts.py).
+
+A baked network's first compile and first draw on llvmpipe with a cold Mesa cache are single moderngl calls of
+10–40 s that hold the GIL: before the supervisor, ``gratnet render`` answered a SIGINT there only when the call
+ended (13 s after the signal, measured). Now the supervisor stops the stuck command: exit 130 within
+:data:`STOP_WITHIN`, one line, no file, no process left. The supervisor is also checked alone, with a pure
+Python call that holds the GIL (``sum(range(…))`` checks no signal), without GL.
+"""
+
+from __future__ import annotations
+
+import os
+import select
+import signal
+import subprocess
+import sys
+import time
+import uuid
+from pathlib import Path
+
+import pytest
+
+REPO = Path(__file__).resolve().parents[1]
+if str(REPO) not in sys.path:  # scripts/ is a folder of the repository, not an installed package
+    sys.path.insert(0, str(REPO))
+
+from scripts.fault_injection import TAG_VARIABLE, tagged_processes  # noqa: E402
+
+#: The longest a command may take to stop after SIGINT (seconds; the issue asks for 1 s, this allows for a busy CI).
+STOP_WITHIN = 1.5
+#: The gratnet command as a process of its own (``main()`` with no arguments: supervised).
+COMMAND = "import sys\nfrom gratnet.cli import main\nsys.exit(main())"
+
+#: A stand-in command: supervised, then holds the GIL inside an atomic write (``gil``), or waits in Python and
+#: answers Ctrl-C itself (``python``), or waits in Python without a SIGINT handler of its own (``plain``).
+STAND_IN = """\
+import sys, time
+from gratnet import atomic, interrupts
+status = interrupts.supervise("gratnet stand-in")
+if status is not None:
+    sys.exit(status)
+if sys.argv[1] == "gil":
+    with atomic.atomic_path("out.bin") as temporary:
+        temporary.write_bytes(b"half")
+        print("ready", flush=True)
+        sum(range(10**12))  # one C call: holds the GIL and checks no signal
+elif sys.argv[1] == "python":
+    print("ready", flush=True)
+    try:
+        while True:
+            time.sleep(0.01)
+    except KeyboardInterrupt:
+        print("stand-in: interrupted by itself", file=sys.stderr)
+        sys.exit(130)
+else:
+    print("ready", flush=True)
+    time.sleep(60)
+"""
+
+
+def _environment(tag: str, **extra: str) -> dict[str, str]:
+    return {**os.environ, TAG_VARIABLE: tag, **extra,
+            "PYTHONPATH": os.pathsep.join(filter(None, [str(REPO), os.environ.get("PYTHONPATH")]))}
+
+
+def _lines(text: str) -> list[str]:
+    """What a terminal shows: each line's text after its last carriage return, blank ones left out."""
+    return [line.rsplit("\r", 1)[-1] for line in text.split("\n") if line.rsplit("\r", 1)[-1].strip()]
+
+
+def _stand_in(folder: Path, mode: str) -> tuple[subprocess.Popen[bytes], str]:
+    tag = uuid.uuid4().hex
+    process = subprocess.Popen([sys.executable, "-c", STAND_IN, mode], cwd=folder, env=_environment(tag),
+                               stdout=subprocess.PIPE, stderr=subprocess.PIPE)
+    assert process.stdout is not None
+    assert process.stdout.readline() == b"ready\n"
+    return process, tag
+
+
+def _stop(process: subprocess.Popen[bytes], number: int = signal.SIGINT) -> tuple[float, str]:
+    """Send ``number``; the seconds until the process ended, and its stderr."""
+    sent = time.monotonic()
+    process.send_signal(number)
+    _, stderr = process.communicate(timeout=60)
+    return time.monotonic() - sent, stderr.decode("utf-8", "replace")
+
+
+def _gone(tag: str, folder: Path, within: float = 2.0) -> dict[int, str]:
+    """The command's processes still alive ``within`` seconds from now (none expected)."""
+    deadline = time.monotonic() + within
+    while (alive := tagged_processes(tag, folder)) and time.monotonic() < deadline:
+        time.sleep(0.05)
+    return alive
+
+
+pytestmark = pytest.mark.skipif(not sys.platform.startswith("linux"), reason="the supervisor is Linux only")
+
+
+def test_a_command_stuck_holding_the_gil_stops_within_a_second(tmp_path: Path) -> None:
+    process, tag = _stand_in(tmp_path, "gil")
+    assert len(os.listdir(tmp_path)) == 1  # the write's temporary
+    time.sleep(0.5)
+    stopped, stderr = _stop(process)
+    print(f"stuck holding the GIL: exit {process.returncode} {stopped:.3f} s after SIGINT")
+    assert process.returncode == 130, stderr
+    assert stopped < STOP_WITHIN, f"{stopped:.2f} s from SIGINT to exit"
+    assert _lines(stderr) == ["gratnet stand-in: interrupted; nothing was written"], stderr
+    assert os.listdir(tmp_path) == []  # the pending temporary removed by the supervisor
+    assert not _gone(tag, tmp_path)
+
+
+def test_a_command_that_answers_ctrl_c_itself_is_left_to_do_so(tmp_path: Path) -> None:
+    process, tag = _stand_in(tmp_path, "python")
+    stopped, stderr = _stop(process)
+    assert process.returncode == 130 and stopped < STOP_WITHIN
+    assert _lines(stderr) == ["stand-in: interrupted by itself"], stderr
+    assert not _gone(tag, tmp_path)
+
+
+def test_signals_reach_the_command_and_its_death_is_the_exit_status(tmp_path: Path) -> None:
+    """SIGTERM is passed on (the command has no handler: it dies of it, 128 + 15); a kill -9 of the supervisor
+    takes the command with it."""
+    process, tag = _stand_in(tmp_path, "plain")
+    stopped, stderr = _stop(process, signal.SIGTERM)
+    assert process.returncode == 128 + signal.SIGTERM and stopped < STOP_WITHIN, stderr
+    assert not _gone(tag, tmp_path)
+    process, tag = _stand_in(tmp_path, "plain")
+    _stop(process, signal.SIGKILL)
+    assert not _gone(tag, tmp_path), "the command outlived its supervisor's kill -9"
+
+
+@pytest.mark.parametrize("marker", ["program 'surface' with baked weights", "deferred shading program"],
+                         ids=["surface-program", "deferred-program"])
+def test_ctrl_c_during_a_cold_shader_compile_stops_within_a_second(tmp_path: Path, marker: str) -> None:
+    """``gratnet render --material cd`` (a baked 28k-MAC network) with an empty Mesa shader cache: SIGINT 1.5 s
+    after the render says it compiles the program named by ``marker`` (a 10–25 s call on llvmpipe)."""
+    work, cache = tmp_path / "work", tmp_path / "mesa-cache"
+    work.mkdir()
+    tag = uuid.uuid4().hex
+    process = subprocess.Popen([sys.executable, "-c", COMMAND, "render", "--material", "cd", "--mesh", "sphere",
+                                "--size", "160,120", "--render-path", "auto", "--out", "x.png"], cwd=work,
+                               env=_environment(tag, MESA_SHADER_CACHE_DIR=str(cache)), stdout=subprocess.PIPE,
+                               stderr=subprocess.PIPE)
+    assert process.stderr is not None
+    before = b""
+    try:
+        deadline = time.monotonic() + 180.0
+        while marker.encode() not in before and process.poll() is None and time.monotonic() < deadline:
+            if select.select([process.stderr], [], [], 1.0)[0]:
+                before += os.read(process.stderr.fileno(), 65536)
+        if marker.encode() not in before:
+            process.kill()
+            process.communicate()
+            pytest.skip(f"the render never compiled {marker!r} here (a GPU, a path without it, or no GL): "
+                        f"{before.decode(errors='replace').strip()[-200:]!r}")
+        time.sleep(1.5)
+        assert process.poll() is None, "the compile ended within 1.5 s: nothing to measure"
+        stopped, after = _stop(process)
+    finally:
+        if process.poll() is None:
+            process.kill()
+            process.communicate()
+    print(f"cold compile ({marker}): exit {process.returncode} {stopped:.3f} s after SIGINT")
+    assert process.returncode == 130, after
+    assert stopped < STOP_WITHIN, f"{stopped:.2f} s from SIGINT to exit"
+    assert _lines(after) == ["gratnet render: interrupted; nothing was written"], after
+    assert os.listdir(work) == []
+    assert not _gone(tag, work)
