@@ -261,7 +261,8 @@ def test_render_and_bench_take_the_tiled_kernel(ctx, tmp_path):
                  "--render-path", "deferred", "--deferred-weights", "tiled", "--out", str(out)]) == 0
     config = json.loads((tmp_path / "disc.config.json").read_text())
     assert config["render"]["deferred_weights"] == "tiled"
-    assert config["render_path"] == {"path": "deferred", "reason": "requested", "deferred_weights": "tiled"}
+    assert config["render_path"] == {"path": "deferred", "reason": "requested"}
+    assert config["deferred_weights"] == "tiled"
     bench = tmp_path / "bench"
     assert main(["bench", str(model), "--out", str(bench), "--no-slices", "--scene-sizes", "12x12", "--spp", "1",
                  "--weights-paths", "texture", "--render-paths", "forward,deferred", "--deferred-weights",

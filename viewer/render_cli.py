@@ -234,8 +234,9 @@ def _render(arguments: argparse.Namespace, out: Path) -> int:
             # A BRDF slice has one path (a full-screen fragment pass); a mesh takes the one chosen.
             resolved = ({"path": "forward", "reason": "BRDF slices are rendered by the fragment pass only"}
                         if config.slice else {"path": renderer.render_path, "reason": renderer.render_path_reason})
-            if resolved["path"] == "deferred" and renderer.deferred is not None:
-                resolved["deferred_weights"] = renderer.deferred.weights  # auto resolved
+            # The deferred path's kernel and weights as resolved (auto: by the rasterizer), beside the path.
+            deferred_weights = (renderer.deferred.weights if resolved["path"] == "deferred"
+                                and renderer.deferred is not None else None)
             with _progress_bar(arguments.quiet) as progress:
                 if config.slice:
                     xyz = renderer.shading.render_brdf_slice(config.light_theta_degrees, config.light_phi_degrees,
@@ -259,6 +260,8 @@ def _render(arguments: argparse.Namespace, out: Path) -> int:
         config = dataclasses.replace(config, material="")
 
     documents: dict[str, object] = {"render": config, "render_path": resolved}
+    if deferred_weights is not None:
+        documents["deferred_weights"] = deferred_weights
     if model_path is not None:
         documents["model_file"] = str(model_path)
     if volume is not None:
