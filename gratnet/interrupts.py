@@ -8,11 +8,13 @@ neither the handler nor an in-process watchdog thread can answer the signal.
 So the ``gratnet`` command runs under a small supervisor: :func:`supervise` forks before any heavy import; the
 child runs the command, the parent waits for it and exits with its status. The parent takes the termination
 signals (SIGINT, SIGTERM, SIGHUP, SIGQUIT) and passes on those sent to it alone (a terminal's Ctrl-C already
-reached the whole process group). The child writes a heartbeat from a thread, which needs the GIL, and tells the
-parent which of gratnet.atomic's temporaries are pending. After a SIGINT the child normally answers by itself
-(one line, exit 130); if its heartbeat then stops for :data:`GRACE` seconds, the GIL is held by a call that
-will not return soon: the parent kills the child (SIGKILL), removes its pending temporaries, prints the one
-line and exits 130. A ``kill -9`` of the parent takes the child with it (``PR_SET_PDEATHSIG``).
+reached the whole process group). The child writes a heartbeat from a thread, which needs the GIL, tells the
+parent which of gratnet.atomic's temporaries are pending, and, from its SIGINT handler, that it answers the
+signal. It normally does so at once and ends by itself (its own line, exit 130, after its own cleanup: a sweep
+shuts Ray down). If instead, after a SIGINT, its handler has not run and its heartbeat stops for
+:data:`GRACE` seconds, the GIL is held by a call that will not return soon: the parent kills the child
+(SIGKILL), removes its pending temporaries, prints the one line and exits 130. A ``kill -9`` of the parent
+takes the child with it (``PR_SET_PDEATHSIG``).
 
 Linux only (``PR_SET_PDEATHSIG``); elsewhere, with ``GRATNET_NO_SUPERVISOR=1``, or when threads already run
 (forking them is unsafe), the command runs in the one process as before.
@@ -55,10 +57,17 @@ def written(path: str | os.PathLike[str]) -> None:
     _tell(b"=", path)
 
 
-def _tell(kind: bytes, path: str | os.PathLike[str]) -> None:
+def _answered(number: int, frame: object) -> None:
+    """The child's SIGINT handler: Python's (KeyboardInterrupt), after telling the supervisor that the command
+    answers the signal itself (it then leaves the command to its own cleanup, however long, and its own line)."""
+    _tell(b"!")
+    signal.default_int_handler(number, frame)  # type: ignore[arg-type]
+
+
+def _tell(kind: bytes, path: str | os.PathLike[str] | None = None) -> None:
     if _channel is None:
         return
-    message = kind + os.fsencode(os.path.abspath(path)) + b"\0"
+    message = kind + (os.fsencode(os.path.abspath(path)) if path is not None else b"") + b"\0"
     if len(message) <= 4096:  # PIPE_BUF: one write, not interleaved with a heartbeat
         with contextlib.suppress(OSError):  # the supervisor is gone, or its pipe is full: nothing to do
             os.write(_channel, message)
@@ -109,6 +118,8 @@ def supervise(command: str) -> int | None:
             os._exit(128 + signal.SIGKILL)
         signal.pthread_sigmask(signal.SIG_SETMASK, before)
         _channel = writer
+        if signal.getsignal(signal.SIGINT) is signal.default_int_handler:
+            signal.signal(signal.SIGINT, _answered)
         threading.Thread(target=_heartbeat, args=(writer,), name="gratnet-heartbeat", daemon=True).start()
         return None
     os.close(writer)
@@ -125,7 +136,8 @@ def _wait(child: int, reader: int, taken: list[int], command: str) -> int:
     finished = False
     buffer = b""
     last_beat = time.monotonic()
-    interrupted_at: float | None = None
+    interrupted_at: float | None = None  # the last SIGINT's arrival
+    answered = False  # whether the child's Python handler ran since then
     while True:
         info = signal.sigtimedwait([*taken, signal.SIGCHLD], HEARTBEAT / 2)
         now = time.monotonic()
@@ -134,7 +146,7 @@ def _wait(child: int, reader: int, taken: list[int], command: str) -> int:
                 with contextlib.suppress(ProcessLookupError):
                     os.kill(child, info.si_signo)
             if info.si_signo == signal.SIGINT:
-                interrupted_at = now
+                interrupted_at, answered = now, False
         with contextlib.suppress(BlockingIOError):
             while chunk := os.read(reader, 65536):
                 buffer += chunk
@@ -148,11 +160,13 @@ def _wait(child: int, reader: int, taken: list[int], command: str) -> int:
                 temporaries.discard(message[1:])
             elif message[:1] == b"=":
                 finished = True
+            elif message[:1] == b"!":
+                answered = True
         buffer = buffer.lstrip(b".")
         done, status = os.waitpid(child, os.WNOHANG)
         if done:
             return os.WEXITSTATUS(status) if os.WIFEXITED(status) else 128 + os.WTERMSIG(status)
-        if interrupted_at is not None and now - max(interrupted_at, last_beat) > GRACE:
+        if interrupted_at is not None and not answered and now - max(interrupted_at, last_beat) > GRACE:
             return _stop(child, temporaries, finished, command)
 
 

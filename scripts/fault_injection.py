@@ -61,7 +61,8 @@ TEMPORARY = re.compile(r"^\..+(\.tmp(\.[A-Za-z0-9]+)?|\.([0-9a-f]{6}-)?\d+\.back
 #: Folders of a sweep that only it reads: its task records (one file per task attempt; they differ by design).
 RECORDS = "records"
 
-_RUNNER = "import sys\nfrom gratnet.cli import main\nsys.exit(main(sys.argv[1:]))"
+#: The gratnet command as its console script runs it (main() without arguments: under gratnet.interrupts' supervisor).
+_RUNNER = "import sys\nfrom gratnet.cli import main\nsys.exit(main())"
 
 SWEEP_FILE = """\
 presets = ["tiny"]

@@ -45,8 +45,8 @@ if sys.argv[1] == "gil":
         print("ready", flush=True)
         sum(range(10**12))  # one C call: holds the GIL and checks no signal
 elif sys.argv[1] == "python":
-    print("ready", flush=True)
     try:
+        print("ready", flush=True)
         while True:
             time.sleep(0.01)
     except KeyboardInterrupt:
