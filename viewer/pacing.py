@@ -22,7 +22,7 @@ projected on the CPU (:func:`projected_row_costs`). Read-backs go in pieces too 
 Two calls must not be interrupted half-way at all (:func:`sigint_deferred`): moderngl's program creation, which
 calls back into Python (a KeyboardInterrupt there crashed the process), and tqdm's refresh. A shader's first
 compile on llvmpipe is one long call that cannot be split (~25 s for a baked 28k-MAC network on a cold Mesa
-cache): Ctrl-C is answered once it ends.
+cache): the ``gratnet`` command's supervisor (gratnet/interrupts.py) stops it within a second of Ctrl-C.
 
 Rendering only: no glfw, no imgui, no torch.
 """
