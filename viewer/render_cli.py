@@ -21,9 +21,10 @@
   sRGB, float32 channels R, G, B, exposure applied, unclipped. The resolved config is saved beside it
   (``NAME.config.json``); both are written atomically.
 - Long renders: a progress bar on stderr once a render has run 2 s (``--quiet``: none), cleared at the end.
-  Ctrl-C: exit status 130 within a second (the GPU work goes in short calls, :mod:`viewer.pacing`; a shader's
-  first compile on a cold Mesa cache is the exception) and one line; nothing is written (no image, no config,
-  no temporary), or the line says the output had landed already.
+  Ctrl-C: exit status 130 within a second (the GPU work goes in short calls, :mod:`viewer.pacing`; inside a
+  shader's first compile on a cold Mesa cache, one long call, the command's supervisor stops it:
+  gratnet/interrupts.py) and one line; nothing is written (no image, no config, no temporary), or the line says
+  the output had landed already.
 - ``--size``: a size this machine cannot render (the GL limits, a render target the driver does not allocate,
   more memory than is available) is refused in one line that names the largest size that fits, before any
   shader compiles (:func:`check_render_size`).
