@@ -4,7 +4,10 @@ Each case renders 96×96 display sRGB (``SceneRenderer`` → ``display_srgb8``, 
 and compares it with ``tests/golden/NAME.png``. It passes when both hold:
 
 - mean LDR-FLIP (``flip_evaluator`` on display sRGB in [0, 1], default 67 pixels per degree) ≤ 0.01;
-- at least 99.9 % of the pixels differ by ≤ 8/255 in every channel.
+- at least 99.9 % of the pixels differ by ≤ 8/255 in every channel, plus, when the picture is compared on a
+  GPU, what two correct float32 drivers may differ by at that pixel (``gratnet.precision.driver_bound`` at the
+  pixel's key, the key moved by a rasterizer's sub-pixel snapping; docs/physics.md, "Float32 error budget"),
+  in display levels.
 
 A failure writes ``NAME.actual.png``, ``NAME.expected.png`` and ``NAME.diff.png`` (per-pixel largest
 channel difference ×8, grey) to ``tests/_failures/`` (gitignored) and names them. ``pytest
@@ -52,8 +55,11 @@ CASES = {
 # Comparison
 
 
-def compare(actual: np.ndarray, expected: np.ndarray) -> tuple[list[str], dict[str, float]]:
-    """``(problems, measures)`` for two ``uint8`` ``(H, W, 3)`` display-sRGB images; no problems = pass."""
+def compare(actual: np.ndarray, expected: np.ndarray,
+            allowed_levels: np.ndarray | int = MAX_LEVELS) -> tuple[list[str], dict[str, float]]:
+    """``(problems, measures)`` for two ``uint8`` ``(H, W, 3)`` display-sRGB images; no problems = pass.
+    ``allowed_levels``: the largest channel difference per pixel that does not count as differing (``(H, W)``
+    or one number)."""
     import flip_evaluator
 
     if actual.shape != expected.shape:
@@ -64,13 +70,15 @@ def compare(actual: np.ndarray, expected: np.ndarray) -> tuple[list[str], dict[s
         "LDR", inputsRGB=True, applyMagma=False, computeMeanError=True,
     )
     levels = np.abs(actual.astype(np.int16) - expected.astype(np.int16)).max(axis=2)
-    differing = float(np.mean(levels > MAX_LEVELS))
+    differing = float(np.mean(levels > allowed_levels))
     measures = {"mean_flip": float(mean_flip), "differing_fraction": differing, "max_levels": float(levels.max())}
     problems = []
     if not mean_flip <= MAX_MEAN_FLIP:
         problems.append(f"mean FLIP {mean_flip:.4f} > {MAX_MEAN_FLIP}")
     if differing > MAX_DIFFERING_FRACTION:
-        problems.append(f"{differing:.2%} of the pixels differ by more than {MAX_LEVELS}/255 "
+        allowed = f"{MAX_LEVELS}/255" if np.ndim(allowed_levels) == 0 else \
+            f"{MAX_LEVELS}/255 + the float32 driver bound (up to {int(np.max(allowed_levels))}/255)"
+        problems.append(f"{differing:.2%} of the pixels differ by more than {allowed} "
                         f"(allowed {MAX_DIFFERING_FRACTION:.1%}; largest difference {levels.max()}/255)")
     return problems, measures
 
@@ -90,7 +98,7 @@ def write_failure(name: str, actual: np.ndarray, expected: np.ndarray, folder: P
 
 
 def check_golden(name: str, actual: np.ndarray, regenerate: bool, golden: Path = GOLDEN,
-                 failures: Path = FAILURES) -> dict[str, float]:
+                 failures: Path = FAILURES, allowed_levels: np.ndarray | int = MAX_LEVELS) -> dict[str, float]:
     """Compare with (or, regenerating, rewrite) ``golden/NAME.png``; fail with the failure images' paths."""
     reference = golden / f"{name}.png"
     if regenerate:
@@ -101,7 +109,7 @@ def check_golden(name: str, actual: np.ndarray, regenerate: bool, golden: Path =
         pytest.fail(f"no golden image {reference}; create it with: python -m pytest tests/test_golden.py "
                     "--regenerate-golden")
     expected = np.asarray(Image.open(reference).convert("RGB"))
-    problems, measures = compare(actual, expected)
+    problems, measures = compare(actual, expected, allowed_levels)
     if problems:
         paths = write_failure(name, actual, expected, failures)
         pytest.fail(f"golden image {name}: {'; '.join(problems)}. Wrote {', '.join(str(p) for p in paths)}")
@@ -140,18 +148,71 @@ def render_case(scene, name: str) -> np.ndarray:
     return scene.display_srgb8(xyz)
 
 
+#: Largest share of a case's pixels whose driver allowance may exceed MAX_LEVELS: beyond it the scene is too
+#: ill-conditioned (too many pixels where a sub-pixel move of the key changes the display) for the pixel rule
+#: to say much, and the case should change.
+MAX_LOOSE_FRACTION = 0.1
+_ALLOWANCES: dict[str, np.ndarray] = {}
+
+
+def driver_allowance(scene, name: str) -> np.ndarray:
+    """:func:`driver_levels` of case ``name`` once per test session (the forward and deferred tests share it),
+    checked against :data:`MAX_LOOSE_FRACTION`."""
+    if name not in _ALLOWANCES:
+        allowance = driver_levels(scene, name)
+        loose = float(np.mean(allowance > MAX_LEVELS))
+        assert loose <= MAX_LOOSE_FRACTION, f"{name}: {loose:.1%} of the pixels are ill-conditioned"
+        _ALLOWANCES[name] = allowance
+    return _ALLOWANCES[name]
+
+
+def driver_levels(scene, name: str) -> np.ndarray:
+    """Display levels ``(H, W)`` that another correct float32 driver may move each pixel of case ``name`` by,
+    beyond :data:`MAX_LEVELS` (docs/physics.md, "Float32 error budget"): ``driver_bound`` at the forward
+    path's key layer (the BRDF slice: the numpy keys of its pixels), the key moved by sub-pixel snapping
+    (``raster_key_error``), times exposure · A; the XYZ box's 8 corners through the display transform."""
+    from gratnet.brdf import a_term, direction, slice_view_directions
+    from gratnet.precision import driver_bound, raster_key_error
+
+    build, camera, (theta, phi), exposure = CASES[name]
+    if build is None:
+        views, inside = slice_view_directions(SIZE)
+        light = direction(theta, phi)
+        key = -(light + views)
+        factor = exposure * a_term(light, views, 1.5) * inside
+        key_error = None  # DriverErrors' 16 u: the slice's key is computed per pixel, no rasterized geometry
+    else:
+        _, key_a = scene.render_layers(build(), Camera(*camera), Light.directional(theta, phi), (SIZE, SIZE),
+                                       exposure)
+        key = key_a[..., :3].astype(np.float64)
+        factor = exposure * key_a[..., 3].astype(np.float64)
+        key_error = raster_key_error(key, key_a[..., 3] > 0)
+    lit = factor > 0  # A = 0 or background: black on every driver, nothing to evaluate
+    value, tolerance = np.zeros((SIZE, SIZE, 3)), np.zeros((SIZE, SIZE, 3))
+    bound = driver_bound(scene.model, key[lit, 0], key[lit, 1], key[lit, 2],
+                         key_error=None if key_error is None else key_error[lit])
+    value[lit], tolerance[lit] = factor[lit, None] * bound.xyz, factor[lit, None] * bound.bound
+    shown = scene.display_srgb8(value).astype(np.int16)
+    levels = np.zeros(shown.shape[:2], dtype=np.int16)
+    for corner in np.ndindex(2, 2, 2):
+        moved = scene.display_srgb8(np.maximum(value + (2 * np.array(corner) - 1) * tolerance, 0.0))
+        levels = np.maximum(levels, np.abs(moved.astype(np.int16) - shown).max(axis=2))
+    return MAX_LEVELS + levels
+
+
 @pytest.mark.parametrize("name", list(CASES))
 def test_render_matches_golden_image(scene, name, request):
     actual = render_case(scene, name)
     assert np.count_nonzero(actual.max(axis=2) > 16) >= 20, f"{name}: the render is (nearly) black"
-    check_golden(name, actual, request.config.getoption("--regenerate-golden"))
+    check_golden(name, actual, request.config.getoption("--regenerate-golden"),
+                 allowed_levels=driver_allowance(scene, name))
 
 
 @pytest.mark.parametrize("name", [name for name, case in CASES.items() if case[0] is not None])
-def test_deferred_render_matches_the_same_golden_image(deferred_scene, name):
+def test_deferred_render_matches_the_same_golden_image(scene, deferred_scene, name):
     """The deferred path (viewer/deferred.py) must give the forward path's pictures: the same references."""
     assert deferred_scene.render_path == "deferred"
-    check_golden(name, render_case(deferred_scene, name), False)
+    check_golden(name, render_case(deferred_scene, name), False, allowed_levels=driver_allowance(scene, name))
 
 
 # --------------------------------------------------------------------------------------------------
