@@ -124,6 +124,14 @@ def main(argv: Sequence[str] | None = None) -> int:
         status = interrupts.supervise("gratnet" + (f" {command}" if command else ""))
         if status is not None:  # the supervisor: the command ran in its child
             return status
+        status = _command(argv, command)
+        interrupts.done(status)  # a Ctrl-C from here on (the interpreter's teardown) changes nothing
+        return status
+    return _command(argv, command)
+
+
+def _command(argv: list[str], command: str | None) -> int:
+    """:func:`main`'s work: parse ``argv`` and run the subcommand (``command``, the first word that is no flag)."""
     try:
         commands = subcommands()
     except GratNetError as error:

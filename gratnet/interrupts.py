@@ -30,7 +30,7 @@ import sys
 import threading
 import time
 
-__all__ = ["GRACE", "HEARTBEAT", "SIGNALS", "pending", "supervise", "written"]
+__all__ = ["GRACE", "HEARTBEAT", "SIGNALS", "done", "pending", "supervise", "written"]
 
 #: Seconds without a heartbeat after a SIGINT before the child counts as stuck in a call that holds the GIL.
 GRACE = 0.5
@@ -55,6 +55,16 @@ def pending(path: str | os.PathLike[str], added: bool) -> None:
 def written(path: str | os.PathLike[str]) -> None:
     """Tell the supervisor, if any, that an output is complete (its line then says that finished files are kept)."""
     _tell(b"=", path)
+
+
+def done(status: int) -> None:
+    """In the supervised child, once the command has returned ``status``: SIGINT is ignored from now on (the work
+    is over; the interpreter's teardown, up to a second with big libraries loaded, is not to be interrupted), and
+    the supervisor exits with ``status`` even if the teardown dies of a signal."""
+    if _channel is None:
+        return
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    _tell(b"#" + str(int(status)).encode())
 
 
 def _answered(number: int, frame: object) -> None:
@@ -138,6 +148,7 @@ def _wait(child: int, reader: int, taken: list[int], command: str) -> int:
     last_beat = time.monotonic()
     interrupted_at: float | None = None  # the last SIGINT's arrival
     answered = False  # whether the child's Python handler ran since then
+    returned: int | None = None  # the command's status, once it has returned (then only teardown is left)
     while True:
         info = signal.sigtimedwait([*taken, signal.SIGCHLD], HEARTBEAT / 2)
         now = time.monotonic()
@@ -162,11 +173,16 @@ def _wait(child: int, reader: int, taken: list[int], command: str) -> int:
                 finished = True
             elif message[:1] == b"!":
                 answered = True
+            elif message[:1] == b"#" and message[1:].isdigit():
+                returned = int(message[1:])
         buffer = buffer.lstrip(b".")
-        done, status = os.waitpid(child, os.WNOHANG)
-        if done:
-            return os.WEXITSTATUS(status) if os.WIFEXITED(status) else 128 + os.WTERMSIG(status)
-        if interrupted_at is not None and not answered and now - max(interrupted_at, last_beat) > GRACE:
+        ended, status = os.waitpid(child, os.WNOHANG)
+        if ended:
+            if os.WIFEXITED(status):
+                return os.WEXITSTATUS(status)
+            return returned if returned is not None else 128 + os.WTERMSIG(status)
+        if returned is None and interrupted_at is not None and not answered and now - max(interrupted_at,
+                                                                                           last_beat) > GRACE:
             return _stop(child, temporaries, finished, command)
 
 

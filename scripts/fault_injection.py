@@ -21,6 +21,9 @@ cut in K equal spans, kill k at a uniformly drawn place in span k (:func:`kill_m
   then equals the reference's, arrays bit for bit, JSON and tables with their timings (keys naming seconds, a
   render path's measured reason), the folder's own path and the sweep's task records left out.
 
+With ``--signal INT`` the signal is SIGINT (Ctrl-C) instead, and each stopped command is also checked for exit
+status 130, the seconds from the signal to its exit (the issue: 1 s) and one line on stderr after the signal.
+
 The commands run in a fresh process with one thread (OMP_NUM_THREADS=1), so that the CPU results are
 deterministic. tests/test_faults_kill.py runs 2–3 kills per command; this script's larger run is recorded in
 docs/robustness.md.
@@ -121,6 +124,10 @@ class Kill:
     differences: list[str] = dataclasses.field(default_factory=list)
     compared: int = 0  # output files compared with the reference's after the rerun
     temporaries_after_rerun: list[str] = dataclasses.field(default_factory=list)  # the kill's, still there
+    signal: str = "SIGKILL"  # what was sent
+    exit_status: int | None = None  # the command's own (SIGINT: 130 expected when it was stopped)
+    stop_s: float | None = None  # seconds from the signal to the command's exit
+    lines: list[str] = dataclasses.field(default_factory=list)  # stderr after the signal, as a terminal shows it
 
     @property
     def ok(self) -> bool:
@@ -432,23 +439,41 @@ def _share_inputs(case: Case, reference: Path, inputs: Path) -> None:
         shutil.copy2(reference / "history.json", inputs / "history.json")
 
 
-def kill_once(case: Case, folder: Path, moment: float, reference: Path) -> Kill:
-    """Start the command in ``folder``, SIGKILL it ``moment`` seconds later, check, rerun, compare."""
+def _visible_lines(text: str) -> list[str]:
+    """The lines a terminal would show: each line's text after its last carriage return (a progress bar redrawn
+    with \\r), blank ones left out."""
+    return [line.rsplit("\r", 1)[-1].strip() for line in text.split("\n") if line.rsplit("\r", 1)[-1].strip()]
+
+
+def kill_once(case: Case, folder: Path, moment: float, reference: Path, number: int = signal.SIGKILL) -> Kill:
+    """Start the command in ``folder``, send it ``number`` (SIGKILL; or SIGINT, Ctrl-C) ``moment`` seconds later,
+    check, rerun, compare."""
     folder.mkdir(parents=True)
+    log = folder.with_name(folder.name + ".log")
     tag = uuid.uuid4().hex
     process = start(case.arguments, folder, tag)
     deadline = time.monotonic() + moment
     while process.poll() is None and time.monotonic() < deadline:
         time.sleep(0.005)
     killed = process.poll() is None
+    offset = log.stat().st_size if log.exists() else 0
+    sent = time.monotonic()
     if killed:
-        os.kill(process.pid, signal.SIGKILL)
-    process.wait()
+        os.kill(process.pid, number)
+    status = process.wait()
+    stop_s = time.monotonic() - sent
     gone_after, survivors = wait_until_gone(tag, folder)
     left = [str(path) for path in inventory(folder)]
     loaded, temporaries, broken = check_files(folder)
     result = Kill(case.name, str(folder), round(moment, 3), killed, left, len(loaded), temporaries, broken,
                   [f"{pid} {command}" for pid, command in sorted(survivors.items())], round(gone_after, 2))
+    result.signal = signal.Signals(number).name
+    result.exit_status = status
+    if killed:
+        result.stop_s = round(stop_s, 3)
+        with open(log, "rb") as handle:
+            handle.seek(offset)
+            result.lines = _visible_lines(handle.read().decode("utf-8", "replace"))
     arguments = case.rerun(folder) if case.rerun else case.arguments
     result.rerun_arguments = arguments[len(case.arguments):]
     result.rerun_status, _ = run_to_end(arguments, folder)
@@ -490,18 +515,23 @@ def kill_moments(case: Case, duration: float, kills: int, seed: int) -> list[flo
     return [(low + (high - low) * (index + rng.random()) / kills) * duration for index in range(kills)]
 
 
-def kill_runs(case: Case, work: Path, duration: float, kills: int, seed: int) -> list[Kill]:
-    """``kills`` killed runs of ``case`` in WORK/CASE/killK, each checked, rerun and compared with the reference."""
-    return [kill_once(case, work / case.name / f"kill{index}", moment, work / case.name / "reference")
+def kill_runs(case: Case, work: Path, duration: float, kills: int, seed: int,
+              number: int = signal.SIGKILL) -> list[Kill]:
+    """``kills`` killed runs of ``case`` in WORK/CASE/killK (SIGINT: intK), each checked, rerun and compared with
+    the reference."""
+    prefix = "int" if number == signal.SIGINT else "kill"
+    return [kill_once(case, work / case.name / f"{prefix}{index}", moment, work / case.name / "reference", number)
             for index, moment in enumerate(kill_moments(case, duration, kills, seed))]
 
 
 def run_all(work: Path, kills: int, seed: int, names: list[str] | None = None, control: bool = True,
-            report: Callable[[str], None] = print) -> dict[str, Any]:
-    """Every case (or those named) with ``kills`` kills each (and a control run each); a JSON-ready summary."""
+            report: Callable[[str], None] = print, number: int = signal.SIGKILL) -> dict[str, Any]:
+    """Every case (or those named) with ``kills`` kills each (``number``: SIGKILL, or SIGINT for Ctrl-C; and a
+    control run each); a JSON-ready summary."""
     inputs = work / "inputs"
     inputs.mkdir(parents=True, exist_ok=True)
-    summary: dict[str, Any] = {"seed": seed, "kills_per_command": kills, "commands": {}}
+    summary: dict[str, Any] = {"seed": seed, "kills_per_command": kills, "signal": signal.Signals(number).name,
+                               "commands": {}}
     started = time.monotonic()
     for case in make_cases(inputs):
         if names and case.name not in names:
@@ -514,7 +544,7 @@ def run_all(work: Path, kills: int, seed: int, names: list[str] | None = None, c
         if control:
             report(f"{case.name}: two uninterrupted runs: {len(control_differences)} outputs differ "
                    f"{control_differences[:3]}")
-        results = kill_runs(case, work, duration, kills, seed)
+        results = kill_runs(case, work, duration, kills, seed, number)
         summary["commands"][case.name] = {"uninterrupted_s": round(duration, 2), "control": control_differences
                                           if control else None,
                                           "kills": [dataclasses.asdict(result) for result in results]}
@@ -528,6 +558,8 @@ def run_all(work: Path, kills: int, seed: int, names: list[str] | None = None, c
                    f"processes gone after {result.gone_after_s} s, {len(result.survivors)} alive at "
                    f"{GRACE_SECONDS:g} s; {flags}: {result.compared} outputs compared, "
                    f"{len(result.differences)} differ: {state}")
+            if result.signal != "SIGKILL" and result.killed:
+                report(f"    {result.signal}: exit {result.exit_status} after {result.stop_s} s; {result.lines}")
             for line in result.broken + result.survivors + result.differences:
                 report(f"    {line}")
     every = [kill for entry in summary["commands"].values() for kill in entry.get("kills", [])]
@@ -544,6 +576,14 @@ def run_all(work: Path, kills: int, seed: int, names: list[str] | None = None, c
         "control_runs_differing": sum(bool(entry.get("control")) for entry in summary["commands"].values()),
         "seconds": round(time.monotonic() - started, 1),
     }
+    if number != signal.SIGKILL:  # Ctrl-C: exit 130, within a second, one line (issue 36)
+        stopped = [kill for kill in every if kill["killed"]]
+        summary["totals"].update({
+            "exit_not_130": sum(kill["exit_status"] != 130 for kill in stopped),
+            "stopped_after_more_than_1_s": sum(kill["stop_s"] > 1.0 for kill in stopped),
+            "slowest_stop_s": max((kill["stop_s"] for kill in stopped), default=None),
+            "not_one_line": sum(len(kill["lines"]) != 1 for kill in stopped),
+        })
     return summary
 
 
@@ -554,20 +594,25 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--work", type=Path, default=Path("out/faults"), help="working folder (must not exist)")
     parser.add_argument("--commands", default="", help="comma-separated commands (default: all)")
     parser.add_argument("--json", type=Path, help="write the summary here")
+    parser.add_argument("--signal", choices=("KILL", "INT"), default="KILL",
+                        help="what is sent: SIGKILL (default), or SIGINT, Ctrl-C (then also checked: exit 130 within "
+                             "1 s, one line on stderr)")
     parser.add_argument("--no-control", action="store_true",
                         help="no control run (a second uninterrupted run compared with the first) per command")
     arguments = parser.parse_args(argv)
     if arguments.work.exists():
         parser.error(f"--work {arguments.work} exists; give a new folder")
     names = [name.strip() for name in arguments.commands.split(",") if name.strip()] or None
-    summary = run_all(arguments.work.resolve(), arguments.kills, arguments.seed, names, not arguments.no_control)
+    summary = run_all(arguments.work.resolve(), arguments.kills, arguments.seed, names, not arguments.no_control,
+                      number=signal.Signals[f"SIG{arguments.signal}"])
     text = json.dumps(summary, indent=1) + "\n"
     if arguments.json:
         arguments.json.write_text(text, encoding="utf-8")
     print(json.dumps(summary["totals"]))
     totals = summary["totals"]
-    failed = ("broken_files", "processes_alive_after_grace", "outputs_differing", "control_runs_differing")
-    return 1 if any(totals[key] for key in failed) else 0
+    failed = ("broken_files", "processes_alive_after_grace", "outputs_differing", "control_runs_differing",
+              "exit_not_130", "not_one_line")
+    return 1 if any(totals.get(key) for key in failed) else 0
 
 
 if __name__ == "__main__":

@@ -32,7 +32,8 @@ STOP_WITHIN = 1.5
 COMMAND = "import sys\nfrom gratnet.cli import main\nsys.exit(main())"
 
 #: A stand-in command: supervised, then holds the GIL inside an atomic write (``gil``), or waits in Python and
-#: answers Ctrl-C itself (``python``), or waits in Python without a SIGINT handler of its own (``plain``).
+#: answers Ctrl-C itself (``python``), or waits in Python without a SIGINT handler of its own (``plain``), or
+#: has returned 0 and tears down (``done``).
 STAND_IN = """\
 import sys, time
 from gratnet import atomic, interrupts
@@ -52,6 +53,10 @@ elif sys.argv[1] == "python":
     except KeyboardInterrupt:
         print("stand-in: interrupted by itself", file=sys.stderr)
         sys.exit(130)
+elif sys.argv[1] == "done":
+    interrupts.done(0)  # the command returned 0; what follows stands for the interpreter's teardown
+    print("ready", flush=True)
+    time.sleep(1.0)
 else:
     print("ready", flush=True)
     time.sleep(60)
@@ -166,3 +171,11 @@ def test_ctrl_c_during_a_cold_shader_compile_stops_within_a_second(tmp_path: Pat
     assert _lines(after) == ["gratnet render: interrupted; nothing was written"], after
     assert os.listdir(work) == []
     assert not _gone(tag, work)
+
+
+def test_ctrl_c_after_the_command_returned_changes_nothing(tmp_path: Path) -> None:
+    """A SIGINT in the interpreter's teardown (the work done, its status known): no line, the command's status."""
+    process, tag = _stand_in(tmp_path, "done")
+    _, stderr = _stop(process)
+    assert process.returncode == 0 and _lines(stderr) == [], stderr
+    assert not _gone(tag, tmp_path)
