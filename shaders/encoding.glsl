@@ -22,6 +22,30 @@ uniform int u_t_frequencies;   // L_t: frequencies of c_t
 // Row j: (a, b) with a + b = s^j (a has 10 significant bits), then (a_t, b_t) for s_t^j; unused rows 0.
 uniform vec4 u_frequency[MAX_FREQUENCIES];
 
+// ---- another driver, emulated (tests only; off unless EMULATE_DRIVER is defined) ------------------
+// docs/physics.md, "Float32 error budget": a correct float32 driver may see the key off by a few ulps and
+// compute sin/cos with an absolute error of ~2^-21. EMULATE_DRIVER moves each key component by up to
+// EMULATE_KEY_ERROR and each phase by up to EMULATE_PHASE_ERROR half-turns, by a hash of the values
+// themselves (deterministic, uncorrelated between pixels and lanes): tests/test_precision.py checks that
+// gratnet.precision's bound covers the difference on the shipped models.
+#ifdef EMULATE_DRIVER
+float emulation_hash(float x) {  // in [-1, 1]: a PCG step on the float's bits
+    uint h = floatBitsToUint(x) * 747796405u + 2891336453u;
+    h = ((h >> ((h >> 28u) + 4u)) ^ h) * 277803737u;
+    h = (h >> 22u) ^ h;
+    return float(h) * (2.0 / 4294967295.0) - 1.0;
+}
+#define EMULATED_KEY(key) ((key) + EMULATE_KEY_ERROR * vec3(emulation_hash((key).x), emulation_hash((key).y + 0.5), \
+                                                          emulation_hash((key).z + 0.25)))
+#define EMULATED_PHASE(x) ((x) + EMULATE_PHASE_ERROR * emulation_hash(x))
+#define EMULATED_PHASE4(x) ((x) + EMULATE_PHASE_ERROR * vec4(emulation_hash((x).x), emulation_hash((x).y), \
+                                                            emulation_hash((x).z), emulation_hash((x).w)))
+#else
+#define EMULATED_KEY(key) (key)
+#define EMULATED_PHASE(x) (x)
+#define EMULATED_PHASE4(x) (x)
+#endif
+
 // ---- error-free float transforms (Knuth TwoSum, Veltkamp split, Dekker product) -----------------
 
 vec2 two_sum(float a, float b) {  // a + b = s + e exactly
@@ -96,7 +120,8 @@ vec4 g_group_grid;   // ... rounded down to a multiple of 2^-12 (<= 14 significa
 vec4 g_group_rest;   // ... and the rest, (hi - grid) + lo
 vec3 g_t;            // c_t: (hi, grid, rest) likewise
 
-void encoding_set_key(vec3 key) {
+void encoding_set_key(vec3 exact_key) {
+    vec3 key = EMULATED_KEY(exact_key);
     vec2 cu = grid_coordinate(key.x);
     vec2 cv = grid_coordinate(key.y);
     vec2 ct = two_sum(2.0 * key_to_t(key), -1.0);  // c_t = 2t - 1
@@ -116,7 +141,7 @@ float reduced_half_turns(vec2 frequency, float grid, float rest, float c_hi) {
     precise float product = frequency.x * grid;                       // exact: 10 x 14 bits
     precise float r = product - 2.0 * floor(0.5 * product + 0.5);     // exact: minus the nearest even integer
     precise float x = r + (frequency.x * rest + frequency.y * c_hi);  // small terms: rounding ~1e-9
-    return x;
+    return EMULATED_PHASE(x);
 }
 
 // The same for four phases at once (the baked MLP's encoding, viewer/baked.py): lane k is
@@ -125,7 +150,7 @@ vec4 reduced_half_turns4(vec4 a, vec4 b, vec4 grid, vec4 rest, vec4 c_hi) {
     precise vec4 product = a * grid;
     precise vec4 r = product - 2.0 * floor(0.5 * product + 0.5);
     precise vec4 x = r + (a * rest + b * c_hi);
-    return x;
+    return EMULATED_PHASE4(x);
 }
 
 // Frequency j of the four spatial groups (c_u, c_v, c_u + c_v, c_u - c_v) at once: lane g of `sines` is

@@ -134,3 +134,33 @@ def test_assert_within_names_the_worst_values():
     assert_within(expected + [0.05, -0.05, 0.0], expected, np.full(3, 0.1))
     with pytest.raises(AssertionError, match=r"1 of 3 things beyond .* 2\.5 against 2 \(bound 0\.1\)"):
         assert_within(expected + [0.0, 0.5, 0.0], expected, np.full(3, 0.1), "things")
+
+
+# --------------------------------------------------------------------------------------------------
+# The bound against an emulated driver in GLSL (shaders/encoding.glsl's EMULATE_DRIVER; needs an OpenGL 4.3
+# context through EGL, skips without one)
+
+
+@pytest.mark.parametrize("material", ["blazed", "paper-cd", "paper-scratches"])
+def test_the_bound_covers_the_glsl_emulated_driver_on_shipped_models(ctx, monkeypatch, material):
+    """The same shader with every key moved by up to 16 u and every phase by up to 2⁻²⁰ rad (what another
+    correct driver may do): its XYZ stays within driver_bound of the plain shader's, and does move."""
+    from pathlib import Path
+
+    import viewer.renderer
+    from viewer.renderer import NetworkRenderer
+
+    model = load_model(Path(__file__).resolve().parents[1] / "assets" / material / "model.npz")
+    u, v, w = parity_keys()
+    with NetworkRenderer(ctx, model, weights_path="texture") as renderer:
+        plain = renderer.evaluate_keys(u, v, w).astype(np.float64)
+    errors = DriverErrors()
+    plain_defines = viewer.renderer.model_defines
+    monkeypatch.setattr(viewer.renderer, "model_defines", lambda m: {
+        **plain_defines(m), "EMULATE_DRIVER": 1, "EMULATE_KEY_ERROR": errors.key_error,
+        "EMULATE_PHASE_ERROR": errors.sinusoid_error / math.pi})
+    with NetworkRenderer(ctx, model, weights_path="texture") as renderer:
+        emulated = renderer.evaluate_keys(u, v, w).astype(np.float64)
+    assert np.any(emulated != plain)
+    bound = driver_bound(model, u, v, w, errors)
+    assert_within(emulated, plain, bound.bound, f"{material}: emulated driver's XYZ")
