@@ -144,11 +144,12 @@ void tiled_store(int pixel, vec3 outputs) {
 
 void main() {
     g_tile_first = (gl_WorkGroupID.y * gl_NumWorkGroups.x + gl_WorkGroupID.x) * uint(TILED_PIXELS);
-    if (g_tile_first >= entry_count) {
-        return;  // the whole group alike: no barrier is left waiting
+    // The whole group alike (uniform control flow around the barriers; no return before them, which some
+    // compilers refuse).
+    if (g_tile_first < entry_count) {
+        tiled_encode(g_tile_first, entry_count);
+        tiled_layers();
     }
-    tiled_encode(g_tile_first, entry_count);
-    tiled_layers();
 }
 #endif
 

@@ -246,15 +246,32 @@ def test_renders_with_the_tiled_kernel_equal_the_per_entry_kernel(ctx):
 
 
 def test_render_and_bench_take_the_tiled_kernel(ctx, tmp_path):
-    import json
-
     from bench.devices import fp32_tmac_per_s
-    from gratnet.cli import main
-    from tests.test_bench import _tiny_model
     from viewer.deferred import DEFERRED_WEIGHTS
     from viewer.scene_config import DEFERRED_WEIGHTS as FLAG_CHOICES
 
     assert FLAG_CHOICES == DEFERRED_WEIGHTS  # the flag's copy (scene_config defers moderngl)
+    try:
+        _render_and_bench(tmp_path)
+    finally:
+        # Each command made its own context and released it, leaving another one current: make the module's
+        # context current again for the tests after this one (their programs live there).
+        ctx.__enter__()
+    assert fp32_tmac_per_s("NVIDIA H100 80GB HBM3/PCIe/SSE2") == pytest.approx(33.45)
+    assert fp32_tmac_per_s("NVIDIA H100 PCIe/PCIe/SSE2") == pytest.approx(25.6)
+    assert fp32_tmac_per_s("llvmpipe (LLVM 15.0.6, 256 bits)") is None
+    with pytest.raises(GratNetError, match="--deferred-weights takes"):
+        from bench.slices import BenchConfig
+
+        BenchConfig(deferred_weights="tiled,fast").deferred_weights_list()
+
+
+def _render_and_bench(tmp_path: Path) -> None:
+    import json
+
+    from gratnet.cli import main
+    from tests.test_bench import _tiny_model
+
     model = _tiny_model(tmp_path / "tiny" / "model.npz")
     out = tmp_path / "disc.exr"
     assert main(["render", "--material", str(model), "--mesh", "cd", "--size", "9,7", "--weights-path", "texture",
@@ -275,10 +292,23 @@ def test_render_and_bench_take_the_tiled_kernel(ctx, tmp_path):
         assert row["tmac_per_s"] > 0 and row["fp32_share"] is None  # llvmpipe: no FP32 figure
     table = (bench / "scenes.md").read_text()
     assert "| TMAC/s | of FP32 peak |" in table and "| tiled |" in table
-    assert fp32_tmac_per_s("NVIDIA H100 80GB HBM3/PCIe/SSE2") == pytest.approx(33.45)
-    assert fp32_tmac_per_s("NVIDIA H100 PCIe/PCIe/SSE2") == pytest.approx(25.6)
-    assert fp32_tmac_per_s("llvmpipe (LLVM 15.0.6, 256 bits)") is None
-    with pytest.raises(GratNetError, match="--deferred-weights takes"):
-        from bench.slices import BenchConfig
 
-        BenchConfig(deferred_weights="tiled,fast").deferred_weights_list()
+
+def test_the_plan_variable_overrides_tile_group_and_shared_memory(ctx, cd_kernels, monkeypatch):
+    from viewer.deferred import DeferredRenderer
+    from viewer.tiled import PLAN_VARIABLE
+
+    monkeypatch.setenv(PLAN_VARIABLE, "pixels=8, group=32, shared=16384")
+    deferred = DeferredRenderer(cd_kernels.network, "tiled")
+    try:
+        plan = deferred.tile_plan
+        assert (plan.pixels, plan.group, plan.budget) == (8, 32, 16384) and plan.shared_bytes <= 16384
+        keys = _keys(29)
+        assert_pair(deferred.shade_keys(keys), cd_kernels["ssbo"].shade_keys(keys),
+                    kernel_pair_bound(cd_kernels.model, keys), "GRATNET_TILE_PLAN")
+    finally:
+        deferred.release()
+    for bad in ("pixels=6", "tile=8", "shared=1000000", "group=4096"):
+        monkeypatch.setenv(PLAN_VARIABLE, bad)
+        with pytest.raises(GratNetError, match=PLAN_VARIABLE):
+            DeferredRenderer(cd_kernels.network, "tiled")

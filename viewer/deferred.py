@@ -69,7 +69,7 @@ from viewer.glsl import compile_compute, compile_program
 from viewer.pacing import BLOCK, Pacer, Progress, projected_row_costs, read_rows
 from viewer.renderer import NetworkRenderer, is_software_rasterizer, set_uniform, skip_threshold_value
 from viewer.surface import MeshBuffers, set_surface_uniforms
-from viewer.tiled import HALF_EXTENSIONS, TilePlan, half_extension, max_compute_shared_bytes, plan_tiles
+from viewer.tiled import HALF_EXTENSIONS, TilePlan, half_extension, plan_for_context
 
 __all__ = ["CHUNK_TEXELS", "DEFERRED_WEIGHTS", "FP16_MAX", "FP16_RELATIVE_ERROR", "TILED_WEIGHTS", "DeferredRenderer"]
 
@@ -149,9 +149,8 @@ class DeferredRenderer:
                     raise GratNetError(f"deferred weights 'tiled-half' need half-precision arithmetic in GLSL "
                                        f"({' or '.join(HALF_EXTENSIONS)}), which {renderer} lacks: use tiled or "
                                        f"tiled-fp16")
-            invocations = int(network.ctx.info.get("GL_MAX_COMPUTE_WORK_GROUP_INVOCATIONS", 1024))
-            self.tile_plan = plan_tiles(network.layout, max_compute_shared_bytes(network.ctx), invocations,
-                                        half=self._half_extension not in (None, _HALF_AS_FLOAT))
+            self.tile_plan = plan_for_context(network.ctx, network.layout,
+                                              half=self._half_extension not in (None, _HALF_AS_FLOAT))
             _LOG.debug("deferred weights %s: %s", weights, self.tile_plan.describe(network.layout))
         self._programs: dict[str, moderngl.Program | moderngl.ComputeShader] = {}
         self._weight_buffer: moderngl.Buffer | None = None

@@ -16,6 +16,10 @@ Shared memory, in vec4s of ``element`` bytes (16 for float32, 8 for half precisi
 The tile is the largest multiple of 4 pixels up to :data:`MAX_TILE_PIXELS` that leaves room for
 :data:`MIN_CHUNK_BLOCKS` input blocks of the widest layer's weights (else for one).
 
+``GRATNET_TILE_PLAN`` (environment; e.g. ``pixels=16,group=128,shared=24576``) overrides the largest tile, the
+invocations per group and the shared memory the plan may use (at most the driver's): a GPU session can time
+several plans in one run (scripts/gpu_bench.sh); a bench row records the plan it ran.
+
 Rendering only: no glfw, no imgui, no torch.
 """
 
@@ -24,14 +28,15 @@ from __future__ import annotations
 import ctypes
 import dataclasses
 import logging
+import os
 from collections.abc import Mapping, Sequence
 
 import moderngl
 
 from gratnet.errors import GratNetError
 
-__all__ = ["GL_MINIMUM_SHARED_BYTES", "HALF_EXTENSIONS", "MAX_TILE_PIXELS", "MIN_CHUNK_BLOCKS", "TilePlan",
-           "half_extension", "max_compute_shared_bytes", "plan_tiles"]
+__all__ = ["GL_MINIMUM_SHARED_BYTES", "HALF_EXTENSIONS", "MAX_TILE_PIXELS", "MIN_CHUNK_BLOCKS", "PLAN_VARIABLE",
+           "TilePlan", "half_extension", "max_compute_shared_bytes", "plan_for_context", "plan_tiles"]
 
 _LOG = logging.getLogger("gratnet.deferred")
 #: GL 4.3's least GL_MAX_COMPUTE_SHARED_MEMORY_SIZE (bytes): assumed when the driver cannot be asked.
@@ -42,6 +47,8 @@ _GL_MAX_COMPUTE_SHARED_MEMORY_SIZE = 0x8262
 MAX_TILE_PIXELS = 32
 #: Input blocks of the widest layer's weights the plan keeps room for before growing the tile.
 MIN_CHUNK_BLOCKS = 4
+#: The environment variable of plan overrides (see the module docstring).
+PLAN_VARIABLE = "GRATNET_TILE_PLAN"
 #: Invocations per work group (a multiple of NVIDIA's 32-wide warp and of llvmpipe's 8 lanes).
 DEFAULT_GROUP = 64
 #: The extensions that give GLSL half-precision arithmetic (f16vec4), in order of preference, with the define
@@ -141,3 +148,29 @@ def plan_tiles(layout: Sequence[Mapping[str, int]], shared_bytes: int, max_invoc
     items = -(-widest_out * (pixels // 4) // group)
     return TilePlan(pixels=pixels, group=group, items=items, act_blocks=act_blocks, weight_vec4s=weight_vec4s,
                     encode_split=max(1, group // pixels), element=element, budget=shared_bytes)
+
+
+def _plan_overrides() -> dict[str, int]:
+    """``GRATNET_TILE_PLAN``'s ``pixels=…,group=…,shared=…`` (any subset), checked."""
+    text = os.environ.get(PLAN_VARIABLE, "").strip()
+    overrides: dict[str, int] = {}
+    for part in (part.strip() for part in text.split(",") if part.strip()):
+        name, _, value = part.partition("=")
+        if name.strip() not in ("pixels", "group", "shared") or not value.strip().isdigit():
+            raise GratNetError(f"{PLAN_VARIABLE} takes pixels=N,group=N,shared=BYTES (any of them); got {text!r}")
+        overrides[name.strip()] = int(value)
+    if overrides.get("pixels", 4) < 4 or overrides.get("pixels", 4) % 4 or overrides.get("group", 1) < 1:
+        raise GratNetError(f"{PLAN_VARIABLE}: pixels must be a multiple of 4 (≥ 4) and group ≥ 1; got {text!r}")
+    return overrides
+
+
+def plan_for_context(ctx: moderngl.Context, layout: Sequence[Mapping[str, int]], half: bool = False) -> TilePlan:
+    """:func:`plan_tiles` for ``ctx``'s limits (shared memory, invocations per group) and ``GRATNET_TILE_PLAN``."""
+    limit = max_compute_shared_bytes(ctx)
+    invocations = int(ctx.info.get("GL_MAX_COMPUTE_WORK_GROUP_INVOCATIONS", 1024))
+    overrides = _plan_overrides()
+    if overrides.get("group", 1) > invocations or overrides.get("shared", 0) > limit:
+        raise GratNetError(f"{PLAN_VARIABLE}: this driver allows {invocations} invocations per group and {limit} "
+                           f"bytes of shared memory; got {os.environ.get(PLAN_VARIABLE)!r}")
+    return plan_tiles(layout, overrides.get("shared", limit), invocations, half,
+                      max_pixels=overrides.get("pixels", MAX_TILE_PIXELS), group=overrides.get("group", DEFAULT_GROUP))
