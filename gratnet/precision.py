@@ -54,6 +54,9 @@ class DriverErrors:
             path's, p = (clamp(c) + 1)·(N − 1)/2 in float32 from a c rounded once: 4·u·N per level of N nodes.
             A texture unit's filter quantises the fraction to 8 bits (2⁻⁸ whether it rounds or truncates):
             ``HARDWARE_FILTER`` for ``grid_filter="hardware"``.
+        t_coordinate_error: absolute error of c_t = 2t − 1 at a given key: for simple-max t = −w/sqrt(4 − u² − v²),
+            a square root and a division of float32 values (≤ 5 u; 2.6 u measured on llvmpipe). c_u and c_v
+            are carried as float pairs (shaders/encoding.glsl): their error is negligible.
         arithmetic_ulps: ulps per hidden activation (SiLU's exp and division) on top of its input's error.
         samples: seeded random perturbations evaluated (besides the 8 sign corners of the key box).
         seed: their seed (deterministic bounds).
@@ -62,6 +65,7 @@ class DriverErrors:
 
     key_error: float = 16.0 * UNIT_ROUNDOFF
     sinusoid_error: float = 2.0**-20
+    t_coordinate_error: float = 8.0 * UNIT_ROUNDOFF
     grid_texel_error: float | None = None
     arithmetic_ulps: float = 4.0
     samples: int = 8
@@ -83,8 +87,8 @@ class DriverBound:
     Attributes:
         xyz: the model's XYZ at the keys (numpy, float64).
         bound: ``safety · (inputs + arithmetic)``: the tolerance for a comparison.
-        evaluated: the largest XYZ deviation over the perturbed evaluations (key, sin/cos, grid position, the
-            MLP's rounding).
+        evaluated: the largest XYZ deviation over the perturbed evaluations (key, c_t, sin/cos, grid position,
+            the MLP's rounding).
         range_rounding: the range inverse's own rounding (pow, exp2), analytic.
         outputs_spread: the evaluated part in the network's output domain (eq. 7's y), before the inverse.
         outputs_bound: ``safety · outputs_spread``: the tolerance for comparing network outputs themselves.
@@ -173,8 +177,11 @@ def _grid_inputs(model: ModelFile, coordinates: np.ndarray, texel_shift: np.ndar
 
 
 def _inputs(model: ModelFile, keys: np.ndarray, sinusoid_shift: np.ndarray | None,
-            texel_shift: np.ndarray | None, texel_error: float | None = None) -> np.ndarray:
+            texel_shift: np.ndarray | None, texel_error: float | None = None,
+            t_shift: np.ndarray | None = None) -> np.ndarray:
     coordinates = network_coordinates(keys[:, 0], keys[:, 1], keys[:, 2], model.scheme)  # type: ignore[arg-type]
+    if t_shift is not None:
+        coordinates[:, 2] += t_shift
     encoded = encode(coordinates, model.encoding)
     if sinusoid_shift is not None:
         encoded = encoded.copy()
@@ -221,8 +228,9 @@ def driver_bound(model: ModelFile, u: Any, v: Any, w: Any, errors: DriverErrors 
         sinusoid = errors.sinusoid_error * rng.uniform(-1.0, 1.0, (count, valid.encoding.features - 3)) \
             if random else None
         texel = rng.uniform(-1.0, 1.0, (levels, count, 3)) if random and levels else None
-        perturbed = _forward(valid, _inputs(valid, keys + eta * key_shift, sinusoid, texel, errors.grid_texel_error),
-                             rng if random else None)
+        t_shift = errors.t_coordinate_error * rng.uniform(-1.0, 1.0, count) if random else None
+        perturbed = _forward(valid, _inputs(valid, keys + eta * key_shift, sinusoid, texel, errors.grid_texel_error,
+                                            t_shift), rng if random else None)
         spread = np.maximum(spread, np.abs(perturbed - outputs))
         deviation = np.maximum(deviation, np.abs(range_inverse(perturbed, valid.range) - xyz))
     range_part = np.abs(xyz) * _range_arithmetic(valid, outputs)
