@@ -13,6 +13,19 @@
 # Anywhere else it runs on whatever EGL gives (Mesa llvmpipe on a machine without a GPU: slow; set
 # SIZES=512x512 to try it). Settings: OUT (default out/gpu-bench), SIZES, SPP, WEIGHTS, RENDER_PATHS,
 # REPEATS, MATERIAL.
+#
+# --tiled (issue 32: the tiled compute MLP, viewer/tiled.py, against the per-entry kernel): every shipped cd and
+# paper-* model on the CD disc at 1920×1080, 1 and 4 spp, deferred path, deferred weights ssbo, tiled and
+# tiled-fp16 (texture weights path), then cd's current best (baked), tiled-half (half arithmetic) where the
+# driver has it, and a few tile plans (GRATNET_TILE_PLAN) on cd and paper-cd. Each part writes its own
+# $OUT/tiled-*/scenes.md as it finishes (a call cut short still brings back the parts done), and the table
+# states TMAC/s and the share of the GPU's FP32 rate. The models do not fit one call with the wheels unless
+# assets/ and docs/ stay behind and assets/ travels without its pictures, as scripts/gpu_check.sh does:
+#   here:   scripts/gpu_check.sh --prepare && scripts/device_tree.sh shed assets docs
+#   there:  the device tool's run, command "bash scripts/gpu_bench.sh --tiled", carry [".gl", ".whl", ".gpu_assets"]
+#   here:   scripts/device_tree.sh restore
+# Settings: OUT, SIZES, SPP, REPEATS as above; TILED_MATERIALS (default: cd and every paper-* model),
+# TILED_FORMS (default ssbo,tiled,tiled-fp16), TILED_PLANS (space-separated GRATNET_TILE_PLAN values).
 set -euo pipefail
 cd "$(dirname "$0")/.."
 
@@ -42,6 +55,10 @@ fi
 
 OUT=${OUT:-out/gpu-bench}
 mkdir -p "$OUT"
+if [[ ! -f assets/cd/model.npz && -d .gpu_assets ]]; then  # assets/ stayed behind: the carried copy takes its place
+    mkdir -p assets
+    cp -a .gpu_assets/. assets/
+fi
 if compgen -G ".gl/*.deb" >/dev/null; then  # the GL loaders (glvnd) the bare image lacks
     for f in .gl/*.deb; do dpkg -x "$f" /; done
     ldconfig
@@ -66,6 +83,35 @@ PYTHONPATH=/tmp/gratnet-site${PYTHONPATH:+:$PYTHONPATH} python3 -m pip install -
 export PYTHONPATH=$PWD:/tmp/gratnet-site:/tmp/gratnet-meta${PYTHONPATH:+:$PYTHONPATH}
 python=${PYTHON:-python3}
 export PYTHONUNBUFFERED=1
+if [[ "${1:-}" == "--tiled" ]]; then
+    materials=${TILED_MATERIALS:-"cd $(cd assets && ls -d paper-* | tr '\n' ' ')"}
+    common=(--no-slices --scene-mesh cd --scene-sizes "${SIZES:-1920x1080}" --spp "${SPP:-1,4}"
+            --repeats "${REPEATS:-5}" --max-seconds 20 --quiet)
+    part() {  # part NAME SECONDS ARGS…: one bench call into $OUT/tiled-NAME, its table printed; a failure is logged
+        local name=$1 seconds=$2
+        shift 2
+        echo "== $name: gratnet bench $*"
+        if timeout "$seconds" "$python" -m gratnet.cli bench "$@" --out "$OUT/tiled-$name"; then
+            cat "$OUT/tiled-$name/scenes.md"
+        else
+            echo "== $name: failed or timed out (exit $?)"
+        fi
+    }
+    {
+        nvidia-smi --query-gpu=name,driver_version --format=csv,noheader 2>/dev/null || true
+        # shellcheck disable=SC2086  # the material names are words
+        part models 330 $materials "${common[@]}" --weights-paths texture --render-paths deferred \
+            --deferred-weights "${TILED_FORMS:-ssbo,tiled,tiled-fp16}"
+        part baked 90 cd "${common[@]}" --weights-paths baked --render-paths deferred --deferred-weights auto
+        part half 90 cd paper-cd paper-scratches "${common[@]}" --weights-paths texture --render-paths deferred \
+            --deferred-weights tiled-half
+        for plan in ${TILED_PLANS:-"pixels=16" "pixels=32,group=128" "pixels=16,shared=24576" "pixels=8,group=32"}; do
+            GRATNET_TILE_PLAN=$plan part "plan-${plan//[=,]/-}" 60 cd paper-cd "${common[@]}" --spp 1 \
+                --weights-paths texture --render-paths deferred --deferred-weights tiled
+        done
+    } 2>&1 | tee "$OUT/log.txt"
+    exit 0
+fi
 {
     nvidia-smi --query-gpu=name,driver_version --format=csv,noheader 2>/dev/null || true
     "$python" -m gratnet.cli bench "${MATERIAL:-cd}" --no-slices --scene-mesh cd --scene-sizes "${SIZES:-1920x1080}" \
