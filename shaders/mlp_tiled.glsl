@@ -15,9 +15,11 @@
 //                 blocks ([out block][input block][column j]); a layer whose weights do not fit is staged in
 //                 chunks of input blocks (tiled_chunk_blocks).
 // Register blocking: invocation n takes items n, n + TILED_GROUP, ... (at most TILED_ITEMS); item = (output
-// block o, pixel quad q), q fastest, so neighbouring invocations read the same weights (a broadcast on a GPU)
-// and neighbouring pixels. Each item holds 4 outputs x 4 pixels as four vec4 accumulators: per input block,
-// 4 weight texels and 4 activation vec4s from shared memory feed 64 multiply-adds.
+// block o, pixel set q), q fastest, so neighbouring invocations read the same weights (a broadcast on a GPU).
+// Set q is pixels q, q + Q, q + 2Q, q + 3Q (Q = TILED_QUADS): neighbouring invocations read neighbouring
+// vec4s of the activations (consecutive banks; 4 consecutive pixels each would put every other invocation of
+// a quarter warp on the same banks). Each item holds 4 outputs x 4 pixels as four vec4 accumulators: per
+// input block, 4 weight texels and 4 activation vec4s from shared memory feed 64 multiply-adds.
 //
 // Needs mlp.glsl compiled with WEIGHTS_SSBO (weight_texel, the activations, u_layers), encoding.glsl /
 // featuregrid.glsl (network_input_block), the list and u_gbuffer of deferred.glsl, and the defines
@@ -133,7 +135,7 @@ void tiled_layers() {
                 if (item < items) {
                     int o = item / TILED_QUADS;
                     int w = o * texels;
-                    int a = tiled_act_index(in_first + start, 4 * (item - o * TILED_QUADS));
+                    int a = tiled_act_index(in_first + start, item - o * TILED_QUADS);
 #ifdef TILED_HALF
                     TILED_VEC4 part[4] = TILED_VEC4[4](TILED_VEC4(0.0), TILED_VEC4(0.0), TILED_VEC4(0.0),
                                                        TILED_VEC4(0.0));
@@ -145,9 +147,9 @@ void tiled_layers() {
                         TILED_VEC4 w3 = s_tiled_w[w + 3];
                         for (int p = 0; p < 4; ++p) {
 #ifdef TILED_HALF
-                            part[p] += tiled_product(w0, w1, w2, w3, s_tiled_act[a + p]);
+                            part[p] += tiled_product(w0, w1, w2, w3, s_tiled_act[a + p * TILED_QUADS]);
 #else
-                            acc[4 * t + p] += tiled_product(w0, w1, w2, w3, s_tiled_act[a + p]);
+                            acc[4 * t + p] += tiled_product(w0, w1, w2, w3, s_tiled_act[a + p * TILED_QUADS]);
 #endif
                         }
                         w += 4;
@@ -168,12 +170,12 @@ void tiled_layers() {
             if (item < items) {
                 int o = item / TILED_QUADS;
                 int q = item - o * TILED_QUADS;
-                int a = tiled_act_index(out_first + o, 4 * q);
+                int a = tiled_act_index(out_first + o, q);
                 for (int p = 0; p < 4; ++p) {
                     if (!last) {
-                        s_tiled_act[a + p] = TILED_VEC4(hidden_activation(acc[4 * t + p]));
+                        s_tiled_act[a + p * TILED_QUADS] = TILED_VEC4(hidden_activation(acc[4 * t + p]));
                     } else if (o == 0) {
-                        tiled_store(4 * q + p, output_activation(acc[4 * t + p]).xyz);
+                        tiled_store(q + p * TILED_QUADS, output_activation(acc[4 * t + p]).xyz);
                     }
                 }
             }
