@@ -67,6 +67,14 @@ def done(status: int) -> None:
     _tell(b"#" + str(int(status)).encode())
 
 
+def _forked() -> None:
+    """In a process forked by the command (multiprocessing's fork): not the command, so no messages from it."""
+    global _channel
+    _channel = None
+    if signal.getsignal(signal.SIGINT) is _answered:
+        signal.signal(signal.SIGINT, signal.default_int_handler)
+
+
 def _answered(number: int, frame: object) -> None:
     """The child's SIGINT handler: Python's (KeyboardInterrupt), after telling the supervisor that the command
     answers the signal itself (it then leaves the command to its own cleanup, however long, and its own line)."""
@@ -130,6 +138,7 @@ def supervise(command: str) -> int | None:
         _channel = writer
         if signal.getsignal(signal.SIGINT) is signal.default_int_handler:
             signal.signal(signal.SIGINT, _answered)
+        os.register_at_fork(after_in_child=_forked)
         threading.Thread(target=_heartbeat, args=(writer,), name="gratnet-heartbeat", daemon=True).start()
         return None
     os.close(writer)

@@ -53,6 +53,14 @@ elif sys.argv[1] == "python":
     except KeyboardInterrupt:
         print("stand-in: interrupted by itself", file=sys.stderr)
         sys.exit(130)
+elif sys.argv[1] == "fork":  # a process the command forks is not the command: it tells the supervisor nothing
+    import os, signal
+    pid = os.fork()
+    if pid == 0:
+        os._exit(0 if interrupts._channel is None and signal.getsignal(signal.SIGINT) is signal.default_int_handler
+                 else 1)
+    print("ready", flush=True)
+    sys.exit(os.waitstatus_to_exitcode(os.waitpid(pid, 0)[1]))
 elif sys.argv[1] == "done":
     interrupts.done(0)  # the command returned 0; what follows stands for the interpreter's teardown
     print("ready", flush=True)
@@ -179,3 +187,9 @@ def test_ctrl_c_after_the_command_returned_changes_nothing(tmp_path: Path) -> No
     _, stderr = _stop(process)
     assert process.returncode == 0 and _lines(stderr) == [], stderr
     assert not _gone(tag, tmp_path)
+
+
+def test_a_process_the_command_forks_sends_the_supervisor_nothing(tmp_path: Path) -> None:
+    process, _ = _stand_in(tmp_path, "fork")
+    _, stderr = process.communicate(timeout=60)
+    assert process.returncode == 0, stderr
