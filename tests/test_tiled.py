@@ -266,13 +266,24 @@ def test_render_and_bench_take_the_tiled_kernel(ctx, tmp_path):
         BenchConfig(deferred_weights="tiled,fast").deferred_weights_list()
 
 
+def _small_model_file(path: Path) -> Path:
+    """A 28-12-8-3 net saved with a volume source (gratnet render's defaults aim the light by it)."""
+    from gratnet.encoding import EncodingSpec
+    from gratnet.modelfile import save_model
+
+    model = random_model([EncodingSpec.for_grid(33, 5, frequencies=3, t_frequencies=2).features, 12, 8, 3],
+                         scheme="simple-max", spec=EncodingSpec.for_grid(33, 5, frequencies=3, t_frequencies=2), seed=3)
+    model.metadata = {"volume": {"source": "generator:sinusoidal(period_um=1.6667)"}}
+    save_model(path, model)
+    return path
+
+
 def _render_and_bench(tmp_path: Path) -> None:
     import json
 
     from gratnet.cli import main
-    from tests.test_bench import _tiny_model
 
-    model = _tiny_model(tmp_path / "tiny" / "model.npz")
+    model = _small_model_file(tmp_path / "tiny" / "model.npz")
     out = tmp_path / "disc.exr"
     assert main(["render", "--material", str(model), "--mesh", "cd", "--size", "9,7", "--weights-path", "texture",
                  "--render-path", "deferred", "--deferred-weights", "tiled", "--out", str(out)]) == 0
