@@ -603,6 +603,10 @@ def main(argv: list[str] | None = None) -> int:
     if arguments.work.exists():
         parser.error(f"--work {arguments.work} exists; give a new folder")
     names = [name.strip() for name in arguments.commands.split(",") if name.strip()] or None
+    if signal.getsignal(signal.SIGINT) is signal.SIG_IGN:
+        # Started in the background (`cmd &`): SIGINT is ignored, and the commands would inherit that across exec
+        # and never see their Ctrl-C. A handled signal is reset to the default at exec instead.
+        signal.signal(signal.SIGINT, signal.default_int_handler)
     summary = run_all(arguments.work.resolve(), arguments.kills, arguments.seed, names, not arguments.no_control,
                       number=signal.Signals[f"SIG{arguments.signal}"])
     text = json.dumps(summary, indent=1) + "\n"
