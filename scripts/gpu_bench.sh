@@ -17,7 +17,8 @@
 # --tiled (issue 32: the tiled compute MLP, viewer/tiled.py, against the per-entry kernel): every shipped cd and
 # paper-* model on the CD disc at 1920×1080, 1 and 4 spp, deferred path, deferred weights ssbo, tiled and
 # tiled-fp16 (texture weights path), then cd's current best (baked), tiled-half (half arithmetic) where the
-# driver has it, and a few tile plans (GRATNET_TILE_PLAN) on cd and paper-cd. Each part writes its own
+# driver has it, its error against tiled on the five evaluation slices (benchmarks/tiled_half_error.py:
+# $OUT/tiled-half-error.jsonl), and a few tile plans (GRATNET_TILE_PLAN) on cd and paper-cd. Each part writes its own
 # $OUT/tiled-*/scenes.md as it finishes (a call cut short still brings back the parts done), and the table
 # states TMAC/s and the share of the GPU's FP32 rate. The models do not fit one call with the wheels unless
 # assets/ and docs/ stay behind and assets/ travels without its pictures, as scripts/gpu_check.sh does:
@@ -105,6 +106,9 @@ if [[ "${1:-}" == "--tiled" ]]; then
         part baked 90 cd "${common[@]}" --weights-paths baked --render-paths deferred --deferred-weights auto
         part half 90 cd paper-cd paper-scratches "${common[@]}" --weights-paths texture --render-paths deferred \
             --deferred-weights tiled-half
+        echo "== half-error: benchmarks/tiled_half_error.py (tiled-half against tiled on the five evaluation slices)"
+        timeout 120 "$python" benchmarks/tiled_half_error.py cd paper-cd paper-scratches paper-corner-cubes --size 256 \
+            | tee "$OUT/tiled-half-error.jsonl" || echo "== half-error: failed or timed out"
         for plan in ${TILED_PLANS:-"pixels=16" "pixels=32,group=128" "pixels=16,shared=24576" "pixels=8,group=32"}; do
             GRATNET_TILE_PLAN=$plan part "plan-${plan//[=,]/-}" 60 cd paper-cd "${common[@]}" --spp 1 \
                 --weights-paths texture --render-paths deferred --deferred-weights tiled
