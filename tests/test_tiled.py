@@ -15,6 +15,7 @@ from __future__ import annotations
 
 from collections.abc import Iterator
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 import pytest
@@ -26,6 +27,11 @@ from gratnet.precision import OWN_KEYS, UNIT_ROUNDOFF, assert_within, driver_bou
 from tests.test_shader_parity import parity_keys, random_model
 from viewer.camera import Camera, Light
 from viewer.meshes import Mesh, compact_disc, plane
+
+if TYPE_CHECKING:
+    import moderngl
+
+    from viewer.deferred import DeferredRenderer
 
 ASSETS = Path(__file__).resolve().parents[1] / "assets"
 SHIPPED = sorted(path.parent.name for path in ASSETS.glob("*/model.npz"))
@@ -91,14 +97,14 @@ def _keys(count: int | None = None) -> np.ndarray:
 class Kernels:
     """One NetworkRenderer and a DeferredRenderer per weights form, on one model."""
 
-    def __init__(self, ctx: object, model: ModelFile) -> None:
+    def __init__(self, ctx: moderngl.Context, model: ModelFile) -> None:
         from viewer.renderer import NetworkRenderer
 
         self.model = model
         self.network = NetworkRenderer(ctx, model, weights_path="texture")
-        self.made: dict[str, object] = {}
+        self.made: dict[str, DeferredRenderer] = {}
 
-    def __getitem__(self, weights: str):  # noqa: ANN204 (a DeferredRenderer; imported lazily)
+    def __getitem__(self, weights: str) -> DeferredRenderer:
         from viewer.deferred import DeferredRenderer
 
         if weights not in self.made:
@@ -107,7 +113,7 @@ class Kernels:
 
     def release(self) -> None:
         for deferred in self.made.values():
-            deferred.release()  # type: ignore[attr-defined]
+            deferred.release()
         self.network.release()
 
 
