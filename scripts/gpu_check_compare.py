@@ -5,7 +5,8 @@ every driver"; docs/physics.md, "Float32 error budget").
     python scripts/gpu_check_compare.py render OUT [--materials a,b] [--meshes cd,sphere] [--paths forward,deferred]
                                         [--size 640,480] [--weights-path texture] [--like DIR]
     python scripts/gpu_check_compare.py compare REFERENCE_DIR TEST_DIR [--json FILE] [--target 0.001]
-    python scripts/gpu_check_compare.py check GPU_DIR [--local DIR]      # render here like GPU_DIR, then compare
+    python scripts/gpu_check_compare.py check GPU_DIR [--local DIR]   # render here like GPU_DIR, then compare
+                                                                      # (DIR: out/gpu-check-llvmpipe)
 
 ``render`` writes ``MATERIAL_MESH_PATH.exr`` (linear sRGB, exposure applied: ``gratnet render``'s EXR) and its
 ``.config.json`` for every shipped material (assets/*/model.npz) on each mesh and render path, at each
@@ -174,7 +175,8 @@ def main(argv: list[str] | None = None) -> int:
     compare.add_argument("--target", type=float, default=FLIP_TARGET)
     check = commands.add_parser("check", help="render here like a GPU folder, then compare")
     check.add_argument("gpu", type=Path)
-    check.add_argument("--local", type=Path, help="where to render here (default: GPU_DIR/../llvmpipe)")
+    check.add_argument("--local", type=Path, help="where to render here (default: out/gpu-check-llvmpipe; the GPU's "
+                                                  "folder may be read-only)")
     check.add_argument("--weights-path", default="texture")
     check.add_argument("--json", type=Path)
     check.add_argument("--target", type=float, default=FLIP_TARGET)
@@ -186,11 +188,11 @@ def main(argv: list[str] | None = None) -> int:
         return 1 if any(record["status"] != 0 for record in records) else 0
     if args.command == "compare":
         return _report(compare_dirs(args.reference, args.test), args.target, args.json)
-    local = args.local or args.gpu.parent / "llvmpipe"
+    local = args.local or REPO / "out" / "gpu-check-llvmpipe"
     materials = [m for m in shipped_materials() if any(p.stem.startswith(f"{m}_") for p in args.gpu.glob("*.exr"))]
     size = "{width},{height}".format(**json.loads(next(args.gpu.glob("*.config.json")).read_text())["render"])
     render_all(local, materials, list(MESHES), list(PATHS), size, args.weights_path, like=args.gpu)
-    return _report(compare_dirs(args.gpu, local), args.target, args.json or args.gpu.parent / "compare.json")
+    return _report(compare_dirs(args.gpu, local), args.target, args.json or local / "compare.json")
 
 
 if __name__ == "__main__":
