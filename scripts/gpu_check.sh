@@ -10,7 +10,9 @@
 #      tool's 64 MiB, so assets/ and docs/ stay behind (scripts/device_tree.sh shed) and the models travel as
 #      .gpu_assets/; all three git-ignored through .git/info/exclude)
 #        scripts/device_tree.sh shed assets docs
-#   2. the device tool's run: command "bash scripts/gpu_check.sh", carry [".gl", ".whl", ".gpu_assets"]
+#   2. the device tool's run: command "bash scripts/gpu_check.sh", carry [".gl", ".whl", ".gpu_assets"], timeout_s
+#      600 (a call may run 10 minutes; should the tests and renders not fit in one, run "SKIP_RENDERS=1 bash
+#      scripts/gpu_check.sh" and then "SKIP_TESTS=1 bash scripts/gpu_check.sh" while the machine is warm)
 #   3. here: scripts/device_tree.sh restore
 #            python scripts/gpu_check_compare.py check FILES_AT/gpu-check/renders    (FILES_AT: the run's files_at)
 # Writes $OUT/gpu-check/: device.txt, tests.txt (pytest's report), tests.xml (junit), failures/ (golden-image
