@@ -137,14 +137,17 @@ def scene_frame_times(ctx: Any, model: Any, model_path: str, view: SceneView, we
                 evaluations = float(np.sum(coverage)) * count  # samples that hit the mesh, each one evaluation
                 path = str(getattr(renderer, "render_path", render_path))
                 tmacs = model.macs_per_evaluation * evaluations / (gpu_seconds or seconds) / 1e12
+                plan = renderer.deferred.tile_plan if path == "deferred" else None  # the tiled kernel's
                 rows.append({
                     "kind": "scene", "mesh": view.mesh, "width": size[0], "height": size[1], "spp": count,
                     "requested_weights_path": weights_path, "weights_path": renderer.network.weights_path,
                     "requested_render_path": render_path, "render_path": path,
                     "requested_deferred_weights": deferred_weights,
                     "deferred_weights": renderer.deferred.weights if path == "deferred" else None,
-                    "tile_plan": (renderer.deferred.tile_plan.describe(renderer.network.layout)
-                                  if path == "deferred" and renderer.deferred.tile_plan is not None else None),
+                    "tile_plan": None if plan is None else plan.describe(renderer.network.layout),
+                    "tile_pixels": None if plan is None else plan.pixels,
+                    "tile_group": None if plan is None else plan.group,
+                    "tile_shared_bytes": None if plan is None else plan.shared_bytes,
                     "setup_s": setup_seconds, "times_s": walls, "seconds": seconds, "gpu_times_s": gpus,
                     "gpu_seconds": gpu_seconds, "fps": 1.0 / seconds,
                     "covered_pixels": int(np.count_nonzero(coverage)), "evaluations": evaluations,
@@ -179,6 +182,9 @@ def markdown_table(rows: list[dict[str, Any]]) -> str:
         deferred = row.get("deferred_weights")
         if deferred is not None and row.get("requested_deferred_weights", deferred) != deferred:
             deferred = f"{row['requested_deferred_weights']} → {deferred}"
+        if row.get("tile_pixels") is not None:  # the tiled kernel's plan, in short
+            deferred = (f"{deferred} ({row['tile_pixels']} px, {row['tile_group']} inv., "
+                        f"{row['tile_shared_bytes'] / 1024:g} KiB)")
         share = row.get("fp32_share")
         lines.append("| " + " | ".join(format_cell(value) for value in (
             row["model"], row["macs_per_pixel"], row["mesh"], f"{row['width']}×{row['height']}", row["weights_path"],

@@ -18,9 +18,10 @@
 # paper-* model on the CD disc at 1920×1080, 1 and 4 spp, deferred path, deferred weights ssbo, tiled and
 # tiled-fp16 (texture weights path), then cd's current best (baked), tiled-half (half arithmetic) where the
 # driver has it, its error against tiled on the five evaluation slices (benchmarks/tiled_half_error.py:
-# $OUT/tiled-half-error.jsonl), and a few tile plans (GRATNET_TILE_PLAN) on cd and paper-cd. Each part writes its own
-# $OUT/tiled-*/scenes.md as it finishes (a call cut short still brings back the parts done), and the table
-# states TMAC/s and the share of the GPU's FP32 rate. The models do not fit one call with the wheels unless
+# $OUT/tiled-half-error.jsonl), and a few tile plans (GRATNET_TILE_PLAN) on cd and paper-cd. Each part writes
+# its own $OUT/tiled-*/scenes.md as it finishes (a call cut short still brings back the parts done; about 6 minutes in
+# all were estimated, not measured), $OUT/tiled.md gathers them, and the tables state TMAC/s and the share of
+# the GPU's FP32 rate. The models do not fit one call with the wheels unless
 # assets/ and docs/ stay behind and assets/ travels without its pictures, as scripts/gpu_check.sh does:
 #   here:   scripts/gpu_check.sh --prepare && scripts/device_tree.sh shed assets docs
 #   there:  the device tool's run, command "bash scripts/gpu_bench.sh --tiled", carry [".gl", ".whl", ".gpu_assets"]
@@ -100,19 +101,25 @@ if [[ "${1:-}" == "--tiled" ]]; then
     }
     {
         nvidia-smi --query-gpu=name,driver_version --format=csv,noheader 2>/dev/null || true
-        # shellcheck disable=SC2086  # the material names are words
-        part models 330 $materials "${common[@]}" --weights-paths texture --render-paths deferred \
-            --deferred-weights "${TILED_FORMS:-ssbo,tiled,tiled-fp16}"
+        for material in $materials; do  # one call per model: a call cut short keeps the models done
+            part "$material" 100 "$material" "${common[@]}" --weights-paths texture --render-paths deferred \
+                --deferred-weights "${TILED_FORMS:-ssbo,tiled,tiled-fp16}"
+        done
         part baked 90 cd "${common[@]}" --weights-paths baked --render-paths deferred --deferred-weights auto
-        part half 90 cd paper-cd paper-scratches "${common[@]}" --weights-paths texture --render-paths deferred \
+        part half 75 cd paper-cd paper-scratches "${common[@]}" --weights-paths texture --render-paths deferred \
             --deferred-weights tiled-half
         echo "== half-error: benchmarks/tiled_half_error.py (tiled-half against tiled on the five evaluation slices)"
         timeout 120 "$python" benchmarks/tiled_half_error.py cd paper-cd paper-scratches paper-corner-cubes --size 256 \
             | tee "$OUT/tiled-half-error.jsonl" || echo "== half-error: failed or timed out"
         for plan in ${TILED_PLANS:-"pixels=16" "pixels=32,group=128" "pixels=16,shared=24576" "pixels=8,group=32"}; do
-            GRATNET_TILE_PLAN=$plan part "plan-${plan//[=,]/-}" 60 cd paper-cd "${common[@]}" --spp 1 \
+            GRATNET_TILE_PLAN=$plan part "plan-${plan//[=,]/-}" 45 cd paper-cd "${common[@]}" --spp 1 \
                 --weights-paths texture --render-paths deferred --deferred-weights tiled
         done
+        # Every part's rows in one table (the header once).
+        first=1
+        for table in "$OUT"/tiled-*/scenes.md; do
+            if [[ $first == 1 ]]; then cat "$table"; first=0; else tail -n +3 "$table"; fi
+        done >"$OUT/tiled.md"
     } 2>&1 | tee "$OUT/log.txt"
     exit 0
 fi

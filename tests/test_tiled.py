@@ -308,7 +308,7 @@ def _render_and_bench(tmp_path: Path) -> None:
     for row in rows:
         assert row["tmac_per_s"] > 0 and row["fp32_share"] is None  # llvmpipe: no FP32 figure
     table = (bench / "scenes.md").read_text()
-    assert "| TMAC/s | of FP32 peak |" in table and "| tiled |" in table
+    assert "| TMAC/s | of FP32 peak |" in table and "| tiled (" in table and " px, 64 inv., 32 KiB) |" in table
 
 
 def test_the_plan_variable_overrides_tile_group_and_shared_memory(ctx, cd_kernels, monkeypatch):
