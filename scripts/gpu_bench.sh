@@ -14,15 +14,19 @@
 # SIZES=512x512 to try it). Settings: OUT (default out/gpu-bench), SIZES, SPP, WEIGHTS, RENDER_PATHS,
 # REPEATS, MATERIAL.
 #
-# --tiled (issue 32: the tiled compute MLP, viewer/tiled.py, against the per-entry kernel): every shipped cd and
-# paper-* model on the CD disc at 1920×1080, 1 and 4 spp, deferred path, deferred weights ssbo, tiled and
-# tiled-fp16 (texture weights path), then cd's current best (baked), tiled-half (half arithmetic) where the
-# driver has it, its error against tiled on the five evaluation slices (benchmarks/tiled_half_error.py:
-# $OUT/tiled-half-error.jsonl), and a few tile plans (GRATNET_TILE_PLAN) on cd and paper-cd. Each part writes
-# its own $OUT/tiled-*/scenes.md as it finishes (a call cut short still brings back the parts done; about 6 minutes in
-# all were estimated, not measured), $OUT/tiled.md gathers them, and the tables state TMAC/s and the share of
-# the GPU's FP32 rate. The models do not fit one call with the wheels unless
-# assets/ and docs/ stay behind and assets/ travels without its pictures, as scripts/gpu_check.sh does:
+# --tiled (issue 32: the tiled compute MLP, viewer/tiled.py, against the per-entry kernel), in this order:
+#   1. every shipped cd and paper-* model on the CD disc at 1920×1080, 1 and 4 spp, deferred path, deferred
+#      weights ssbo, tiled and tiled-fp16 (texture weights path), one bench call per model: $OUT/tiled-MODEL/;
+#   2. the shading kernels alone on 699,052 keys (benchmarks/shade_kernels.py: $OUT/tiled-kernels.jsonl, the
+#      MLP's TMAC/s without the frame's other passes);
+#   3. cd's current best (baked weights, deferred auto): $OUT/tiled-baked/;
+#   4. tiled-half (half arithmetic) where the driver has it: $OUT/tiled-half/, and its error against tiled on
+#      the five evaluation slices (benchmarks/tiled_half_error.py: $OUT/tiled-half-error.jsonl);
+#   5. a few tile plans (GRATNET_TILE_PLAN) on cd and paper-cd at 1 spp: $OUT/tiled-plan-*/.
+# Each part writes its results as it finishes (a call cut short still brings back the parts done; about 6
+# minutes in all, estimated, not measured); $OUT/tiled.md gathers every table, which states TMAC/s and the
+# share of the GPU's FP32 rate. The models fit one call with the wheels only if assets/ and docs/ stay behind
+# and assets/ travels without its pictures, as scripts/gpu_check.sh does it:
 #   here:   scripts/gpu_check.sh --prepare && scripts/device_tree.sh shed assets docs
 #   there:  the device tool's run, command "bash scripts/gpu_bench.sh --tiled", carry [".gl", ".whl", ".gpu_assets"]
 #   here:   scripts/device_tree.sh restore
@@ -105,6 +109,9 @@ if [[ "${1:-}" == "--tiled" ]]; then
             part "$material" 100 "$material" "${common[@]}" --weights-paths texture --render-paths deferred \
                 --deferred-weights "${TILED_FORMS:-ssbo,tiled,tiled-fp16}"
         done
+        echo "== kernels: benchmarks/shade_kernels.py (the shading dispatches alone, 699,052 keys)"
+        timeout 150 "$python" benchmarks/shade_kernels.py cd paper-cd paper-scratches paper-corner-cubes \
+            --forms ssbo,tiled,tiled-fp16,tiled-half | tee "$OUT/tiled-kernels.jsonl" || echo "== kernels: failed"
         part baked 90 cd "${common[@]}" --weights-paths baked --render-paths deferred --deferred-weights auto
         part half 75 cd paper-cd paper-scratches "${common[@]}" --weights-paths texture --render-paths deferred \
             --deferred-weights tiled-half

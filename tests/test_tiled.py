@@ -159,6 +159,11 @@ def test_tile_edges_odd_lengths_pieces_and_the_empty_list(cd_kernels):
     # Pieces of 256 entries, as a render shades a long list: each piece's tiles start again at its first entry.
     assert_pair(tiled.shade_keys(keys, piece_entries=256), whole, bound, "pieces of 256")
     assert tiled.shade_keys(keys[:0]).shape == (0, 3)  # one dispatch over an empty list: no group runs past it
+    # Timed repeats (benchmarks/shade_kernels.py) upload the keys and the list again: the same outputs.
+    timings: list[tuple[float, float]] = []
+    again = tiled.shade_keys(keys, piece_entries=256, timings=timings, repeats=2)
+    assert len(timings) == 2 and all(wall > 0 for _, wall in timings)
+    assert_pair(again, whole, bound, "timed repeats")
 
 
 @pytest.mark.parametrize(("budget", "max_pixels", "group"),

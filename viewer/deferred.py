@@ -56,6 +56,7 @@ Rendering only: no glfw, no imgui, no torch.
 from __future__ import annotations
 
 import logging
+import time
 from collections.abc import Callable
 
 import moderngl
@@ -374,11 +375,17 @@ class DeferredRenderer:
         groups = _groups(count, _SHADE_GROUP if self.tile_plan is None else self.tile_plan.pixels)
         shade.run(min(groups, _MAX_GROUPS), _groups(groups, _MAX_GROUPS))
 
-    def shade_keys(self, keys: np.ndarray, factor: float = 1.0, piece_entries: int | None = None) -> np.ndarray:
+    def shade_keys(self, keys: np.ndarray, factor: float = 1.0, piece_entries: int | None = None,
+                   timings: list[tuple[float, float]] | None = None, repeats: int = 1) -> np.ndarray:
         """The SHADE kernel of this renderer's weights on key vectors ``keys`` (``(N, 3)``): ``factor · XYZ``,
         ``float32`` ``(N, 3)``. The list holds exactly these N entries in order (no G-buffer pass, no
         compaction), so tests choose its length: tile edges, 1, 0. ``piece_entries`` (a multiple of 256):
-        shade in pieces of that many entries, as :meth:`render` does (default: one dispatch)."""
+        shade in pieces of that many entries, as :meth:`render` does (default: one dispatch).
+
+        ``timings``: receives ``(GL timer seconds, wall seconds)`` of the shading dispatches alone, once per
+        repeat (``repeats`` runs, the keys uploaded again before each, outside the timing; the wall time ends
+        with ``ctx.finish()``): the kernel's own time, without the G-buffer, compaction and read-back of a frame
+        (benchmarks/shade_kernels.py). llvmpipe's timer reads about 0 for compute work: take the wall time there."""
         keys = np.asarray(keys, dtype=np.float32).reshape(-1, 3)
         count = len(keys)
         width = max(1, min(count, 1024))
@@ -393,13 +400,30 @@ class DeferredRenderer:
         if piece_entries is not None and (piece_entries <= 0 or piece_entries % _PIECE_ENTRIES):
             raise GratNetError(f"piece_entries must be a positive multiple of {_PIECE_ENTRIES}, got {piece_entries}")
         texture = self.ctx.texture((width, rows), 4, texels.tobytes(), dtype="f4")
-        list_buffer = self.ctx.buffer(np.concatenate([header, packed]).tobytes())
+        listed = np.concatenate([header, packed]).tobytes()
+        list_buffer = self.ctx.buffer(listed)
         try:
             shade = self._compute("SHADE")
             self._bind_weights()
             texture.bind_to_image(0, read=True, write=True)
-            for first in range(0, max(count, 1), max(piece, 1)):
-                self._shade(shade, list_buffer, first, min(count, first + piece))
+            query = self.ctx.query(time=True) if timings is not None else None
+            for repeat in range(max(1, repeats)):
+                if repeat:
+                    texture.write(texels.tobytes())  # the kernel replaced the keys by its outputs
+                    list_buffer.write(listed)  # and pieces' headers overwrote entries
+                    self.ctx.memory_barrier()
+                    self.ctx.finish()
+                if query is not None:
+                    start = time.perf_counter()
+                    with query:
+                        for first in range(0, max(count, 1), max(piece, 1)):
+                            self._shade(shade, list_buffer, first, min(count, first + piece))
+                        self.ctx.finish()
+                    wall = time.perf_counter() - start
+                    timings.append((query.elapsed * 1e-9, wall))  # type: ignore[union-attr]  # waits for the result
+                else:
+                    for first in range(0, max(count, 1), max(piece, 1)):
+                        self._shade(shade, list_buffer, first, min(count, first + piece))
             self.ctx.memory_barrier()
             result = np.frombuffer(texture.read(), dtype=np.float32).reshape(-1, 4)
         finally:
