@@ -28,7 +28,6 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 import numpy as np  # noqa: E402
 
 from bench.devices import fp32_tmac_per_s  # noqa: E402
-from gratnet.brdf import direction  # noqa: E402
 from gratnet.errors import GratNetError  # noqa: E402
 from gratnet.modelfile import load_model  # noqa: E402
 from viewer.catalog import resolve_material  # noqa: E402
@@ -40,11 +39,11 @@ from viewer.renderer import NetworkRenderer  # noqa: E402
 def random_keys(count: int, seed: int = 0) -> np.ndarray:
     """``count`` key vectors −(ωi + ωo) of directions uniform over the upper hemisphere, (count, 3)."""
     rng = np.random.default_rng(seed)
-    theta = np.degrees(np.arccos(rng.uniform(0.0, 1.0, (2, count))))
-    phi = rng.uniform(0.0, 360.0, (2, count))
-    light = np.stack([direction(t, p) for t, p in zip(theta[0], phi[0], strict=True)])
-    view = np.stack([direction(t, p) for t, p in zip(theta[1], phi[1], strict=True)])
-    return -(light + view)
+    cos_theta = rng.uniform(0.0, 1.0, (2, count))  # gratnet.brdf.direction's frame, vectorised
+    sin_theta = np.sqrt(1.0 - cos_theta**2)
+    phi = rng.uniform(0.0, 2.0 * np.pi, (2, count))
+    directions = np.stack([sin_theta * np.cos(phi), sin_theta * np.sin(phi), cos_theta], axis=-1)
+    return -(directions[0] + directions[1])
 
 
 def main() -> int:
