@@ -215,6 +215,9 @@ class DeferredRenderer:
                         np.prod(self.network.packed_weights.shape[:2]))
                     raise GratNetError(f"deferred weights 'shared': the net's {bytes_needed} bytes of weights must fit "
                                        f"the GPU's compute shared memory (32 KiB on llvmpipe): {error}") from error
+                if self.tile_plan is not None and kernel == "SHADE":  # name the plan (GRATNET_TILE_PLAN may change it)
+                    plan = self.tile_plan.describe(self.network.layout)
+                    raise GratNetError(f"deferred weights {self.weights!r} ({plan}): {error}") from error
                 raise
             if kernel == "SHADE":
                 uniforms = "ssbo" if self.fp16_storage or self.tile_plan is not None else self.weights
