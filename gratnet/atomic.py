@@ -36,6 +36,9 @@ from gratnet.errors import GratNetError
 #: Longest file name (bytes) that the usual file systems accept.
 _NAME_MAX = 255
 
+#: Every output this process has completed, in order (an interrupted command's line names what it kept).
+WRITTEN: list[Path] = []
+
 #: Our temporaries and backups: ``.NAME.HOST-PID-RANDOM.tmp.EXT`` and ``.NAME.EXT.HOST-PID.backup`` (HOST: 6 hex
 #: digits; RANDOM: mkstemp's 8 characters; EXT: the target's suffix, at most 20 characters with its dot).
 TEMPORARY_NAME = re.compile(r"^\..+\.(?P<host>[0-9a-f]{6})-(?P<pid>[0-9]+)"
@@ -288,6 +291,7 @@ def atomic_paths(*targets: str | os.PathLike[str]) -> Iterator[tuple[Path, ...]]
             raise GratNetError(f"cannot write {names}: {error.strerror or error}") from error
         _commit(paths, temporaries)
         for path in paths:
+            WRITTEN.append(path)
             interrupts.written(path)
     finally:
         for temporary in temporaries:

@@ -159,6 +159,9 @@ def _command(argv: list[str], command: str | None) -> int:
         logger.addHandler(handler)
     handler.setFormatter(logging.Formatter(f"gratnet {arguments.command}: %(message)s"))
     logger.setLevel(logging.WARNING if getattr(arguments, "quiet", False) else logging.INFO)
+    from gratnet.atomic import WRITTEN
+
+    written_before = len(WRITTEN)
     try:
         return int(arguments.handler(arguments) or 0)
     except GratNetError as error:
@@ -172,7 +175,7 @@ def _command(argv: list[str], command: str | None) -> int:
     except (KeyboardInterrupt, ImportError) as error:
         if not is_interrupt(error):
             raise
-        return _interrupted(f"gratnet {arguments.command}")
+        return _interrupted(f"gratnet {arguments.command}", WRITTEN[written_before:])
 
 
 def is_interrupt(error: BaseException) -> bool:
@@ -182,10 +185,18 @@ def is_interrupt(error: BaseException) -> bool:
         isinstance(error, ImportError) and isinstance(error.__cause__ or error.__context__, KeyboardInterrupt))
 
 
-def _interrupted(prefix: str) -> int:
+def _interrupted(prefix: str, written: Sequence[object] = ()) -> int:
     """Ctrl-C's answer (a subcommand with outputs of its own to report, such as train or render, answers itself):
-    one line, exit status 130. The writers are atomic, so nothing half-written is left."""
-    print(f"{prefix}: interrupted; no output was written", file=sys.stderr)
+    one line, exit status 130. The writers are atomic, so nothing half-written is left; ``written``: the outputs
+    the command completed before (gratnet.atomic.WRITTEN), which are kept."""
+    if written:
+        count = len(set(map(str, written)))  # a checkpoint is written once per epoch: one file
+        others = f" and {count - 1} other file{'s' if count > 2 else ''}" if count > 1 else ""
+        outcome = f"{written[-1]}{others} written before it {'are' if count > 1 else 'is'} kept, nothing is " \
+                  f"half-written"
+    else:
+        outcome = "no output was written"
+    print(f"{prefix}: interrupted; {outcome}", file=sys.stderr)
     # The interpreter's teardown would then spend ~0.4 s collecting the objects of big libraries
     # (colour-science; measured on llvmpipe's 2-core machine); frozen at exit, nothing is collected.
     atexit.register(gc.freeze)
