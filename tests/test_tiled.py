@@ -52,7 +52,9 @@ def kernel_pair_bound(model: ModelFile, keys: np.ndarray, fp16_weights: bool = F
     """A bound on |XYZ_tiled − XYZ_SHADE| at float32 ``keys`` (N, 3), ``(N, 3)`` float64.
 
     - Inputs: the same encoding.glsl / featuregrid.glsl source on the same key and driver, but compiled into two
-      programs, which may contract a·b + c differently outside ``precise``: 4 ulps of each feature.
+      programs, which may contract a·b + c differently outside ``precise``: 4 ulps of each encoded feature; a
+      grid feature is an 8-term trilinear sum with rounded weights, so each side errs by γ₁₂ · Σ wᵢ|fᵢ| (the
+      trilinear interpolation of |grid|), twice that between the two.
     - Layer k, z = b + Σᵢ wᵢ aᵢ over n inputs: each kernel's float32 sum lies within γ_{n+1} · (|b| + Σ|w||a|) of
       the exact sum of its own inputs (any order, fused or not: the tiled kernel adds the same terms, chunk by
       chunk, and tiled-half's emulation in partial sums per chunk), so the two differ by
@@ -67,6 +69,11 @@ def kernel_pair_bound(model: ModelFile, keys: np.ndarray, fp16_weights: bool = F
     coordinates = network_coordinates(keys[:, 0], keys[:, 1], keys[:, 2], model.scheme)
     a = network_inputs(model, coordinates)
     delta = 4.0 * UNIT_ROUNDOFF * np.abs(a)
+    if model.grids:
+        magnitudes = network_inputs(model, coordinates, grids=[np.abs(grid) for grid in model.grids])
+        grid_columns = len(model.grids) * model.grids[0].shape[-1]  # the grid features come first
+        delta[:, :grid_columns] = np.maximum(delta[:, :grid_columns],
+                                             2.0 * _gamma(12) * magnitudes[:, :grid_columns])
     last = len(model.weights) - 1
     from gratnet.network import activate_hidden, activate_output
 
