@@ -12,6 +12,7 @@ Rendering (no glfw, no imgui; ``gratnet render``, ``gratnet bench`` and the test
 - ``surface``: what both mesh render paths share (``MeshBuffers``, the surface program's camera/light uniforms).
 - ``forward``, ``deferred``: the two render paths; ``scene``: ``SceneRenderer`` over both, and
   ``choose_render_path`` (``auto``: timed once per GPU and network shape, cached).
+- ``tiled``: the plan of the deferred path's tiled MLP kernel (tile, blocking, shared memory from the limits).
 
 Library for the commands (no GL at import):
 - ``catalog``: shipped materials and built-in meshes by name (resolve, build).
