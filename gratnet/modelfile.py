@@ -80,6 +80,7 @@ __all__ = [
     "save_model",
     "texture_forward",
     "texture_layout",
+    "validated",
 ]
 
 FORMAT_NAME = "gratnet-model"
@@ -310,7 +311,7 @@ def _check_parameters(
     return array
 
 
-def _validated(model: object, where: str = "model", *, from_file: bool = False) -> ModelFile:
+def validated(model: object, where: str = "model", *, from_file: bool = False) -> ModelFile:
     """Check every field of ``model``; return a copy with ``float32`` arrays and plain lists.
 
     Raises:
@@ -412,7 +413,7 @@ def pack_texture(model: ModelFile) -> tuple[np.ndarray, list[dict[str, int]]]:
     Raises:
         GratNetError: the model is invalid (shapes, non-finite values, …).
     """
-    valid = _validated(model)
+    valid = validated(model)
     layout = texture_layout(valid.layer_sizes)
     return pack_weights(valid.weights, valid.biases, layout), layout
 
@@ -433,7 +434,7 @@ def mlp_forward(model: ModelFile, encoded: np.ndarray) -> np.ndarray:
         ``float64`` ``(…, 3)``: the network outputs after the output activation, i.e. range-transformed
         XYZ (``range_inverse`` turns them into CIE XYZ).
     """
-    return _forward(_validated(model), encoded)
+    return _forward(validated(model), encoded)
 
 
 def _forward(valid: ModelFile, encoded: object) -> np.ndarray:
@@ -469,7 +470,7 @@ def evaluate_keys(model: ModelFile, u: np.ndarray, v: np.ndarray, w: np.ndarray)
         ``float64`` ``(…, 3)``: CIE XYZ of the D65-normalised reflectance (a flat mirror's specular
         peak has ``Y = 1``), ``…`` the broadcast shape of ``u, v, w``.
     """
-    valid = _validated(model)
+    valid = validated(model)
     u, v, w = np.broadcast_arrays(*(np.asarray(c, dtype=np.float64) for c in (u, v, w)))
     coordinates = network_coordinates(u, v, w, valid.scheme)  # type: ignore[arg-type]
     return range_inverse(_forward(valid, network_inputs(valid, coordinates)), valid.range)
@@ -512,7 +513,7 @@ def save_model(path: str | os.PathLike[str], model: ModelFile) -> None:
         GratNetError: invalid model, or the file cannot be written.
     """
     target = Path(path)
-    valid = _validated(model, f"cannot save model {target}")
+    valid = validated(model, f"cannot save model {target}")
     layout = texture_layout(valid.layer_sizes)
     arrays: dict[str, np.ndarray] = {
         _METADATA_ARRAY: np.array(json.dumps(_header(valid, layout), allow_nan=False, ensure_ascii=False)),
@@ -587,7 +588,7 @@ def _read_header(source: Path, arrays: dict[str, np.ndarray]) -> dict[str, Any]:
 
 def _grid_header(header: dict[str, Any], where: str) -> list[list[int]]:
     """The grid levels' shapes from the header's ``grid`` (version 2), or [] for a pure-MLP file (its
-    ``interpolation`` is checked by :func:`_validated`)."""
+    ``interpolation`` is checked by :func:`validated`)."""
     if header["format_version"] == FORMAT_VERSION:
         if _GRID_KEY in header:
             raise GratNetError(f"{where}: a format version {FORMAT_VERSION} file has a 'grid' entry; "
@@ -638,7 +639,7 @@ def load_model(path: str | os.PathLike[str]) -> ModelFile:
         raise GratNetError(
             f"{where}: has unexpected array(s) {', '.join(unexpected)} for layer_sizes {sizes}; the file is corrupt"
         )
-    model = _validated(
+    model = validated(
         ModelFile(
             layer_sizes=sizes,
             weights=[arrays[f"weight_{k}"] for k in range(layers)],

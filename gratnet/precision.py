@@ -32,7 +32,7 @@ import numpy as np
 
 from gratnet.encoding import encode, network_coordinates, range_inverse
 from gratnet.featuregrid import grid_features
-from gratnet.modelfile import ModelFile, _validated
+from gratnet.modelfile import ModelFile, validated
 
 #: float32 unit roundoff u = 2⁻²⁴: a correctly rounded operation errs by at most u relative.
 UNIT_ROUNDOFF = 2.0**-24
@@ -205,7 +205,7 @@ def driver_bound(model: ModelFile, u: Any, v: Any, w: Any, errors: DriverErrors 
     Returns:
         :class:`DriverBound`, every field ``(…, 3)`` float64, ``…`` the broadcast shape of ``u, v, w``.
     """
-    valid = _validated(model)
+    valid = validated(model)
     u, v, w = np.broadcast_arrays(*(np.asarray(c, dtype=np.float64) for c in (u, v, w)))
     shape = u.shape
     keys = np.stack([u.ravel(), v.ravel(), w.ravel()], axis=-1)
