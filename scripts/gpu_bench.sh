@@ -30,6 +30,10 @@
 #   here:   scripts/gpu_check.sh --prepare && scripts/device_tree.sh shed assets docs
 #   there:  the device tool's run, command "bash scripts/gpu_bench.sh --tiled", carry [".gl", ".whl", ".gpu_assets"]
 #   here:   scripts/device_tree.sh restore
+# --lut (issue 33: the look-up-table baseline on this GPU): paper-cd's training volume computed there (CUDA,
+#   `gratnet groundtruth paper-cd --sampling simple-max --device cuda`), then benchmarks/lut_baseline.py (the network
+#   and the table at u*/v* strides 1 and 4: memory, ms per 1080p frame, FLIP of the exact slices):
+#   $OUT/lut_baseline_paper-cd.json and $OUT/lut_baseline.png; same carry as --tiled.
 # Settings: OUT, SIZES, SPP, REPEATS as above; TILED_MATERIALS (default: cd and every paper-* model),
 # TILED_FORMS (default ssbo,tiled,tiled-fp16), TILED_PLANS (space-separated GRATNET_TILE_PLAN values).
 set -euo pipefail
@@ -89,6 +93,17 @@ PYTHONPATH=/tmp/gratnet-site${PYTHONPATH:+:$PYTHONPATH} python3 -m pip install -
 export PYTHONPATH=$PWD:/tmp/gratnet-site:/tmp/gratnet-meta${PYTHONPATH:+:$PYTHONPATH}
 python=${PYTHON:-python3}
 export PYTHONUNBUFFERED=1
+if [[ "${1:-}" == "--lut" ]]; then
+    {
+        nvidia-smi --query-gpu=name,driver_version --format=csv,noheader 2>/dev/null || true
+        volume=/tmp/gratnet-lut/paper-cd-s11.exr
+        [[ -f $volume ]] || "$python" -m gratnet.cli groundtruth paper-cd --sampling simple-max --slices 11 \
+            --device cuda --quiet --out "$volume"
+        "$python" benchmarks/lut_baseline.py paper-cd "$volume" --strides 1,4 --cache-dir /tmp/gratnet-lut/cache \
+            --json "$OUT/lut_baseline_paper-cd.json" --figure "$OUT/lut_baseline.png"
+    } 2>&1 | tee "$OUT/log.txt"
+    exit 0
+fi
 if [[ "${1:-}" == "--tiled" ]]; then
     materials=${TILED_MATERIALS:-"cd $(cd assets && ls -d paper-* | tr '\n' ' ')"}
     common=(--no-slices --scene-mesh cd --scene-sizes "${SIZES:-1920x1080}" --spp "${SPP:-1,4}"
