@@ -78,6 +78,20 @@ def _forked() -> None:
         signal.signal(signal.SIGINT, signal.default_int_handler)
 
 
+def _unraisable(unraisable: object) -> None:
+    """``sys.unraisablehook`` of the child: a KeyboardInterrupt raised inside a weakref callback or a ``__del__``
+    (Ctrl-C during a garbage collection) cannot propagate, so Python printed a traceback and went on, and the
+    command ran to its end (seen in gratnet train's report). Instead the signal is sent again, to be raised where
+    the command can answer it: a little later, from a thread (sent from here, it would be raised here, in the hook,
+    and be lost the same way; if it lands in a callback again, this repeats)."""
+    if isinstance(getattr(unraisable, "exc_value", None), KeyboardInterrupt):
+        later = threading.Timer(0.02, os.kill, (os.getpid(), signal.SIGINT))
+        later.daemon = True
+        later.start()
+        return
+    sys.__unraisablehook__(unraisable)  # type: ignore[arg-type]
+
+
 def _answered(number: int, frame: object) -> None:
     """The child's SIGINT handler: Python's (KeyboardInterrupt), after telling the supervisor that the command
     answers the signal itself (it then leaves the command to its own cleanup, however long, and its own line)."""
@@ -141,6 +155,7 @@ def supervise(command: str) -> int | None:
         _channel = writer
         if signal.getsignal(signal.SIGINT) is signal.default_int_handler:
             signal.signal(signal.SIGINT, _answered)
+            sys.unraisablehook = _unraisable
         os.register_at_fork(after_in_child=_forked)
         threading.Thread(target=_heartbeat, args=(writer,), name="gratnet-heartbeat", daemon=True).start()
         return None

@@ -61,6 +61,24 @@ elif sys.argv[1] == "fork":  # a process the command forks is not the command: i
                  else 1)
     print("ready", flush=True)
     sys.exit(os.waitstatus_to_exitcode(os.waitpid(pid, 0)[1]))
+elif sys.argv[1] == "callback":  # Ctrl-C inside a weakref callback (a garbage collection), then Python code
+    import gc, os, signal, weakref
+    class Thing:
+        pass
+    def hit(_reference):
+        os.kill(os.getpid(), signal.SIGINT)
+        time.sleep(0.05)  # the KeyboardInterrupt is raised here, where it cannot propagate
+    thing = Thing()
+    reference = weakref.ref(thing, hit)
+    try:
+        print("ready", flush=True)
+        del thing
+        gc.collect()
+        time.sleep(5)
+        print("stand-in: ran on", file=sys.stderr)
+    except KeyboardInterrupt:
+        print("stand-in: interrupted by itself", file=sys.stderr)
+        sys.exit(130)
 elif sys.argv[1] == "done":
     interrupts.done(0)  # the command returned 0; what follows stands for the interpreter's teardown
     print("ready", flush=True)
@@ -193,3 +211,14 @@ def test_a_process_the_command_forks_sends_the_supervisor_nothing(tmp_path: Path
     process, _ = _stand_in(tmp_path, "fork")
     _, stderr = process.communicate(timeout=60)
     assert process.returncode == 0, stderr
+
+
+def test_ctrl_c_inside_a_garbage_collection_callback_is_not_lost(tmp_path: Path) -> None:
+    """Python cannot raise a KeyboardInterrupt out of a weakref callback: it printed a traceback ("Exception
+    ignored") and the command went on (gratnet train ran its report to the end and exited 0). It is raised
+    again where the command answers it."""
+    process, tag = _stand_in(tmp_path, "callback")
+    stderr = process.communicate(timeout=60)[1].decode("utf-8", "replace")
+    assert process.returncode == 130, stderr
+    assert _lines(stderr) == ["stand-in: interrupted by itself"], stderr
+    assert not _gone(tag, tmp_path)
