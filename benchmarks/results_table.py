@@ -448,6 +448,12 @@ def _meshes_section(folder: Path = COMPARE_DATA) -> list[str]:
         picture = f"[picture](images/compare_{data['material']}.png)"
         lines.append(f"| {data['material']} | {data.get('volume', '—')} | {data.get('image', '—')} | "
                      f"{' | '.join(cells)} | {mean:.4f} | {picture} |")
+    dark = [f"{json.loads(path.read_text(encoding='utf-8'))['material']} {row['mesh']} ({row['name']})"
+            for path in files for row in json.loads(path.read_text(encoding="utf-8"))["views"]
+            if row["flip_covered"] < 5e-5]
+    if dark:  # FLIP 0 needs two identical pictures: a view the light leaves black in both (checked on the pictures)
+        lines += ["", "FLIP 0.0000 means two identical pictures: at the default view's exposure these views are black "
+                  f"in both renders (the diffraction misses the camera); they say nothing: {', '.join(dark)}."]
     lines += ["", "Per mesh: FLIP at the default view / light turned / camera moved. The rainbow rings and swirls "
               "across the CD disc are in the reference renders too: they are the surface's diffraction, not network "
               "error ([experiments/2026-11-26-reference-renders.md](experiments/2026-11-26-reference-renders.md)).",
@@ -464,7 +470,7 @@ def _reproduce_section() -> list[str]:
         "    bash scripts/ship_materials.sh                    # the 20 µm tiles",
         "    bash scripts/reevaluate_materials.sh NAME         # today's evaluation of a shipped model",
         "    python benchmarks/oracle_table.py VOLUMES --json docs/data/oracle_paper.json",
-        "    gratnet compare NAME --reference VOLUME.exr --out DIR  # docs/data/compare/NAME.json (see that section)",
+        "    bash scripts/compare_paper_models.sh [NAME …]     # docs/data/compare/NAME.json: volume, gratnet compare",
         "    python benchmarks/results_table.py                # this page",
         "",
         "Each experiment log in docs/experiments/ gives its own commands and data.",
