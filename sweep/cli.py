@@ -60,7 +60,7 @@ def run(arguments: argparse.Namespace) -> int:
     import_ray()  # before any work: one line when Ray is missing
     try:
         rows, failures = run_sweep(spec, arguments.address, arguments.workers, progress=not arguments.quiet)
-    except KeyboardInterrupt as error:  # Ctrl-C, or SIGTERM / SIGHUP (Stopped): Ray was shut down
+    except KeyboardInterrupt as error:  # Ctrl-C, or SIGTERM / SIGHUP (Stopped): Ray's processes are gone
         how = f" ({error})" if isinstance(error, Stopped) else ""
         print(f"gratnet sweep: interrupted{how}; finished volumes and runs are kept, and the same command resumes "
               "the rest (trainings from their last checkpoint)", file=sys.stderr)

@@ -12,10 +12,13 @@ Faults (docs/robustness.md):
   exceptions raised by a task are not retried). Tasks are idempotent and write atomically, and pass only small
   values to each other (the arrays go through the results folder), so a retry finds what was finished and a
   finished output is not computed again (OUT/records, sweep/records.py);
-- the sweep itself: Ctrl-C, SIGTERM and SIGHUP end it through ``ray.shutdown()`` (exit 130, or 128 + the
-  signal); a local Ray instance also has a watchdog (sweep/watchdog.py) that removes every process of it when
-  the sweep is killed with SIGKILL. The same command then continues: finished volumes, blocks, slices and runs
-  are kept, trainings resume from their checkpoints.
+- the sweep itself: Ctrl-C, SIGTERM and SIGHUP end it within a second (exit 130, or 128 + the signal). A
+  local Ray instance has a watchdog (sweep/watchdog.py) that removes every process of it (SIGKILL) when the
+  sweep ends, however: after ``ray.shutdown()`` at a normal end; after a stop, once the driver has only
+  disconnected (Ray's shutdown of its processes gives each up to 1 s, one after another: 1–3 s); and when the
+  sweep itself is killed with SIGKILL. A stopped sweep's instance thus ends as a killed one's does, which
+  leaves nothing half-written (atomic writes). The same command then continues: finished volumes, blocks,
+  slices and runs are kept, trainings resume from their checkpoints.
 
 Ray is imported here only, when a sweep runs: every other command works without it.
 """
@@ -42,6 +45,9 @@ from sweep.spec import SweepSpec
 MISSING_RAY = "gratnet sweep needs Ray, which is not installed: pip install 'gratnet[sweep]' (or 'ray>=2.9')"
 #: Times Ray runs a task again after its worker process or its node died (Ray's own default, said here).
 MAX_RETRIES = 3
+#: Seconds of each ``ray.wait`` call: Python's SIGINT handler runs between two calls (inside one, Ray checks
+#: for signals only once a second), so Ctrl-C is raised within about this.
+WAIT_SECONDS = 0.1
 
 
 class Stopped(KeyboardInterrupt):
@@ -213,7 +219,7 @@ def _wait(ray: Any, labels: dict[Any, str], progress: bool) -> list[str]:
     repeated = 0
     with bar:
         while pending:
-            ready, pending = ray.wait(pending, num_returns=1)
+            ready, pending = ray.wait(pending, num_returns=1, timeout=WAIT_SECONDS)
             for ref in ready:
                 try:
                     ray.get(ref)
@@ -229,6 +235,29 @@ def _wait(ray: Any, labels: dict[Any, str], progress: bool) -> list[str]:
     if repeated:
         failures.append(f"{repeated} more tasks failed with one of these errors (or depended on a failed task)")
     return failures
+
+
+def _stop_instance(ray: Any, guard: watchdog.Watchdog) -> None:
+    """End a stopped sweep's local instance within a second: the driver disconnects (``ray.shutdown()`` without
+    its node: 0.3 s), then the watchdog kills every process of the instance at once (0.2 s), as after a kill -9
+    of the sweep. Ray's own shutdown of the node gives each process up to 1 s to exit, one after another (1–3 s
+    measured); killing the instance under a connected driver instead makes the driver print Ray's errors
+    (task_manager.cc: "Failed to push error to driver", "(raylet) A worker died …")."""
+    worker = getattr(getattr(ray, "_private", None), "worker", None)
+    node = getattr(worker, "_global_node", None)
+    if node is None:  # stopped inside ray.init, or a Ray other than the one measured (2.60): its own shutdown
+        try:
+            ray.shutdown()
+        finally:
+            guard.close()
+        return
+    try:
+        worker._global_node = None  # ray.shutdown() then leaves the node's processes alone
+        ray.shutdown()
+    finally:
+        guard.close()
+    # Those Ray started are the driver's children: reap them (all dead by now, so nothing waits or is signalled).
+    node.kill_all_processes(check_alive=False, allow_graceful=False)
 
 
 def run_sweep(spec: SweepSpec, address: str | None = None, workers: int | None = None, progress: bool = True,
@@ -248,19 +277,26 @@ def run_sweep(spec: SweepSpec, address: str | None = None, workers: int | None =
     owned = not ray.is_initialized() and not nothing_left
     failures: list[str] = []
     guard = watchdog.start() if owned and not address else None  # before Ray starts any process
+    stopped = False
     try:
         if owned:
             _init(ray, address, workers)
         with signals_stop_the_sweep():  # after ray.init, whose own SIGTERM handler would end the process at once
             labels = {} if nothing_left else _submit(ray, spec, plan, out)
             failures = _wait(ray, labels, progress)
+    except KeyboardInterrupt:  # Ctrl-C, or Stopped (SIGTERM, SIGHUP)
+        stopped = True
+        raise
     finally:
-        try:
-            if owned:
-                ray.shutdown()
-        finally:
-            if guard is not None:
-                guard.close()
+        if stopped and guard is not None:
+            _stop_instance(ray, guard)
+        else:
+            try:
+                if owned:
+                    ray.shutdown()
+            finally:
+                if guard is not None:
+                    guard.close()
     rows = collect_rows(spec)
     if rows:
         from sweep.results import write_results

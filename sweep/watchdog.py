@@ -5,8 +5,9 @@ the workers the raylet starts) as children that the kernel kills when the driver
 ``PR_SET_PDEATHSIG``) — but only its direct children: measured with Ray 2.60 on Linux, a sweep killed with
 SIGKILL while a volume was computed left the dashboard agent, the runtime-env agent and two starting workers
 alive 10 s later, and the agents for good (they notice the raylet is gone, then hang reporting it to the dead
-GCS). Ctrl-C and SIGTERM are handled in the driver (sweep.runner: ``ray.shutdown()`` runs); for SIGKILL
-(and the OOM killer) this module adds a watchdog:
+GCS). For SIGKILL (and the OOM killer) this module adds a watchdog, which also ends the instance of a sweep
+stopped by Ctrl-C, SIGTERM or SIGHUP: at once, instead of Ray's shutdown of its processes (1–3 s; sweep.runner
+only disconnects the driver then):
 
 - before ``ray.init()``, the driver puts a token unique to this sweep in its environment
   (:data:`TOKEN_VARIABLE`); every process Ray starts inherits it, whatever its process group or session
@@ -14,9 +15,9 @@ GCS). Ctrl-C and SIGTERM are handled in the driver (sweep.runner: ``ray.shutdown
   ``ray::TASK``, overwrite their ``/proc/PID/environ`` with the title, the token with it);
 - a watchdog process (``python -m sweep.watchdog``, in a session of its own so that a signal to the
   terminal's process group does not take it first) blocks reading a pipe whose only writer is the driver.
-  The read ends when the driver closes the pipe after ``ray.shutdown()`` or when the kernel closes it
-  because the driver died; the watchdog then kills (SIGKILL) every process that carries the token, until
-  none is left, and exits.
+  The read ends when the driver closes the pipe after ``ray.shutdown()`` (or after only disconnecting, when
+  the sweep was stopped) or when the kernel closes it because the driver died; the watchdog then kills
+  (SIGKILL) every process that carries the token, until none is left, and exits.
 
 Linux only (processes are found through ``/proc/PID/environ``); elsewhere :func:`start` returns None and the
 instance's cleanup is Ray's own. A sweep that joins a cluster (``--address``) starts no watchdog: the
@@ -83,7 +84,8 @@ class Watchdog:
         self.process = process
 
     def close(self) -> None:
-        """After ``ray.shutdown()``: let the watchdog remove what is left of the instance, and wait for it."""
+        """After ``ray.shutdown()``: let the watchdog remove what is left of the instance (all of it when the
+        sweep was stopped: sweep.runner), and wait for it."""
         with contextlib.suppress(OSError):
             if self.process.stdin is not None:
                 self.process.stdin.close()

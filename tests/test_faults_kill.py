@@ -6,8 +6,9 @@ one moment in each). After each kill: every file left loads as what it is (volum
 JSON, …) or is a hidden temporary of gratnet.atomic that no command reads; no process of the command (Ray's
 included) is alive 10 s later; the rerun (``train``: with ``--resume`` when a checkpoint was left) gives
 outputs equal to the reference's, arrays bit for bit. The sweep's task records show nothing finished computed
-twice. A sweep stopped with SIGTERM shuts Ray down and exits 143. The watchdog that removes a killed sweep's
-Ray processes is also checked alone, without Ray. The larger run (10 kills a command) is recorded in
+twice. A sweep stopped with SIGTERM exits 143; one stopped with Ctrl-C exits 130 within 1.5 s (its watchdog
+kills its Ray instance), and its rerun ends as the uninterrupted run. The watchdog that removes a killed
+sweep's Ray processes is also checked alone, without Ray. The larger run (10 kills a command) is recorded in
 docs/robustness.md.
 """
 
@@ -117,6 +118,60 @@ def test_a_sweep_stopped_with_sigterm_shuts_ray_down(references):
     assert not broken
     assert gone_after < faults.GRACE_SECONDS
 
+
+
+#: The longest a sweep may take to stop after Ctrl-C once Ray runs (seconds; the issue asks for 1 s, this allows
+#: for a busy CI, as tests/test_faults_render.py does).
+SWEEP_STOP_WITHIN = 1.5
+
+
+def test_ctrl_c_stops_a_running_sweep_at_once_and_the_rerun_ends_the_same(references):
+    """SIGINT once the sweep's tasks run: exit 130 within SWEEP_STOP_WITHIN with the sweep's one line and nothing
+    else on stderr (no message of Ray's, no traceback: the watchdog kills the instance instead of a graceful
+    ``ray.shutdown()``), no process of Ray's left, every file whole; the same command then finishes with the
+    reference's outputs, nothing finished computed twice."""
+    pytest.importorskip("ray")
+    cases, work, reference = references
+    case = cases["sweep"]
+    reference("sweep")
+    folder = work / "sweep" / "sigint"
+    folder.mkdir()
+    log = work / "sweep" / "sigint.log"
+    tag = "sigint-" + str(os.getpid())
+    # A background job ignores SIGINT and its children inherit that across exec: the sweep's must not.
+    ignored = signal.getsignal(signal.SIGINT) is signal.SIG_IGN
+    if ignored:
+        signal.signal(signal.SIGINT, signal.default_int_handler)
+    try:
+        process = faults.start(case.arguments, folder, tag)
+    finally:
+        if ignored:
+            signal.signal(signal.SIGINT, signal.SIG_IGN)
+    deadline = time.monotonic() + 120
+    while not list((folder / "out" / "records").glob("*/*.json")) and process.poll() is None \
+            and time.monotonic() < deadline:
+        time.sleep(0.05)
+    time.sleep(1.0)  # into the first tasks' work
+    assert process.poll() is None, "the sweep ended before its first task started"
+    offset = log.stat().st_size
+    sent = time.monotonic()
+    process.send_signal(signal.SIGINT)
+    status = process.wait(timeout=60)
+    stopped = time.monotonic() - sent
+    lines = faults._visible_lines(log.read_bytes()[offset:].decode("utf-8", "replace"))
+    assert status == 130, lines
+    assert len(lines) == 1 and lines[0].startswith("gratnet sweep: interrupted; finished volumes and runs are kept"), \
+        lines
+    _, survivors = faults.wait_until_gone(tag, folder)
+    assert not survivors, f"alive {faults.GRACE_SECONDS:g} s after the sweep ended: {survivors}"
+    _, _, broken = faults.check_files(folder)
+    assert not broken
+    assert stopped < SWEEP_STOP_WITHIN, f"{stopped:.2f} s from SIGINT to exit"
+    rerun, _ = faults.run_to_end(case.arguments, folder)
+    assert rerun == 0, f"the rerun failed (log: {log})"
+    compared, differences = faults.compare(folder, work / "sweep" / "reference")
+    assert compared > 0 and not differences
+    assert computed_more_than_once(read_records(folder / "out")) == {}
 
 DRIVER = """
 import subprocess, sys, time
