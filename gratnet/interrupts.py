@@ -11,10 +11,10 @@ signals (SIGINT, SIGTERM, SIGHUP, SIGQUIT) and passes on those sent to it alone 
 reached the whole process group). The child writes a heartbeat from a thread, which needs the GIL, tells the
 parent which of gratnet.atomic's temporaries are pending, and, from its SIGINT handler, that it answers the
 signal. It normally does so at once and ends by itself (its own line, exit 130, after its own cleanup: a sweep
-shuts Ray down). If instead, after a SIGINT, its handler has not run and its heartbeat stops for
-:data:`GRACE` seconds, the GIL is held by a call that will not return soon: the parent kills the child
-(SIGKILL), removes its pending temporaries, prints the one line and exits 130. A ``kill -9`` of the parent
-takes the child with it (``PR_SET_PDEATHSIG``).
+leaves its Ray instance, whose watchdog kills it). If instead, after a SIGINT, its handler has not run and
+its heartbeat stops for :data:`GRACE` seconds, the GIL is held by a call that will not return soon: the
+parent kills the child (SIGKILL), removes its pending temporaries, prints the one line and exits 130. A
+``kill -9`` of the parent takes the child with it (``PR_SET_PDEATHSIG``).
 
 Linux only (``PR_SET_PDEATHSIG``); elsewhere, with ``GRATNET_NO_SUPERVISOR=1``, or when threads already run
 (forking them is unsafe), the command runs in the one process as before.
