@@ -439,7 +439,7 @@ def _share_inputs(case: Case, reference: Path, inputs: Path) -> None:
         shutil.copy2(reference / "history.json", inputs / "history.json")
 
 
-def _visible_lines(text: str) -> list[str]:
+def visible_lines(text: str) -> list[str]:
     """The lines a terminal would show: each line's text after its last carriage return (a progress bar redrawn
     with \\r), blank ones left out."""
     return [line.rsplit("\r", 1)[-1].strip() for line in text.split("\n") if line.rsplit("\r", 1)[-1].strip()]
@@ -473,7 +473,7 @@ def kill_once(case: Case, folder: Path, moment: float, reference: Path, number: 
         result.stop_s = round(stop_s, 3)
         with open(log, "rb") as handle:
             handle.seek(offset)
-            result.lines = _visible_lines(handle.read().decode("utf-8", "replace"))
+            result.lines = visible_lines(handle.read().decode("utf-8", "replace"))
     arguments = case.rerun(folder) if case.rerun else case.arguments
     result.rerun_arguments = arguments[len(case.arguments):]
     result.rerun_status, _ = run_to_end(arguments, folder)

@@ -158,7 +158,7 @@ def test_ctrl_c_stops_a_running_sweep_at_once_and_the_rerun_ends_the_same(refere
     process.send_signal(signal.SIGINT)
     status = process.wait(timeout=60)
     stopped = time.monotonic() - sent
-    lines = faults._visible_lines(log.read_bytes()[offset:].decode("utf-8", "replace"))
+    lines = faults.visible_lines(log.read_bytes()[offset:].decode("utf-8", "replace"))
     assert status == 130, lines
     assert len(lines) == 1 and lines[0].startswith("gratnet sweep: interrupted; finished volumes and runs are kept"), \
         lines
