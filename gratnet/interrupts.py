@@ -8,13 +8,14 @@ neither the handler nor an in-process watchdog thread can answer the signal.
 So the ``gratnet`` command runs under a small supervisor: :func:`supervise` forks before any heavy import; the
 child runs the command, the parent waits for it and exits with its status. The parent takes the termination
 signals (SIGINT, SIGTERM, SIGHUP, SIGQUIT) and passes on those sent to it alone (a terminal's Ctrl-C already
-reached the whole process group). The child writes a heartbeat from a thread, which needs the GIL, tells the
-parent which of gratnet.atomic's temporaries are pending, and, from its SIGINT handler, that it answers the
-signal. It normally does so at once and ends by itself (its own line, exit 130, after its own cleanup: a sweep
-leaves its Ray instance, whose watchdog kills it). If instead, after a SIGINT, its handler has not run and
-its heartbeat stops for :data:`GRACE` seconds, the GIL is held by a call that will not return soon: the
-parent kills the child (SIGKILL), removes its pending temporaries, prints the one line and exits 130. A
-``kill -9`` of the parent takes the child with it (``PR_SET_PDEATHSIG``).
+reached the whole process group). The child tells the parent which of gratnet.atomic's temporaries are pending
+and, from its SIGINT handler, that it answers the signal. It normally does so at once and ends by itself (its
+own line, exit 130, after its own cleanup: a sweep leaves its Ray instance, whose watchdog kills it). If
+instead its handler has not run :data:`GRACE` seconds after a SIGINT, its main thread is inside a call that
+will not return soon — one that holds the GIL (a shader compile) or one that releases it (a long numpy or
+torch operation: other threads run, but Python runs signal handlers only in the main thread, between
+bytecodes): the parent kills the child (SIGKILL), removes its pending temporaries, prints the one line and
+exits 130. A ``kill -9`` of the parent takes the child with it (``PR_SET_PDEATHSIG``).
 
 Linux only (``PR_SET_PDEATHSIG``); elsewhere, with ``GRATNET_NO_SUPERVISOR=1``, or when threads already run
 (forking them is unsafe), the command runs in the one process as before.
@@ -30,19 +31,19 @@ import sys
 import threading
 import time
 
-__all__ = ["GRACE", "HEARTBEAT", "SIGNALS", "done", "pending", "supervise", "written"]
+__all__ = ["GRACE", "POLL", "SIGNALS", "done", "pending", "supervise", "written"]
 
-#: Seconds without a heartbeat after a SIGINT before the child counts as stuck in a call that holds the GIL.
+#: Seconds after a SIGINT without the child's handler running before the child counts as stuck in a long call.
 GRACE = 0.5
-#: Seconds between the child's heartbeats.
-HEARTBEAT = 0.1
+#: Seconds between the supervisor's looks at the child.
+POLL = 0.1
 #: The signals the supervisor takes and passes on to the command.
 SIGNALS = (signal.SIGINT, signal.SIGTERM, signal.SIGHUP, signal.SIGQUIT)
 #: ``si_code`` of a signal the kernel sent (a terminal's Ctrl-C, a hangup): the whole process group has it.
 _SI_KERNEL = 0x80
 _PR_SET_PDEATHSIG = 1
 
-#: In the supervised child: the pipe's write end to the supervisor (heartbeats and temporaries), else None.
+#: In the supervised child: the pipe's write end to the supervisor (its messages), else None.
 _channel: int | None = None
 
 
@@ -103,21 +104,11 @@ def _tell(kind: bytes, path: str | os.PathLike[str] | None = None) -> None:
     if _channel is None:
         return
     message = kind + (os.fsencode(os.path.abspath(path)) if path is not None else b"") + b"\0"
-    if len(message) <= 4096:  # PIPE_BUF: one write, not interleaved with a heartbeat
+    if len(message) <= 4096:  # PIPE_BUF: one write, never interleaved with another message
         with contextlib.suppress(OSError):  # the supervisor is gone, or its pipe is full: nothing to do
             os.write(_channel, message)
 
 
-def _heartbeat(channel: int) -> None:
-    """The child's heartbeat: one byte every :data:`HEARTBEAT` seconds while Python can run (needs the GIL)."""
-    while True:
-        try:
-            os.write(channel, b".")
-        except BlockingIOError:
-            pass
-        except OSError:  # the supervisor is gone
-            return
-        time.sleep(HEARTBEAT)
 
 
 def _enabled() -> bool:
@@ -140,7 +131,7 @@ def supervise(command: str) -> int | None:
         return None
     taken = [number for number in SIGNALS if signal.getsignal(number) is not signal.SIG_IGN]
     reader, writer = os.pipe()
-    os.set_blocking(writer, False)  # a heartbeat is dropped rather than wait for a busy supervisor
+    os.set_blocking(writer, False)  # a message is dropped rather than block the command on a busy supervisor
     parent = os.getpid()
     sys.stdout.flush()
     sys.stderr.flush()
@@ -157,7 +148,6 @@ def supervise(command: str) -> int | None:
             signal.signal(signal.SIGINT, _answered)
             sys.unraisablehook = _unraisable
         os.register_at_fork(after_in_child=_forked)
-        threading.Thread(target=_heartbeat, args=(writer,), name="gratnet-heartbeat", daemon=True).start()
         return None
     os.close(writer)
     # The signals stay blocked here to the end: one pending when the child ends (a second Ctrl-C) must not
@@ -172,12 +162,11 @@ def _wait(child: int, reader: int, taken: list[int], command: str) -> int:
     temporaries: set[bytes] = set()
     finished = False
     buffer = b""
-    last_beat = time.monotonic()
     interrupted_at: float | None = None  # the last SIGINT's arrival
     answered = False  # whether the child's Python handler ran since then
     returned: int | None = None  # the command's status, once it has returned (then only teardown is left)
     while True:
-        info = signal.sigtimedwait([*taken, signal.SIGCHLD], HEARTBEAT / 2)
+        info = signal.sigtimedwait([*taken, signal.SIGCHLD], POLL / 2)
         now = time.monotonic()
         if info is not None and info.si_signo != signal.SIGCHLD:
             if info.si_code != _SI_KERNEL:  # sent to this process alone: the child has not seen it
@@ -188,10 +177,8 @@ def _wait(child: int, reader: int, taken: list[int], command: str) -> int:
         with contextlib.suppress(BlockingIOError):
             while chunk := os.read(reader, 65536):
                 buffer += chunk
-                last_beat = now  # any byte: the child's Python ran (a heartbeat or a message, written atomically)
         *messages, buffer = buffer.split(b"\0")
         for message in messages:
-            message = message.lstrip(b".")  # heartbeats come between messages, never inside one
             if message[:1] == b"+":
                 temporaries.add(message[1:])
             elif message[:1] == b"-":
@@ -202,7 +189,6 @@ def _wait(child: int, reader: int, taken: list[int], command: str) -> int:
                 answered = True
             elif message[:1] == b"#" and message[1:].isdigit():
                 returned = int(message[1:])
-        buffer = buffer.lstrip(b".")
         if returned is not None and interrupted_at is not None:
             # Ctrl-C, and the command has returned (its outputs and its line are out): only the interpreter's
             # teardown is left (1–2 s with torch loaded, on a busy CPU), and it does nothing the user waits for.
@@ -215,8 +201,7 @@ def _wait(child: int, reader: int, taken: list[int], command: str) -> int:
             if os.WIFEXITED(status):
                 return os.WEXITSTATUS(status)
             return returned if returned is not None else 128 + os.WTERMSIG(status)
-        if returned is None and interrupted_at is not None and not answered and now - max(interrupted_at,
-                                                                                           last_beat) > GRACE:
+        if returned is None and interrupted_at is not None and not answered and now - interrupted_at > GRACE:
             return _stop(child, temporaries, finished, command)
 
 

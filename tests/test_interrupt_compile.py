@@ -45,6 +45,16 @@ if sys.argv[1] == "gil":
         temporary.write_bytes(b"half")
         print("ready", flush=True)
         sum(range(10**12))  # one C call: holds the GIL and checks no signal
+elif sys.argv[1] == "released":  # inside C calls that release the GIL and check no signal: other threads run
+    import threading
+    import numpy as np
+    threading.Thread(target=lambda: [time.sleep(0.01) for _ in iter(int, 1)], daemon=True).start()
+    matrix = np.random.default_rng(0).random((3000, 3000))
+    with atomic.atomic_path("out.bin") as temporary:
+        temporary.write_bytes(b"half")
+        print("ready", flush=True)
+        while True:
+            np.linalg.eigvals(matrix)  # one LAPACK call of ~10 s on 2 cores, the GIL released
 elif sys.argv[1] == "python":
     try:
         print("ready", flush=True)
@@ -125,6 +135,21 @@ def _gone(tag: str, folder: Path, within: float = 2.0) -> dict[int, str]:
 
 
 pytestmark = pytest.mark.skipif(not sys.platform.startswith("linux"), reason="the supervisor is Linux only")
+
+
+def test_a_command_inside_a_long_call_that_releases_the_gil_stops_within_a_second(tmp_path: Path) -> None:
+    """A long numpy/torch operation releases the GIL, so the command's other threads run, but its SIGINT handler
+    waits for the main thread's call to end: the supervisor stops it all the same (it once waited on, fooled by
+    a heartbeat from another thread: `gratnet groundtruth` ran on for over 20 s after a SIGINT)."""
+    process, tag = _stand_in(tmp_path, "released")
+    time.sleep(0.5)
+    stopped, stderr = _stop(process)
+    print(f"inside a GIL-releasing call: exit {process.returncode} {stopped:.3f} s after SIGINT")
+    assert process.returncode == 130, stderr
+    assert stopped < STOP_WITHIN, f"{stopped:.2f} s from SIGINT to exit"
+    assert _lines(stderr) == ["gratnet stand-in: interrupted; nothing was written"], stderr
+    assert os.listdir(tmp_path) == []
+    assert not _gone(tag, tmp_path)
 
 
 def test_a_command_stuck_holding_the_gil_stops_within_a_second(tmp_path: Path) -> None:
