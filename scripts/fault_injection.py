@@ -442,7 +442,7 @@ def _share_inputs(case: Case, reference: Path, inputs: Path) -> None:
 def visible_lines(text: str) -> list[str]:
     """The lines a terminal would show: each line's text after its last carriage return (a progress bar redrawn
     with \\r), blank ones left out."""
-    return [line.rsplit("\r", 1)[-1].strip() for line in text.split("\n") if line.rsplit("\r", 1)[-1].strip()]
+    return [line.rsplit("\r", 1)[-1] for line in text.split("\n") if line.rsplit("\r", 1)[-1].strip()]
 
 
 def kill_once(case: Case, folder: Path, moment: float, reference: Path, number: int = signal.SIGKILL) -> Kill:

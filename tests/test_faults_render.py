@@ -29,6 +29,7 @@ import pytest
 import viewer.context
 import viewer.render_cli
 from gratnet.cli import main
+from scripts.fault_injection import visible_lines
 from tests.test_shader_parity import random_model
 from viewer.antialias import sample_offsets
 from viewer.camera import Camera, Light
@@ -44,12 +45,6 @@ LIGHT = Light.directional(40.0, 80.0)
 
 # -------------------------------------------------------------------------------------------------
 # Ctrl-C in a real process
-
-
-def _visible_lines(stderr: str) -> list[str]:
-    """The lines a terminal would show at the end: each line's text after its last carriage return (tqdm
-    redraws its bar with \\r and clears it with spaces), blank ones left out."""
-    return [line.rsplit("\r", 1)[-1] for line in stderr.split("\n") if line.rsplit("\r", 1)[-1].strip()]
 
 
 def _interrupted(folder: Path, arguments: list[str]) -> tuple[int, float, str]:
@@ -89,7 +84,7 @@ def test_ctrl_c_stops_a_mesh_render_within_a_second_and_writes_nothing(tmp_path,
                                                     path, "--out", "x.png"])
     assert code == 130, stderr
     assert stopped < STOP_WITHIN, f"{stopped:.2f} s from SIGINT to exit"
-    assert _visible_lines(stderr) == ["gratnet render: interrupted; nothing was written"], stderr
+    assert visible_lines(stderr) == ["gratnet render: interrupted; nothing was written"], stderr
     assert sorted(os.listdir(tmp_path)) == []
 
 
@@ -98,7 +93,7 @@ def test_ctrl_c_stops_a_slice_render_within_a_second_and_writes_nothing(tmp_path
                                                     "--weights-path", "texture", "--out", "s.exr"])
     assert code == 130, stderr
     assert stopped < STOP_WITHIN, f"{stopped:.2f} s from SIGINT to exit"
-    assert _visible_lines(stderr) == ["gratnet render: interrupted; nothing was written"], stderr
+    assert visible_lines(stderr) == ["gratnet render: interrupted; nothing was written"], stderr
     assert sorted(os.listdir(tmp_path)) == []
 
 
@@ -114,7 +109,7 @@ def test_the_progress_bar_shows_on_long_renders_and_quiet_hides_it(tmp_path, cap
         assert stderr == ""
     else:
         assert "gratnet render:   0%|" in stderr and "%|█" in stderr
-        assert _visible_lines(stderr) == []
+        assert visible_lines(stderr) == []
     assert sorted(os.listdir(tmp_path)) == ["x.config.json", "x.png"]
 
 

@@ -24,7 +24,7 @@ REPO = Path(__file__).resolve().parents[1]
 if str(REPO) not in sys.path:  # scripts/ is a folder of the repository, not an installed package
     sys.path.insert(0, str(REPO))
 
-from scripts.fault_injection import TAG_VARIABLE, tagged_processes  # noqa: E402
+from scripts.fault_injection import TAG_VARIABLE, tagged_processes, visible_lines  # noqa: E402
 
 #: The longest a command may take to stop after SIGINT (seconds; the issue asks for 1 s, this allows for a busy CI).
 STOP_WITHIN = 1.5
@@ -104,11 +104,6 @@ def _environment(tag: str, **extra: str) -> dict[str, str]:
             "PYTHONPATH": os.pathsep.join(filter(None, [str(REPO), os.environ.get("PYTHONPATH")]))}
 
 
-def _lines(text: str) -> list[str]:
-    """What a terminal shows: each line's text after its last carriage return, blank ones left out."""
-    return [line.rsplit("\r", 1)[-1] for line in text.split("\n") if line.rsplit("\r", 1)[-1].strip()]
-
-
 def _stand_in(folder: Path, mode: str) -> tuple[subprocess.Popen[bytes], str]:
     tag = uuid.uuid4().hex
     process = subprocess.Popen([sys.executable, "-c", STAND_IN, mode], cwd=folder, env=_environment(tag),
@@ -150,7 +145,7 @@ def test_a_command_stuck_in_a_long_call_stops_within_a_second(tmp_path: Path, mo
     print(f"stuck in a long call ({mode}): exit {process.returncode} {stopped:.3f} s after SIGINT")
     assert process.returncode == 130, stderr
     assert stopped < STOP_WITHIN, f"{stopped:.2f} s from SIGINT to exit"
-    assert _lines(stderr) == ["gratnet stand-in: interrupted; nothing was written"], stderr
+    assert visible_lines(stderr) == ["gratnet stand-in: interrupted; nothing was written"], stderr
     assert os.listdir(tmp_path) == []  # the pending temporary removed by the supervisor
     assert not _gone(tag, tmp_path)
 
@@ -159,7 +154,7 @@ def test_a_command_that_answers_ctrl_c_itself_is_left_to_do_so(tmp_path: Path) -
     process, tag = _stand_in(tmp_path, "python")
     stopped, stderr = _stop(process)
     assert process.returncode == 130 and stopped < STOP_WITHIN
-    assert _lines(stderr) == ["stand-in: interrupted by itself"], stderr
+    assert visible_lines(stderr) == ["stand-in: interrupted by itself"], stderr
     assert not _gone(tag, tmp_path)
 
 
@@ -209,7 +204,7 @@ def test_ctrl_c_during_a_cold_shader_compile_stops_within_a_second(tmp_path: Pat
     print(f"cold compile ({marker}): exit {process.returncode} {stopped:.3f} s after SIGINT")
     assert process.returncode == 130, after
     assert stopped < STOP_WITHIN, f"{stopped:.2f} s from SIGINT to exit"
-    assert _lines(after) == ["gratnet render: interrupted; nothing was written"], after
+    assert visible_lines(after) == ["gratnet render: interrupted; nothing was written"], after
     assert os.listdir(work) == []
     assert not _gone(tag, work)
 
@@ -218,7 +213,7 @@ def test_ctrl_c_after_the_command_returned_changes_nothing(tmp_path: Path) -> No
     """A SIGINT in the interpreter's teardown (the work done, its status known): no line, the command's status."""
     process, tag = _stand_in(tmp_path, "done")
     _, stderr = _stop(process)
-    assert process.returncode == 0 and _lines(stderr) == [], stderr
+    assert process.returncode == 0 and visible_lines(stderr) == [], stderr
     assert not _gone(tag, tmp_path)
 
 
@@ -235,5 +230,5 @@ def test_ctrl_c_inside_a_garbage_collection_callback_is_not_lost(tmp_path: Path)
     process, tag = _stand_in(tmp_path, "callback")
     stderr = process.communicate(timeout=60)[1].decode("utf-8", "replace")
     assert process.returncode == 130, stderr
-    assert _lines(stderr) == ["stand-in: interrupted by itself"], stderr
+    assert visible_lines(stderr) == ["stand-in: interrupted by itself"], stderr
     assert not _gone(tag, tmp_path)
