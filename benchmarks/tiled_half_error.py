@@ -26,22 +26,15 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 import numpy as np  # noqa: E402
 
 from gratnet.brdf import STANDARD_SLICES, a_term, direction, slice_view_directions  # noqa: E402
-from gratnet.display import ldr_flip, xyz_to_linear_srgb  # noqa: E402
+from gratnet.display import ldr_flip  # noqa: E402
 from gratnet.encoding import range_forward  # noqa: E402
 from gratnet.errors import GratNetError  # noqa: E402
 from gratnet.modelfile import load_model  # noqa: E402
+from trainer.metrics import to_display_srgb  # noqa: E402
 from viewer.catalog import resolve_material  # noqa: E402
 from viewer.context import create_headless_context  # noqa: E402
 from viewer.deferred import DeferredRenderer  # noqa: E402
 from viewer.renderer import NetworkRenderer  # noqa: E402
-
-
-def _display(xyz: np.ndarray) -> np.ndarray:
-    """Display sRGB in [0, 1] as trainer/metrics.py shows slices to FLIP (no 8-bit rounding)."""
-    import colour
-
-    linear = np.clip(xyz_to_linear_srgb(xyz), 0.0, 1.0)
-    return np.clip(np.asarray(colour.cctf_encoding(linear, function="sRGB"), dtype=np.float64), 0.0, 1.0)
 
 
 def main() -> int:
@@ -73,7 +66,7 @@ def main() -> int:
                         image = np.zeros((arguments.size, arguments.size, 3))
                         image[inside] = exposure * attenuation * value
                         images[name] = image
-                    flip, _ = ldr_flip(_display(images["float"]), _display(images["half"]))
+                    flip, _ = ldr_flip(to_display_srgb(images["float"]), to_display_srgb(images["half"]))
                     peak = xyz["float"].max()
                     lit = xyz["float"].max(axis=-1) > 1e-3 * peak
                     relative = (np.abs(xyz["half"] - xyz["float"])[lit]
