@@ -101,8 +101,10 @@ def read_exr(path: Path) -> np.ndarray:
 
 def display(linear: np.ndarray) -> np.ndarray:
     """Linear sRGB (exposure applied) → display sRGB in [0, 1] (clipped, the sRGB transfer function)."""
-    clipped = np.clip(linear, 0.0, 1.0)
-    return np.where(clipped <= 0.0031308, 12.92 * clipped, 1.055 * clipped ** (1.0 / 2.4) - 0.055)
+    import colour
+
+    encoded = colour.cctf_encoding(np.clip(linear, 0.0, 1.0), function="sRGB")
+    return np.clip(np.asarray(encoded, dtype=np.float64), 0.0, 1.0)
 
 
 def compare_images(reference: np.ndarray, test: np.ndarray) -> dict[str, float]:
