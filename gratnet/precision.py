@@ -33,6 +33,7 @@ import numpy as np
 from gratnet.encoding import encode, network_coordinates, range_inverse
 from gratnet.featuregrid import grid_features
 from gratnet.modelfile import ModelFile, validated
+from gratnet.network import activate_hidden, activate_output
 
 #: float32 unit roundoff u = 2⁻²⁴: a correctly rounded operation errs by at most u relative.
 UNIT_ROUNDOFF = 2.0**-24
@@ -109,19 +110,11 @@ def _gamma(terms: int) -> float:
     return nu / (1.0 - nu)
 
 
-def _activate(x: np.ndarray, name: str) -> np.ndarray:
-    from gratnet.network import activate_hidden, activate_output
-
-    return activate_output(x, name) if name in ("clamp", "sigmoid", "none") else activate_hidden(x, name)
-
-
 def _forward(model: ModelFile, inputs: np.ndarray, rng: np.random.Generator | None, ulps: float = 4.0) -> np.ndarray:
     """The network's outputs (eq. 7's y) on ``inputs`` (N, width), in float64; with ``rng``, every layer's
     pre-activations moved by a random share of their float32 rounding bound γ_{n+1}·(|W|·|x| + |b|) (the
     bias is the (n+1)-th term; any summation order, fused or not), and SiLU's output by ``ulps`` u (exp, 1 + e,
     division, product): one float32 driver's rounding, propagated through the network's own Jacobian."""
-    from gratnet.network import activate_hidden, activate_output
-
     x = inputs
     last = len(model.weights) - 1
     for k, (weight, bias) in enumerate(zip(model.weights, model.biases, strict=True)):
