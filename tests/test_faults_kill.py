@@ -95,24 +95,13 @@ def test_a_sweep_stopped_with_sigterm_shuts_ray_down(references):
     """SIGTERM (as from ``kill``, systemd or a batch scheduler) once the sweep's tasks run: exit 143 with one line
     saying how to continue, no process of Ray's left, every file whole (the rerun after a stop is the kills'
     case, above)."""
-    pytest.importorskip("ray")
-    cases, work, reference = references
-    case = cases["sweep"]
-    reference("sweep")
-    folder = work / "sweep" / "sigterm"
-    folder.mkdir()
-    tag = "sigterm-" + str(os.getpid())
-    process = faults.start(case.arguments, folder, tag)
-    deadline = time.monotonic() + 120
-    while not list((folder / "out" / "records").glob("*/*.json")) and process.poll() is None \
-            and time.monotonic() < deadline:
-        time.sleep(0.05)
+    _, _, folder, tag, process = _running_sweep(references, "sigterm")
     assert process.poll() is None, "the sweep ended before its first task started"
     process.send_signal(signal.SIGTERM)
     assert process.wait(timeout=60) == 128 + signal.SIGTERM
     gone_after, survivors = faults.wait_until_gone(tag, folder)
     assert not survivors, f"alive {faults.GRACE_SECONDS:g} s after the sweep ended: {survivors}"
-    log = (work / "sweep" / "sigterm.log").read_text()
+    log = folder.with_name(folder.name + ".log").read_text()
     assert "gratnet sweep: interrupted (SIGTERM); finished volumes and runs are kept" in log
     _, _, broken = faults.check_files(folder)
     assert not broken
@@ -120,25 +109,19 @@ def test_a_sweep_stopped_with_sigterm_shuts_ray_down(references):
 
 
 
-#: The longest a sweep may take to stop after Ctrl-C once Ray runs (seconds; the issue asks for 1 s, this allows
-#: for a busy CI, as tests/test_faults_render.py does).
-SWEEP_STOP_WITHIN = 1.5
-
-
-def test_ctrl_c_stops_a_running_sweep_at_once_and_the_rerun_ends_the_same(references):
-    """SIGINT once the sweep's tasks run: exit 130 within SWEEP_STOP_WITHIN with the sweep's one line and nothing
-    else on stderr (no message of Ray's, no traceback: the watchdog kills the instance instead of a graceful
-    ``ray.shutdown()``), no process of Ray's left, every file whole; the same command then finishes with the
-    reference's outputs, nothing finished computed twice."""
+def _running_sweep(references: tuple[dict[str, faults.Case], Path, Callable[[str], float]],
+                   name: str) -> tuple[faults.Case, Path, Path, str, subprocess.Popen]:
+    """The sweep case (its reference run done) started in WORK/sweep/NAME, returned once its first task has
+    written its record (or it ended, or 120 s passed): (case, work, folder, process tag, process). A background
+    job ignores SIGINT and its children inherit that across exec: the sweep's must not, so it starts with
+    SIGINT's default disposition."""
     pytest.importorskip("ray")
     cases, work, reference = references
     case = cases["sweep"]
     reference("sweep")
-    folder = work / "sweep" / "sigint"
+    folder = work / "sweep" / name
     folder.mkdir()
-    log = work / "sweep" / "sigint.log"
-    tag = "sigint-" + str(os.getpid())
-    # A background job ignores SIGINT and its children inherit that across exec: the sweep's must not.
+    tag = f"{name}-{os.getpid()}"
     ignored = signal.getsignal(signal.SIGINT) is signal.SIG_IGN
     if ignored:
         signal.signal(signal.SIGINT, signal.default_int_handler)
@@ -151,6 +134,21 @@ def test_ctrl_c_stops_a_running_sweep_at_once_and_the_rerun_ends_the_same(refere
     while not list((folder / "out" / "records").glob("*/*.json")) and process.poll() is None \
             and time.monotonic() < deadline:
         time.sleep(0.05)
+    return case, work, folder, tag, process
+
+
+#: The longest a sweep may take to stop after Ctrl-C once Ray runs (seconds; the issue asks for 1 s, this allows
+#: for a busy CI, as tests/test_faults_render.py does).
+SWEEP_STOP_WITHIN = 1.5
+
+
+def test_ctrl_c_stops_a_running_sweep_at_once_and_the_rerun_ends_the_same(references):
+    """SIGINT once the sweep's tasks run: exit 130 within SWEEP_STOP_WITHIN with the sweep's one line and nothing
+    else on stderr (no message of Ray's, no traceback: the watchdog kills the instance instead of a graceful
+    ``ray.shutdown()``), no process of Ray's left, every file whole; the same command then finishes with the
+    reference's outputs, nothing finished computed twice."""
+    case, work, folder, tag, process = _running_sweep(references, "sigint")
+    log = folder.with_name(folder.name + ".log")
     time.sleep(1.0)  # into the first tasks' work
     assert process.poll() is None, "the sweep ended before its first task started"
     offset = log.stat().st_size
