@@ -14,7 +14,8 @@
 - ``--slice``: instead of a mesh, the network's BRDF slice for the light θ,φ (physics.md "BRDF slice").
 - ``--reference VOLUME.exr``: the ground-truth volume looked up instead of the network (viewer.reference); with
   ``--material`` it must be that material's surface (source and σs) and the view is the material's; alone, the
-  fallback view and an exposure that puts the brightest 0.5 % of the lit pixels at white.
+  fallback view and the exposure the black-picture hint would suggest (gratnet.showcase.suggest_exposure: the
+  99th percentile of the lit pixels at white, raised until 3 % of the picture shows).
 - ``--spp N``: N samples per pixel (anti-aliasing: the mean of N renders at sub-pixel offsets, each its own
   key vector; the same flag and meaning as ``gratnet mitsuba-render``); default 1.
 - Output: ``.png`` = display sRGB, 8-bit (``gratnet.display``, like every GratNet PNG); ``.exr`` = linear
@@ -64,7 +65,6 @@ from viewer.scene_config import (
 
 if TYPE_CHECKING:
     import moderngl
-    import numpy as np
 
     from viewer.pacing import Progress
 
@@ -145,21 +145,6 @@ def _progress_bar(quiet: bool) -> Iterator[Progress]:
         yield report
 
 
-def _auto_exposure(xyz: np.ndarray) -> float:
-    """The exposure that puts the brightest 0.5 % of the lit pixels at display white (largest linear sRGB
-    channel), for a picture rendered at exposure 1; 1 when nothing is lit."""
-    import numpy as np
-
-    from gratnet.display import xyz_to_linear_srgb
-
-    peak = np.max(xyz_to_linear_srgb(np.asarray(xyz, dtype=np.float64)), axis=-1)
-    lit = peak[peak > 0.0]
-    if lit.size == 0:
-        return 1.0
-    exposure = 1.0 / float(np.percentile(lit, 99.5))
-    return float(f"{exposure:.3g}") if np.isfinite(exposure) and exposure > 0.0 else 1.0
-
-
 def run(arguments: argparse.Namespace) -> int:
     """Check every input, render, write the image and its config atomically. Ctrl-C: exit status 130 and one
     line saying whether the output was written (it lands whole or not at all; the render answers within a
@@ -221,6 +206,7 @@ def _render(arguments: argparse.Namespace, out: Path) -> int:
     mesh = None if config.slice else build_mesh(config.mesh)
 
     from gratnet.bounds import DISPLAY_SKIP_THRESHOLD
+    from gratnet.showcase import suggest_exposure
     from viewer.context import create_headless_context
     from viewer.scene import SceneRenderer
 
@@ -254,7 +240,7 @@ def _render(arguments: argparse.Namespace, out: Path) -> int:
     if not np.all(np.isfinite(xyz)):
         raise GratNetError("the render contains NaN or inf; nothing was written (please report this)")
     if auto_exposure:  # rendered at exposure 1; the picture is linear in it
-        exposure = _auto_exposure(xyz)
+        exposure = suggest_exposure(xyz, 1.0) or 1.0  # the black-image hint's rule; 1 when nothing is lit
         xyz = xyz * exposure
         config = dataclasses.replace(config, exposure=exposure)
     if reference_only:
