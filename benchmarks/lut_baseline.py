@@ -14,9 +14,12 @@ trilinear in (u*, v*, t), float16 storage) at full resolution and with only ever
 
     python benchmarks/lut_baseline.py paper-cd VOLUME.exr [--strides 1,4] [--frame 1920x1080] [--repeats 3]
         [--cache-dir out/cache] [--json docs/data/lut_baseline_paper-cd.json] [--figure docs/images/lut_baseline.png]
-    python benchmarks/lut_baseline.py paper-cd VOLUME.exr --plot-only --json ROWS.json --figure PLOT.png
+    python benchmarks/lut_baseline.py --plot-only --json ROWS.json [ROWS.json ...] --figure PLOT.png
 
-Prints a markdown table; --json writes every figure, --figure plots error against frame time (marker labels: MB).
+Prints a markdown table; --json writes every figure, --figure plots error against frame time (one colour per
+material, a circle for the network, a square for the full table and triangles for smaller ones; the legend gives
+each one's memory). --plot-only draws the rows of one or more earlier runs (several materials in one plot) without
+measuring anything.
 """
 
 from __future__ import annotations
@@ -30,7 +33,6 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-from oracle_table import decimated, oracle_rows  # benchmarks/ sibling: the oracle's slices and metrics
 
 from gratnet.atomic import atomic_path, write_text_atomic
 from gratnet.modelfile import load_model
@@ -42,6 +44,11 @@ from viewer.catalog import build_mesh, resolve_material
 from viewer.context import create_headless_context
 from viewer.defaults import resolve_defaults
 from viewer.scene import SceneRenderer
+
+try:  # run as a script: benchmarks/ is sys.path[0]; the oracle's slices and metrics
+    from oracle_table import decimated, oracle_rows
+except ModuleNotFoundError:  # imported as benchmarks.lut_baseline (the tests)
+    from benchmarks.oracle_table import decimated, oracle_rows
 
 
 def frame_ms(scene: SceneRenderer, size: tuple[int, int], material: str, repeats: int) -> float:
@@ -113,19 +120,23 @@ def figure(rows: list[dict[str, Any]], path: Path) -> None:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    axes = plt.figure(figsize=(7.0, 4.2), layout="constrained").gca()
-    for row in rows:
-        marker = "o" if row["what"] == "network" else "s"
-        axes.scatter(row["ms_per_frame"], row["flip_mean"], marker=marker, s=40)
-        axes.annotate(f"{row['material']} {row['what']}, {row['mb']:.0f} MB", (row["ms_per_frame"], row["flip_mean"]),
-                      textcoords="offset points", xytext=(5, 4), fontsize=7)
+    axes = plt.figure(figsize=(8.0, 4.2), layout="constrained").gca()
+    materials = list(dict.fromkeys(row["material"] for row in rows))
+    tables = sorted((row for row in rows if row["what"] != "network"), key=lambda row: -row["mb"])
+    for row in rows:  # a legend rather than labels at the points: tables of several materials lie close together
+        # the network a circle; each material's tables, largest first: square, triangles, diamond
+        rank = [table for table in tables if table["material"] == row["material"]].index(row) \
+            if row["what"] != "network" else -1
+        marker = "o" if rank < 0 else ("s", "^", "v", "D")[min(rank, 3)]
+        axes.scatter(row["ms_per_frame"], row["flip_mean"], marker=marker, s=40,
+                     color=f"C{materials.index(row['material']) % 10}",
+                     label=f"{row['material']} {row['what']}, {row['mb']:.1f} MB")
     axes.set_xlabel(f"ms per {rows[0]['frame']} frame (CD disc, 1 spp, {rows[0].get('renderer', '?')})", fontsize=8)
     axes.set_ylabel("mean LDR-FLIP, the paper's five BRDF slices")
     axes.set_title("network against the ground-truth volume as a look-up table", fontsize=9)
     axes.set_yscale("log")
     axes.set_xscale("log")
-    low, high = min(row["ms_per_frame"] for row in rows), max(row["ms_per_frame"] for row in rows)
-    axes.set_xlim(low / 2.0, high * 8.0)  # room for the labels right of the points
+    axes.legend(fontsize=7, loc="center left", bbox_to_anchor=(1.01, 0.5), frameon=False)
     with atomic_path(path) as temporary:
         axes.figure.savefig(temporary, format="png", dpi=110)
     plt.close(axes.figure)
@@ -133,22 +144,31 @@ def figure(rows: list[dict[str, Any]], path: Path) -> None:
 
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("material")
-    parser.add_argument("volume", type=Path)
+    parser.add_argument("material", nargs="?", help="shipped material (not with --plot-only)")
+    parser.add_argument("volume", type=Path, nargs="?", help="its training volume, VOLUME.exr (not with --plot-only)")
     parser.add_argument("--strides", default="1,4", help="u*/v* strides of the table, comma-separated")
     parser.add_argument("--frame", default="1920x1080", help="frame size WxH, pixels")
     parser.add_argument("--repeats", type=int, default=3)
     parser.add_argument("--slice-size", type=int, default=256)
     parser.add_argument("--cache-dir", default="out/cache")
-    parser.add_argument("--json", type=Path)
+    parser.add_argument("--json", type=Path, nargs="+", help="where to write the rows (one file); with --plot-only, "
+                        "the rows to draw (one or more files)")
     parser.add_argument("--figure", type=Path)
     parser.add_argument("--plot-only", action="store_true", help="draw --figure from the rows in --json (no runs)")
     arguments = parser.parse_args(argv)
     if arguments.plot_only:
-        if not (arguments.json and arguments.figure):
-            parser.error("--plot-only needs --json (the rows) and --figure")
-        figure(json.loads(arguments.json.read_text(encoding="utf-8")), arguments.figure)
+        if not (arguments.json and arguments.figure) or arguments.material or arguments.volume:
+            parser.error("--plot-only takes --json ROWS.json [...] and --figure, and no material or volume")
+        missing = [str(path) for path in arguments.json if not path.is_file()]
+        if missing:
+            parser.error(f"--json: no such file: {', '.join(missing)}")
+        figure([row for path in arguments.json for row in json.loads(path.read_text(encoding="utf-8"))],
+               arguments.figure)
         return 0
+    if not (arguments.material and arguments.volume):
+        parser.error("a material and its volume are needed (or --plot-only)")
+    if arguments.json and len(arguments.json) > 1:
+        parser.error("--json takes one file when measuring")
     try:
         strides = [int(part) for part in arguments.strides.split(",")]
         width, height = (int(part) for part in arguments.frame.lower().split("x"))
@@ -158,7 +178,7 @@ def main(argv: list[str] | None = None) -> int:
                    arguments.slice_size, arguments.cache_dir)
     sys.stdout.write(markdown(rows))
     if arguments.json:
-        write_text_atomic(arguments.json, json.dumps(rows, indent=1) + "\n")
+        write_text_atomic(arguments.json[0], json.dumps(rows, indent=1) + "\n")
     if arguments.figure:
         figure(rows, arguments.figure)
     return 0
