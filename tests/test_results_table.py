@@ -84,3 +84,22 @@ def test_a_slices_table_without_the_trained_count_gives_no_oracle(tmp_path, monk
     assert results_table.paper_oracle(folder, {}, 21) == pytest.approx(
         next(row["brdf_slices"][0]["flip"] for row in table if row["slices"] == 21))
     assert results_table.paper_oracle(folder, {"oracle_flip": 0.5}, 41) == 0.5  # its own evaluation first
+
+
+def test_the_seeds_section_is_the_recorded_seeds_mean_and_spread(page):
+    """docs/data/seeds_paper.json (benchmarks/seed_summary.py): each dataset's line gives the mean and sample spread
+    of its seeds' (0°, 0°) FLIP, recomputed here, and the verdict against the paper's own column."""
+    import statistics
+
+    path = REPO / "docs" / "data" / "seeds_paper.json"
+    if not path.exists():
+        assert "## Seeds" not in page
+        return
+    section = page.split("## Seeds", 1)[1].split("\n## ", 1)[0]
+    for row in json.loads(path.read_text()):
+        flips = row["flip_0_0"]
+        assert len(flips) == len(row["seeds"]) >= 3  # the rule: a mean over at least three seeds
+        line = next(line for line in section.splitlines() if line.startswith(f"| {row['dataset']} |"))
+        assert f"{statistics.fmean(flips):.4f} ± {statistics.stdev(flips):.4f}" in line
+        verdict = "**yes**" if statistics.fmean(flips) <= PAPER[row["dataset"]] else "no"
+        assert f"| {verdict} |" in line
