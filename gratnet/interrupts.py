@@ -109,8 +109,6 @@ def _tell(kind: bytes, path: str | os.PathLike[str] | None = None) -> None:
             os.write(_channel, message)
 
 
-
-
 def _enabled() -> bool:
     return (sys.platform.startswith("linux") and hasattr(os, "fork") and not os.environ.get("GRATNET_NO_SUPERVISOR")
             and threading.active_count() == 1)
