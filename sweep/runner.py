@@ -237,27 +237,18 @@ def _wait(ray: Any, labels: dict[Any, str], progress: bool) -> list[str]:
     return failures
 
 
-def _stop_instance(ray: Any, guard: watchdog.Watchdog) -> None:
-    """End a stopped sweep's local instance within a second: the driver disconnects (``ray.shutdown()`` without
-    its node: 0.3 s), then the watchdog kills every process of the instance at once (0.2 s), as after a kill -9
-    of the sweep. Ray's own shutdown of the node gives each process up to 1 s to exit, one after another (1–3 s
-    measured); killing the instance under a connected driver instead makes the driver print Ray's errors
-    (task_manager.cc: "Failed to push error to driver", "(raylet) A worker died …")."""
+def _detach_node(ray: Any) -> Any:
+    """For a stopped sweep's local instance: take its node from the driver, so that the ``ray.shutdown()`` that
+    follows only disconnects (0.3 s) and the watchdog then kills every process of the instance at once (0.2 s),
+    as after a kill -9 of the sweep. Ray's own shutdown of the node gives each process up to 1 s to exit, one
+    after another (1–3 s measured); killing the instance under a connected driver instead makes the driver print
+    Ray's errors (task_manager.cc: "Failed to push error to driver", "(raylet) A worker died …"). Returns the
+    node, or None (stopped inside ray.init, or a Ray other than the one measured, 2.60: its own shutdown then)."""
     worker = getattr(getattr(ray, "_private", None), "worker", None)
     node = getattr(worker, "_global_node", None)
-    if node is None:  # stopped inside ray.init, or a Ray other than the one measured (2.60): its own shutdown
-        try:
-            ray.shutdown()
-        finally:
-            guard.close()
-        return
-    try:
-        worker._global_node = None  # ray.shutdown() then leaves the node's processes alone
-        ray.shutdown()
-    finally:
-        guard.close()
-    # Those Ray started are the driver's children: reap them (all dead by now, so nothing waits or is signalled).
-    node.kill_all_processes(check_alive=False, allow_graceful=False)
+    if node is not None:
+        worker._global_node = None
+    return node
 
 
 def run_sweep(spec: SweepSpec, address: str | None = None, workers: int | None = None, progress: bool = True,
@@ -288,15 +279,16 @@ def run_sweep(spec: SweepSpec, address: str | None = None, workers: int | None =
         stopped = True
         raise
     finally:
-        if stopped and guard is not None:
-            _stop_instance(ray, guard)
-        else:
-            try:
-                if owned:
-                    ray.shutdown()
-            finally:
-                if guard is not None:
-                    guard.close()
+        detached = _detach_node(ray) if stopped and guard is not None else None
+        try:
+            if owned:
+                ray.shutdown()
+        finally:
+            if guard is not None:
+                guard.close()
+        if detached is not None:
+            # Those Ray started are the driver's children: reap them (all dead by now: nothing waits or is signalled).
+            detached.kill_all_processes(check_alive=False, allow_graceful=False)
     rows = collect_rows(spec)
     if rows:
         from sweep.results import write_results
