@@ -122,13 +122,13 @@ def figure(rows: list[dict[str, Any]], path: Path) -> None:
 
     axes = plt.figure(figsize=(8.0, 4.2), layout="constrained").gca()
     materials = list(dict.fromkeys(row["material"] for row in rows))
-    tables = sorted((row for row in rows if row["what"] != "network"), key=lambda row: -row["mb"])
+    markers = {}  # the network a circle; each material's tables, largest first: square, triangles, diamond
+    for material in materials:
+        tables = sorted((row for row in rows if row["material"] == material and row["what"] != "network"),
+                        key=lambda row: -row["mb"])
+        markers.update({id(row): ("s", "^", "v", "D")[min(rank, 3)] for rank, row in enumerate(tables)})
     for row in rows:  # a legend rather than labels at the points: tables of several materials lie close together
-        # the network a circle; each material's tables, largest first: square, triangles, diamond
-        rank = [table for table in tables if table["material"] == row["material"]].index(row) \
-            if row["what"] != "network" else -1
-        marker = "o" if rank < 0 else ("s", "^", "v", "D")[min(rank, 3)]
-        axes.scatter(row["ms_per_frame"], row["flip_mean"], marker=marker, s=40,
+        axes.scatter(row["ms_per_frame"], row["flip_mean"], marker=markers.get(id(row), "o"), s=40,
                      color=f"C{materials.index(row['material']) % 10}",
                      label=f"{row['material']} {row['what']}, {row['mb']:.1f} MB")
     axes.set_xlabel(f"ms per {rows[0]['frame']} frame (CD disc, 1 spp, {rows[0].get('renderer', '?')})", fontsize=8)
