@@ -1,0 +1,53 @@
+#!/usr/bin/env bash
+# Issue 42 screening: cheaper grid + funnel models on paper-cd at a short budget, each against today's shipped
+# recipe (candidate "base") trained for the same epochs. One core (OMP_NUM_THREADS=1, nice), one run after
+# another; a run cut off is resumed (--resume) and a finished one (its metrics.json) skipped, so calling again
+# goes on where the last call stopped. Each run is then scored with the paper's five BRDF slices and
+# docs/results.md's three further views at 256² (gratnet evaluate), and the table is printed by
+# fast_models_table.py.
+# Usage: bash docs/experiments/probes/fast_models_screen.sh [CANDIDATE ...]   (default: every candidate below)
+#   OUT=out/fast (volume, runs, slice cache), EPOCHS=3, GRATNET=.venv/bin/gratnet
+set -euo pipefail
+cd "$(dirname "$0")/../../.."
+gratnet=${GRATNET:-.venv/bin/gratnet}
+out=${OUT:-out/fast}
+epochs=${EPOCHS:-3}
+views="45,60,5000;15,200,3000;60,315,5000"
+volume="$out/volumes/paper-cd.exr"
+# The shipped paper-cd recipe less its network (assets/paper-cd/train_command.json).
+common=(--batch-size 2048 --split all --architecture grid --range-power 4 --grid-interpolation smoothstep
+        --device cpu --no-evaluate --epochs "$epochs")
+declare -A candidates=(
+    # name: grid (levels × features @ finest, t nodes), encoding (L, L_t), hidden widths. MACs in the log.
+    [base]="--preset small --grid-levels 3 --grid-resolution 251 --grid-t-resolution 6 --grid-features 4"
+    [g8-L8-h44]="--hidden 44,24,12 --grid-levels 3 --grid-resolution 251 --grid-t-resolution 5 --grid-features 8 --frequencies 8 --t-frequencies 2"
+    [g8-L4-h56]="--hidden 56,32,16 --grid-levels 3 --grid-resolution 251 --grid-t-resolution 5 --grid-features 8 --frequencies 4 --t-frequencies 2"
+    [g4x4-501-L4-h56]="--hidden 56,32,16 --grid-levels 4 --grid-resolution 501 --grid-level-t 4,4,4,2 --grid-features 4 --frequencies 4 --t-frequencies 2"
+    [g8-L2-h40]="--hidden 40,24 --grid-levels 3 --grid-resolution 251 --grid-t-resolution 5 --grid-features 8 --frequencies 2 --t-frequencies 1"
+    [g4-L19-h24]="--hidden 24,16 --grid-levels 3 --grid-resolution 251 --grid-t-resolution 6 --grid-features 4"
+)
+order=(base g8-L4-h56 g8-L8-h44 g4x4-501-L4-h56 g8-L2-h40 g4-L19-h24)
+names=("$@")
+[ ${#names[@]} -gt 0 ] || names=("${order[@]}")
+for name in "${names[@]}"; do
+    [ -n "${candidates[$name]:-}" ] || { echo "fast_models_screen: unknown candidate $name" >&2; exit 2; }
+done
+run() { echo "+ $*"; "$@"; }
+if [ ! -f "$volume" ]; then
+    run "$gratnet" groundtruth paper-cd --sampling simple-max --out "$volume"
+fi
+for name in "${names[@]}"; do
+    runs="$out/runs/e$epochs/$name"
+    if [ -f "$runs/metrics.json" ]; then echo "= $runs: finished"; continue; fi
+    if [ ! -f "$runs/model.npz" ]; then
+        resume=()
+        [ -f "$runs/checkpoint.pt" ] && resume=(--resume)
+        read -r -a flags <<< "${candidates[$name]}"
+        SECONDS=0
+        run env OMP_NUM_THREADS=1 nice -n 10 "$gratnet" train "$volume" --out "$runs" "${common[@]}" "${flags[@]}" \
+            "${resume[@]}"
+        echo "$SECONDS" > "$runs/train_seconds.txt"
+    fi
+    run env OMP_NUM_THREADS=1 nice -n 10 "$gratnet" evaluate "$runs/model.npz" --out "$runs" --heightfield paper-cd \
+        --volume "$volume" --views "$views" --cache-dir "$out/cache"
+done
