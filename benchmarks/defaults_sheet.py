@@ -1,6 +1,6 @@
 """Contact sheet: every shipped material (rows) on every built-in mesh (columns) at the shared defaults.
 
-    PYTHONPATH=. python benchmarks/defaults_sheet.py --size 192,144 --out docs/images/defaults_sheet.png
+    python benchmarks/defaults_sheet.py --size 192,144 --out docs/images/defaults_sheet.png
 
 Each tile is what ``gratnet render --material M --mesh MESH`` writes with no --light, --camera or
 --exposure (viewer.defaults.resolve_defaults), rendered headless with the texture weight path (same

@@ -1,6 +1,6 @@
 """Frame times of the forward and deferred render paths (issue 12), one JSON line per configuration.
 
-    PYTHONPATH=. python benchmarks/render_paths.py --material cd --mesh cd --sizes 640x480,1920x1080 \\
+    python benchmarks/render_paths.py --material cd --mesh cd --sizes 640x480,1920x1080 \\
         --samples 1,4 --variants forward:texture,forward:baked,deferred:texture,deferred:ssbo,deferred:baked
 
 A variant is ``PATH:WEIGHTS``: ``forward:texture|baked`` (the fragment-shader network, depth pre-pass),
@@ -20,20 +20,16 @@ import argparse
 import json
 import os
 import statistics
-import sys
 import time
-from pathlib import Path
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+import numpy as np
 
-import numpy as np  # noqa: E402
-
-from bench.scenes import scene_view  # noqa: E402
-from gratnet.modelfile import ModelFile, load_model  # noqa: E402
-from viewer.camera import Light  # noqa: E402
-from viewer.catalog import build_mesh, resolve_material  # noqa: E402
-from viewer.context import create_headless_context  # noqa: E402
-from viewer.scene import SceneRenderer  # noqa: E402
+from bench.scenes import scene_view
+from gratnet.modelfile import ModelFile, load_model
+from viewer.camera import Light
+from viewer.catalog import build_mesh, resolve_material
+from viewer.context import create_headless_context
+from viewer.scene import SceneRenderer
 
 
 def _sizes(text: str) -> list[tuple[int, int]]:

@@ -1,8 +1,8 @@
 """The deferred path's shading kernels alone (issue 32): GL-timer time of the SHADE / SHADE_TILED dispatches on a
 list of N key vectors, per model and deferred weights form, one JSON line each.
 
-    PYTHONPATH=. python benchmarks/shade_kernels.py cd paper-cd --keys 699052 --forms ssbo,tiled,tiled-fp16
-    PYTHONPATH=. python benchmarks/shade_kernels.py cd --keys 8192 --forms texture,tiled --repeats 3   # llvmpipe
+    python benchmarks/shade_kernels.py cd paper-cd --keys 699052 --forms ssbo,tiled,tiled-fp16
+    python benchmarks/shade_kernels.py cd --keys 8192 --forms texture,tiled --repeats 3   # llvmpipe
 
 A frame of ``gratnet bench`` also draws the G-buffer, compacts it and reads the float image back; this times
 only what the network costs (``DeferredRenderer.shade_keys(timings=…)``: the keys uploaded again before each
@@ -20,20 +20,16 @@ import argparse
 import json
 import os
 import statistics
-import sys
-from pathlib import Path
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+import numpy as np
 
-import numpy as np  # noqa: E402
-
-from bench.devices import fp32_tmac_per_s  # noqa: E402
-from gratnet.errors import GratNetError  # noqa: E402
-from gratnet.modelfile import load_model  # noqa: E402
-from viewer.catalog import resolve_material  # noqa: E402
-from viewer.context import create_headless_context  # noqa: E402
-from viewer.deferred import DeferredRenderer  # noqa: E402
-from viewer.renderer import NetworkRenderer  # noqa: E402
+from bench.devices import fp32_tmac_per_s
+from gratnet.errors import GratNetError
+from gratnet.modelfile import load_model
+from viewer.catalog import resolve_material
+from viewer.context import create_headless_context
+from viewer.deferred import DeferredRenderer
+from viewer.renderer import NetworkRenderer
 
 
 def random_keys(count: int, seed: int = 0) -> np.ndarray:

@@ -1,8 +1,8 @@
 """The error of the tiled kernel's half-precision arithmetic (``tiled-half``, issue 32) against its float32 form
 (``tiled``), on the paper's five evaluation slices, one JSON line per model and slice.
 
-    PYTHONPATH=. python benchmarks/tiled_half_error.py cd paper-cd paper-scratches --size 256
-    PYTHONPATH=. python benchmarks/tiled_half_error.py cd --size 64 --as-float   # llvmpipe: the code path only
+    python benchmarks/tiled_half_error.py cd paper-cd paper-scratches --size 256
+    python benchmarks/tiled_half_error.py cd --size 64 --as-float   # llvmpipe: the code path only
 
 Per slice (gratnet.brdf.STANDARD_SLICES: light θ, φ and exposure; the view disc of ``--size``²): both kernels
 shade the slice's key vectors (``DeferredRenderer.shade_keys``: the list holds exactly the disc's pixels);
@@ -19,22 +19,19 @@ import argparse
 import json
 import os
 import sys
-from pathlib import Path
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+import numpy as np
 
-import numpy as np  # noqa: E402
-
-from gratnet.brdf import STANDARD_SLICES, a_term, direction, slice_view_directions  # noqa: E402
-from gratnet.display import ldr_flip  # noqa: E402
-from gratnet.encoding import range_forward  # noqa: E402
-from gratnet.errors import GratNetError  # noqa: E402
-from gratnet.modelfile import load_model  # noqa: E402
-from trainer.metrics import to_display_srgb  # noqa: E402
-from viewer.catalog import resolve_material  # noqa: E402
-from viewer.context import create_headless_context  # noqa: E402
-from viewer.deferred import DeferredRenderer  # noqa: E402
-from viewer.renderer import NetworkRenderer  # noqa: E402
+from gratnet.brdf import STANDARD_SLICES, a_term, direction, slice_view_directions
+from gratnet.display import ldr_flip
+from gratnet.encoding import range_forward
+from gratnet.errors import GratNetError
+from gratnet.modelfile import load_model
+from trainer.metrics import to_display_srgb
+from viewer.catalog import resolve_material
+from viewer.context import create_headless_context
+from viewer.deferred import DeferredRenderer
+from viewer.renderer import NetworkRenderer
 
 
 def main() -> int:

@@ -45,4 +45,4 @@ PY
     run cp "$compare/compare.json" "docs/data/compare/$name.json"
     run cp "$compare/compare.png" "docs/images/compare_$name.png"
 done
-run "$python" benchmarks/results_table.py
+run "$python" -m analysis.results_table

@@ -7,8 +7,8 @@
 #   OUT=out/paper (volumes, runs, slice cache), GRATNET=.venv/bin/gratnet, DRY_RUN=1 prints the commands only.
 #   SEEDS="0 1 2": each dataset's recipe once per seed (`--seed K` appended), into OUT/runs/NAME/seed-K, then
 #   OUT/seeds.json and OUT/seeds.md: per dataset the mean and spread of the (0°, 0°) FLIP against the paper's
-#   column (benchmarks/seed_summary.py). Finished runs (their metrics.json) are skipped, so a second call goes on
-#   where the first stopped; TIME_BUDGET_S=N starts no new run after N seconds (a device call's time limit).
+#   column (python -m analysis.seed_summary). Finished runs (their metrics.json) are skipped, so a second call
+#   goes on where the first stopped; TIME_BUDGET_S=N starts no new run after N seconds (a device call's time limit).
 #   DEVICE=cuda trains there whatever device the recipe recorded (paper-cd's was trained on the CPU).
 # Nothing is copied into assets/: compare OUT/runs/NAME/metrics.json with assets/NAME/metrics.json.
 # GPU training is not bit-reproducible: expect figures near, not equal to, the shipped ones. A recorded
@@ -73,5 +73,5 @@ PY
 done
 if [ "$left" -gt 0 ]; then echo "reproduce: TIME_BUDGET_S=$budget spent; $left run(s) left: call again to go on"; fi
 if [ ${#seeds[@]} -gt 0 ]; then
-    run "$python" benchmarks/seed_summary.py "$out/runs" --json "$out/seeds.json" --markdown "$out/seeds.md"
+    run "$python" -m analysis.seed_summary "$out/runs" --json "$out/seeds.json" --markdown "$out/seeds.md"
 fi

@@ -1,6 +1,6 @@
 """``gratnet sweep SWEEP.toml``: datasets × presets × seeds × training variants, as tasks on Ray.
 
-    gratnet sweep benchmarks/sweep_small.toml --out out/sweep --workers 2
+    gratnet sweep benchmarks/size_sweep.toml --out out/sweep --workers 2
     gratnet sweep SWEEP.toml --address auto            # a cluster started with `ray start --head`
 
 Writes OUT/volumes/, OUT/runs/RUN/ (as ``gratnet train`` does), OUT/results.{csv,md,json}, OUT/pareto.png

@@ -18,8 +18,8 @@ and exits 2). The resolved grid is a list of :class:`DatasetSpec`
     wavelength_step_nm = 10.0
     parts = 1                            # wavelength blocks per volume, computed as separate tasks
 
-    [train]                              # TrainConfig fields (not preset, seed): every run
-    epochs = 4
+    [train]                              # TrainConfig options as the flags name them (grid_levels for
+    epochs = 4                           # --grid-levels; not preset, seed): every run
     [evaluate]                           # EvaluateConfig fields (size, ior, brdf_slices)
     size = 128
     [resources]                          # per task: CPUs, GPUs (fractions share one GPU), memory
@@ -272,13 +272,16 @@ def build_config(config_class: type, values: dict[str, Any], table: Table, exclu
     """``config_class`` from the TOML ``values`` of ``table`` (over ``base``, when given), checked by the class
     itself as the command line is: unknown keys, wrong types and every refused value give one GratNetError that
     names the key (``name_of(field)``: where a field's value came from; default: ``table``)."""
-    hints = typing.get_type_hints(config_class)
-    fields = {field.name for field in dataclasses.fields(config_class)
-              if field.init and field.name not in exclude and field.metadata.get("cli") is not False}
-    unknown = sorted(set(values) - fields)
+    from gratnet.config import flat_fields
+
+    # Keys are the flags' names (a nested config's fields under its prefix: grid_levels for TrainConfig.grid),
+    # which the class's constructor takes (gratnet.config.flat_keywords).
+    fields = {name: flat for name, flat in flat_fields(config_class).items()
+              if name not in exclude and flat.field.metadata.get("cli") is not False}
+    unknown = sorted(set(values) - set(fields))
     if unknown:
         raise GratNetError(f"{table}: unknown key {unknown[0]!r}; known keys: {', '.join(sorted(fields))}")
-    values = {key: _check_value(table.key(key), value, hints[key]) for key, value in values.items()}
+    values = {key: _check_value(table.key(key), value, fields[key].kind) for key, value in values.items()}
     made = (lambda: dataclasses.replace(base, **values)) if base is not None else (lambda: config_class(**values))
     return checked(config_class, name_of or table.key, table, made)
 

@@ -29,7 +29,7 @@ from pathlib import Path
 from typing import Any
 
 from gratnet.atomic import atomic_path, atomic_paths, write_text_atomic
-from gratnet.config import config_path_for, config_text, save_config
+from gratnet.config import config_path_for, config_text, nested_dict, save_config
 from gratnet.errors import GratNetError
 from sweep.records import attempt
 from sweep.spec import DatasetSpec, RunSpec
@@ -73,6 +73,11 @@ def run_state(out: Path, run: RunSpec) -> str:
     recorded = _recorded(folder / SPEC_FILE, "spec")
     if recorded is None:
         return "todo"
+    if isinstance(recorded, dict) and isinstance(recorded.get("train"), dict):
+        from trainer.train_config import TrainConfig
+
+        # Recorded before the grid options were nested (flat grid_* keys): the same run.
+        recorded = {**recorded, "train": nested_dict(TrainConfig, recorded["train"])}
     if recorded != json.loads(json.dumps(run.to_dict())):
         return "conflict"
     if (folder / RESULT_FILE).is_file():

@@ -1,4 +1,4 @@
-"""benchmarks/adam_state.py: sqrt(v̂) and the share below ε, read back from an optimiser of known gradients."""
+"""analysis.adam_state: sqrt(v̂) and the share below ε, read back from an optimiser of known gradients."""
 
 from __future__ import annotations
 
@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 import torch
 
-from benchmarks.adam_state import adam_table, first_layer_sqrt_v
+from analysis.adam_state import adam_table, first_layer_sqrt_v
 
 
 def test_sqrt_v_is_the_gradient_size_after_one_step_and_untouched_entries_are_counted_apart():

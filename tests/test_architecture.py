@@ -33,8 +33,8 @@ else:  # pragma: no cover - Python 3.10
 REPO = Path(__file__).resolve().parents[1]
 
 #: The folders whose .py files are the project's own modules.
-FOLDERS = ("gratnet", "viewer", "trainer", "bench", "sweep", "mitsuba_plugin", "shaders", "benchmarks", "tests",
-           "scripts")
+FOLDERS = ("gratnet", "viewer", "trainer", "bench", "sweep", "mitsuba_plugin", "analysis", "shaders", "benchmarks",
+           "tests", "scripts")
 
 #: The longest a source file may be (lines).
 MAX_LINES = 800
@@ -43,8 +43,10 @@ MAX_LINES = 800
 #: stage and the runtime: it imports nothing above it. viewer/ (the runtime) and trainer/ (the offline stage)
 #: stand on it side by side; shaders/ holds the GLSL the viewer loads. The tools stand on top: bench/ times the
 #: runtime against the trainer's torch reference; sweep/ runs trainer/ on Ray and bench/'s measurement and tables;
-#: mitsuba_plugin/ shares the viewer's scene setup. benchmarks/ and scripts/ may use any package, tests/ anything.
-PACKAGES = ("gratnet", "viewer", "trainer", "shaders", "bench", "sweep", "mitsuba_plugin")
+#: mitsuba_plugin/ shares the viewer's scene setup; analysis/ reads runs, models and volumes (trainer/'s checkpoints
+#: and slices, viewer/'s renders) into the tables, records and figures the docs, scripts and probes share.
+#: benchmarks/ and scripts/ may use any package, tests/ anything.
+PACKAGES = ("gratnet", "viewer", "trainer", "shaders", "bench", "sweep", "mitsuba_plugin", "analysis")
 ALLOWED_IMPORTS: dict[str, frozenset[str]] = {
     "gratnet": frozenset(),
     "shaders": frozenset(),
@@ -53,6 +55,7 @@ ALLOWED_IMPORTS: dict[str, frozenset[str]] = {
     "bench": frozenset({"gratnet", "viewer", "trainer", "shaders"}),
     "sweep": frozenset({"gratnet", "viewer", "trainer", "shaders", "bench"}),
     "mitsuba_plugin": frozenset({"gratnet", "viewer", "trainer", "shaders"}),
+    "analysis": frozenset({"gratnet", "viewer", "trainer", "shaders"}),
     "benchmarks": frozenset(PACKAGES),
     "scripts": frozenset(PACKAGES),
     "tests": frozenset(FOLDERS),

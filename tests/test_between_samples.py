@@ -1,4 +1,4 @@
-"""benchmarks/between_samples.py: the on-sample, mid-cell and corner-spread figures on analytic lattices."""
+"""analysis.between_samples: the on-sample, mid-cell and corner-spread figures on analytic lattices."""
 
 from __future__ import annotations
 
@@ -7,7 +7,7 @@ from collections.abc import Callable
 import numpy as np
 import pytest
 
-from benchmarks.between_samples import centre_truth, slice_errors
+from analysis.between_samples import centre_truth, slice_errors
 
 RESOLUTION = 5
 

@@ -1,10 +1,10 @@
-"""benchmarks/between_slices.py: each pixel's distance from the nearest w-slice, and the per-distance bins."""
+"""analysis.between_slices: each pixel's distance from the nearest w-slice, and the per-distance bins."""
 
 from __future__ import annotations
 
 import numpy as np
 
-from benchmarks.between_slices import binned, slice_distance
+from analysis.between_slices import binned, slice_distance
 from gratnet.encoding import key_to_t
 from trainer.brdfslice import SliceConfig, slice_geometry
 

@@ -1,4 +1,4 @@
-"""benchmarks/checkpoint_model.py: a checkpoint's model file equals the one the trainer writes at its end; several
+"""analysis.checkpoint_model: a checkpoint's model file equals the one the trainer writes at its end; several
 checkpoints of one run give their weights' mean."""
 
 from __future__ import annotations
@@ -18,7 +18,7 @@ ROOT = Path(__file__).resolve().parents[1]
 
 
 def run_script(*arguments: object) -> subprocess.CompletedProcess:
-    return subprocess.run([sys.executable, "benchmarks/checkpoint_model.py", *map(str, arguments)], cwd=ROOT,
+    return subprocess.run([sys.executable, "-m", "analysis.checkpoint_model", *map(str, arguments)], cwd=ROOT,
                           capture_output=True, text=True)
 
 

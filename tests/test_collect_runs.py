@@ -1,4 +1,4 @@
-"""benchmarks/collect_runs.py and gratnet.config.changed_flags: a run's record is read back from its files, and
+"""analysis.collect_runs and gratnet.config.changed_flags: a run's record is read back from its files, and
 its command rebuilds its configuration."""
 
 from __future__ import annotations
@@ -12,7 +12,7 @@ from pathlib import Path
 
 import pytest
 
-from benchmarks.collect_runs import HEADLINE, collect_run, markdown_table, parse_run
+from analysis.collect_runs import HEADLINE, collect_run, markdown_table, parse_run
 from gratnet.config import add_arguments, changed_flags, config_to_dict, from_arguments
 from gratnet.errors import GratNetError
 from trainer.train_config import TrainConfig
@@ -78,7 +78,7 @@ def test_a_folder_without_the_files_is_refused_with_one_message(tmp_path):
     (tmp_path / "empty").mkdir()
     with pytest.raises(GratNetError, match="model.config.json"):
         collect_run(tmp_path / "empty", "x")
-    result = subprocess.run([sys.executable, "benchmarks/collect_runs.py", str(tmp_path / "missing")],
+    result = subprocess.run([sys.executable, "-m", "analysis.collect_runs", str(tmp_path / "missing")],
                             cwd=ROOT, capture_output=True, text=True)
     assert result.returncode != 0 and "not a folder" in result.stderr and "Traceback" not in result.stderr
 
@@ -89,7 +89,7 @@ def test_labels_default_to_the_folder_name():
 
 
 def test_the_figure_is_written_for_runs_with_and_without_per_epoch_flip(tmp_path):
-    from benchmarks.collect_runs import plot_runs
+    from analysis.collect_runs import plot_runs
 
     with_flip = collect_run(_fake_run(tmp_path / "a"), "a")
     without = collect_run(_fake_run(tmp_path / "b"), "b")

@@ -11,6 +11,8 @@ pyproject.toml:
 - ``sweep/`` (``gratnet sweep`` on Ray, a tool on top of trainer/): core + the ``trainer`` and ``sweep`` extras.
 - ``bench/`` (``gratnet bench``, a tool on top of viewer/ and trainer/: it times the runtime and uses torch
   as the reference): core + the ``trainer`` extra.
+- ``analysis/`` (tables, records and figures of runs, models and volumes; it reads trainer checkpoints): core +
+  the ``trainer`` extra.
 - ``tests/`` and ``benchmarks/``: core + every extra.
 """
 
@@ -57,6 +59,7 @@ ALLOWED = {
     "mitsuba_plugin": CORE | EXTRAS.get("mitsuba", set()),
     "sweep": CORE | EXTRAS.get("trainer", set()) | EXTRAS.get("sweep", set()),
     "bench": CORE | EXTRAS.get("trainer", set()),
+    "analysis": CORE | EXTRAS.get("trainer", set()),
     "tests": CORE.union(*EXTRAS.values()),
     "benchmarks": CORE.union(*EXTRAS.values()),
 }

@@ -1,4 +1,4 @@
-"""benchmarks/encoding_weights.py: per-frequency column norms land on the frequency eq. 6's layout gives them."""
+"""analysis.encoding_weights: per-frequency column norms land on the frequency eq. 6's layout gives them."""
 
 from __future__ import annotations
 
@@ -10,7 +10,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from benchmarks.encoding_weights import frequency_norms
+from analysis.encoding_weights import frequency_norms
 from gratnet.modelfile import load_model
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -38,6 +38,6 @@ def test_a_single_column_shows_at_its_own_frequency(asset):
 
 
 def test_a_missing_model_is_one_message():
-    result = subprocess.run([sys.executable, "benchmarks/encoding_weights.py", "no/such.npz"], cwd=ROOT,
+    result = subprocess.run([sys.executable, "-m", "analysis.encoding_weights", "no/such.npz"], cwd=ROOT,
                             capture_output=True, text=True)
     assert result.returncode != 0 and "no such file" in result.stderr and "Traceback" not in result.stderr

@@ -1,11 +1,11 @@
-"""benchmarks/error_budget.py: noise of a stated RMS in y, the slice ↔ y round trip, and the target crossing."""
+"""analysis.error_budget: noise of a stated RMS in y, the slice ↔ y round trip, and the target crossing."""
 
 from __future__ import annotations
 
 import numpy as np
 import pytest
 
-from benchmarks.error_budget import crossing, image_of, noisy_volume, pixel_y, reachable_mask
+from analysis.error_budget import crossing, image_of, noisy_volume, pixel_y, reachable_mask
 from gratnet.encoding import RangeSpec, range_forward
 from gratnet.volume import Volume
 from trainer.brdfslice import SliceConfig, slice_geometry

@@ -143,6 +143,26 @@ def test_an_old_checkpoint_without_the_shuffling_state_resumes_with_a_warning(ti
     assert [record["epoch"] for record in history["epochs"]] == [1, 2, 3, 4]
 
 
+def test_a_checkpoint_saved_before_the_grid_options_were_nested_resumes(tiny_volume, tmp_path):
+    """A checkpoint whose config holds the grid options as flat grid_* keys (as written before TrainConfig.grid)
+    resumes a run of the same options, and still refuses one whose grid options differ."""
+    volume, _ = tiny_volume
+    config = _config(architecture="grid", epochs=2, grid_levels=1, grid_resolution=5, grid_t_resolution=2)
+    with pytest.raises(KeyboardInterrupt):
+        train(volume, config, tmp_path, progress=False, per_epoch=_stop_after(1))
+    checkpoint = tmp_path / "checkpoint.pt"
+    state = torch.load(checkpoint, weights_only=False)
+    assert state["config"]["grid"]["levels"] == 1
+    grid = state["config"].pop("grid")
+    state["config"].update({f"grid_{key}": value for key, value in grid.items()})
+    torch.save(state, checkpoint)
+    with pytest.raises(GratNetError, match="different configuration"):
+        train(volume, _config(architecture="grid", epochs=2, grid_levels=1, grid_resolution=5, grid_t_resolution=3),
+              tmp_path, resume=True, progress=False)
+    _, _, history = train(volume, config, tmp_path, resume=True, progress=False)
+    assert [record["epoch"] for record in history["epochs"]] == [1, 2]
+
+
 # --------------------------------------------------------------------------------------------------
 # A real process, killed
 

@@ -76,6 +76,40 @@ def test_level_resolutions_halve_the_intervals():
         level_resolutions(2, 1, 11)
 
 
+def test_the_grid_options_are_one_nested_config_under_their_flat_names():
+    """TrainConfig.grid is a GridConfig; the flags (--grid-levels …), keywords (grid_levels=) and a config saved
+    with flat grid_* keys (before the nesting) all reach it, and a saved config holds it as one dict."""
+    import argparse
+    import dataclasses
+
+    from gratnet.config import add_arguments, changed_flags, config_to_dict, from_arguments, saved_config_dict
+    from trainer.train_config import GridConfig, TrainConfig
+
+    nested = TrainConfig(architecture="grid", grid=GridConfig(levels=2, features=4, interpolation="smoothstep"))
+    assert TrainConfig(architecture="grid", grid_levels=2, grid_features=4, grid_interpolation="smoothstep") == nested
+    assert nested.grid.levels == nested.grid_levels == 2 and nested.grid_shapes()[0][3] == 4
+    assert dataclasses.replace(nested, grid_features=3).grid == GridConfig(levels=2, features=3,
+                                                                            interpolation="smoothstep")
+    parser = argparse.ArgumentParser()
+    add_arguments(parser, TrainConfig)
+    words = changed_flags(nested)
+    assert words == ["--architecture", "grid", "--grid-levels", "2", "--grid-features", "4", "--grid-interpolation",
+                     "smoothstep"]
+    assert from_arguments(TrainConfig, parser.parse_args(words)) == nested
+    saved = config_to_dict(nested)
+    assert saved["grid"]["features"] == 4 and "grid_features" not in saved
+    flat = {key: value for key, value in saved.items() if key != "grid"}
+    flat.update({f"grid_{key}": value for key, value in saved["grid"].items()})
+    assert TrainConfig(**saved) == TrainConfig(**flat) == nested
+    assert saved_config_dict(TrainConfig, flat) == saved
+    # The grid's checks are the same flags' and only for the grid architecture.
+    assert TrainConfig(grid_features=99).grid.features == 99
+    with pytest.raises(GratNetError, match="--grid-features must be from 1 to 16, got 99"):
+        TrainConfig(architecture="grid", grid=GridConfig(features=99))
+    with pytest.raises(GratNetError, match="--grid-adam-epsilon must be a positive number"):
+        TrainConfig(grid_adam_epsilon=0.0)
+
+
 def test_smoothstep_interpolation_is_the_smoothstep_of_the_cell_fraction():
     # One axis varies (u: a ramp 0, 1, 2, … over the nodes); between nodes i and i + 1 smoothstep gives
     # i + s²(3 − 2s) for the cell fraction s, equal to linear at the nodes and the cell midpoints, with zero

@@ -1,11 +1,11 @@
-"""benchmarks/lattice_band_limit.py: F is band-limited by the integration width, and the lattice spacings."""
+"""analysis.lattice_band_limit: F is band-limited by the integration width, and the lattice spacings."""
 
 from __future__ import annotations
 
 import numpy as np
 import pytest
 
-from benchmarks.lattice_band_limit import f_patch, lattice_spacing, power_spectrum, share_beyond
+from analysis.lattice_band_limit import f_patch, lattice_spacing, power_spectrum, share_beyond
 from trainer.fourier import OpticsConfig, prepare_surface
 from trainer.heightfield import HeightField
 

@@ -1,4 +1,4 @@
-"""benchmarks/lut_baseline.py: the plot of earlier runs (one or several materials) and its argument checks."""
+"""analysis.lut_baseline: the plot of earlier runs (one or several materials) and its argument checks."""
 
 from __future__ import annotations
 
@@ -7,7 +7,7 @@ from pathlib import Path
 
 import pytest
 
-from benchmarks.lut_baseline import main
+from analysis.lut_baseline import main
 
 
 def _rows(path: Path, material: str, scale: float) -> Path:

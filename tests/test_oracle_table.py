@@ -1,11 +1,11 @@
-"""benchmarks/oracle_table.py --uv-stride: a decimated volume keeps the coarser lattice's own nodes."""
+"""analysis.oracle_table --uv-stride: a decimated volume keeps the coarser lattice's own nodes."""
 
 from __future__ import annotations
 
 import numpy as np
 import pytest
 
-from benchmarks.oracle_table import decimated
+from analysis.oracle_table import decimated
 from gratnet.volume import Volume, volume_axes
 from trainer.diagnostics import VolumeOracle
 

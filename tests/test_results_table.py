@@ -1,4 +1,4 @@
-"""benchmarks/results_table.py: the paper-datasets table is the shipped metrics, the oracle of the volume each
+"""analysis.results_table: the paper-datasets table is the shipped metrics, the oracle of the volume each
 model was trained on, and the paper's figure, with verdicts that follow from them."""
 
 from __future__ import annotations
@@ -11,7 +11,7 @@ import pytest
 
 from tests.conftest import REPO
 
-# The paper's table, typed here independently of benchmarks/results_table.py: each dataset's own column (paper-snake
+# The paper's table, typed here independently of analysis.results_table: each dataset's own column (paper-snake
 # is the corn snake, Elaphe; 0.0318 is the sunbeam snake's column, another dataset).
 PAPER = {"paper-blazed": 0.0021, "paper-cd": 0.0178, "paper-snake": 0.0221, "paper-scratches": 0.0123,
          "paper-pits": 0.0878, "paper-corner-cubes": 0.0751, "paper-sunbeam": 0.0318}
@@ -34,7 +34,7 @@ def _paper_table(page: str) -> tuple[dict[str, int], dict[str, list[str]]]:
 @pytest.fixture(scope="module")
 def page(tmp_path_factory) -> str:
     out = tmp_path_factory.mktemp("results") / "results.md"
-    subprocess.run([sys.executable, "benchmarks/results_table.py", "--out", str(out)], cwd=REPO, check=True)
+    subprocess.run([sys.executable, "-m", "analysis.results_table", "--out", str(out)], cwd=REPO, check=True)
     return out.read_text()
 
 
@@ -72,7 +72,7 @@ def test_the_oracle_is_of_the_volume_the_model_was_trained_on(page):
 
 def test_a_slices_table_without_the_trained_count_gives_no_oracle(tmp_path, monkeypatch):
     """No matching slice count: the oracle column says so (—) rather than borrowing another volume's figure."""
-    from benchmarks import results_table
+    from analysis import results_table
     folder = tmp_path / "paper-pits"
     folder.mkdir()
     (tmp_path / "docs" / "data").mkdir(parents=True)
@@ -87,7 +87,7 @@ def test_a_slices_table_without_the_trained_count_gives_no_oracle(tmp_path, monk
 
 
 def test_the_seeds_section_is_the_recorded_seeds_mean_and_spread(page):
-    """docs/data/seeds_paper.json (benchmarks/seed_summary.py): each dataset's line gives the mean and sample spread
+    """docs/data/seeds_paper.json (analysis.seed_summary): each dataset's line gives the mean and sample spread
     of its seeds' (0°, 0°) FLIP, recomputed here, and the verdict against the paper's own column."""
     import statistics
 

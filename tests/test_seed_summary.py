@@ -1,4 +1,4 @@
-"""Seeds × datasets (issue 34): scripts/reproduce_paper_models.sh with SEEDS, and benchmarks/seed_summary.py."""
+"""Seeds × datasets (issue 34): scripts/reproduce_paper_models.sh with SEEDS, and analysis.seed_summary."""
 
 from __future__ import annotations
 
@@ -9,7 +9,7 @@ from pathlib import Path
 
 import pytest
 
-from benchmarks.seed_summary import summarise
+from analysis.seed_summary import summarise
 
 REPO = Path(__file__).resolve().parents[1]
 SCRIPT = REPO / "scripts" / "reproduce_paper_models.sh"
@@ -51,7 +51,7 @@ def test_seeds_run_each_recipe_per_seed_skip_finished_runs_and_honour_the_budget
     for seed, train in zip((0, 2), trains, strict=True):
         assert train[train.index("--seed") + 1] == str(seed)
         assert train[len(train) - 1 - train[::-1].index("--device") + 1] == "cuda"  # the last --device wins
-    assert commands[-1][1:2] == ["benchmarks/seed_summary.py"]
+    assert commands[-1][1:3] == ["-m", "analysis.seed_summary"]
     (tmp_path / "runs/paper-cd/seed-0").mkdir(parents=True)
     (tmp_path / "runs/paper-cd/seed-0/metrics.json").write_text("{}")
     again = [command for command in _dry(tmp_path, "paper-cd", SEEDS="0 2") if "train" in command]

@@ -260,6 +260,9 @@ BAD_FILES = {
     "variant's held-out slices": ('[groundtruth]\nslices = 5\n[train]\ntest_slices = "2"\n' + DATASET
                                   + '[[variants]]\nname = "x"\ntest_slices = "7"\n',
                                   "[[variants]] #1 test_slices 7 out of range for a 5-slice volume"),
+    "grid option a string": ('[train]\ngrid_levels = "3"\n' + DATASET, "[train] grid_levels must be a whole number"),
+    "bad grid option": ('[train]\narchitecture = "grid"\n' + DATASET + '[[variants]]\nname = "x"\ngrid_features = 99\n',
+                        "[[variants]] #1 grid_features must be from 1 to 16, got 99"),
     "bench sizes": (DATASET + '[bench]\nsizes = "1"\n', "[bench] sizes must lie in 2 … 16384"),
     "bench exposure": (DATASET + "[bench]\nexposure = -1.0\n", "[bench] exposure must be a positive number"),
 }
@@ -310,6 +313,33 @@ def test_a_good_sweep_file_is_accepted_with_every_table(tmp_path):
     assert {run.evaluate.size for run in spec.runs} == {32}
     assert spec.bench.size_list() == [64]
     assert [dataset.parts for dataset in spec.datasets] == [1, 3]
+
+
+def test_grid_options_are_keys_by_their_flags_names(tmp_path):
+    """[train] and [[variants]] name the grid options as the flags do (grid_levels for --grid-levels); a variant's
+    are set over [train]'s, into the run's nested TrainConfig.grid. A run recorded before the nesting (flat
+    grid_* keys in run.json) is the same run, not another configuration's."""
+    import json
+
+    from sweep.spec import load_sweep
+    from sweep.tasks import SPEC_FILE, run_folder, run_state
+    from trainer.train_config import GridConfig
+
+    text = (TINY.replace("epochs = 1\n", 'epochs = 1\narchitecture = "grid"\ngrid_features = 3\n')
+            + '[[variants]]\nname = "g"\ngrid_levels = 2\ngrid_interpolation = "smoothstep"\n')
+    spec = load_sweep(_write(tmp_path, text), tmp_path / "out")
+    assert {run.train.grid for run in spec.runs} == {GridConfig(levels=2, features=3, interpolation="smoothstep")}
+    run = spec.runs[0]
+    recorded = json.loads(json.dumps(run.to_dict()))
+    grid = recorded["train"].pop("grid")
+    recorded["train"].update({f"grid_{key}": value for key, value in grid.items()})
+    folder = run_folder(spec.out, run)
+    folder.mkdir(parents=True)
+    (folder / SPEC_FILE).write_text(json.dumps({"spec": recorded}))
+    assert run_state(spec.out, run) == "todo"
+    recorded["train"]["grid_levels"] = 3
+    (folder / SPEC_FILE).write_text(json.dumps({"spec": recorded}))
+    assert run_state(spec.out, run) == "conflict"
 
 
 def test_a_folder_of_another_configuration_is_refused(swept, tmp_path, capsys):

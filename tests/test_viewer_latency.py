@@ -1,11 +1,12 @@
-"""benchmarks/viewer_latency.py's input matching: each injected motion goes to the first frame whose picture
-reflects it (issue 35: the old matching by summed drag pixels reported latencies down to −12.3 s)."""
+"""analysis.input_latency, benchmarks/viewer_latency.py's input matching: each injected motion goes to the first
+frame whose picture reflects it (issue 35: the old matching by summed drag pixels reported latencies down to
+−12.3 s)."""
 
 from __future__ import annotations
 
 import pytest
 
-from benchmarks.viewer_latency import FrameRecord, match_inputs
+from analysis.input_latency import FrameRecord, match_inputs
 
 
 def test_a_motion_is_answered_by_the_first_picture_that_reflects_it():

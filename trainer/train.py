@@ -15,6 +15,7 @@ import math
 import os
 import time
 from collections.abc import Callable
+from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -22,7 +23,7 @@ import torch
 from tqdm.auto import tqdm
 
 from gratnet.atomic import atomic_path, make_folder, write_text_atomic
-from gratnet.config import config_to_dict
+from gratnet.config import config_to_dict, saved_config_dict
 from gratnet.encoding import EncodingSpec, RangeSpec, encode, network_coordinates, range_forward
 from gratnet.errors import GratNetError
 from gratnet.modelfile import ModelFile
@@ -121,7 +122,7 @@ def build_model(config: TrainConfig, encoding: EncodingSpec) -> FunnelMLP | Grid
     hidden = parse_hidden(config.preset, config.hidden)
     if config.architecture == "grid":
         return GridNetwork(encoding, config.grid_shapes(), hidden, config.activation, config.output_activation,
-                           config.grid_init, config.grid_dtype, config.grid_interpolation)
+                           config.grid.init, config.grid.dtype, config.grid.interpolation)
     return FunnelMLP(encoding.features, hidden, config.activation, config.output_activation)
 
 
@@ -141,8 +142,8 @@ def make_optimizer(model: FunnelMLP | GridNetwork, config: TrainConfig,
         fused = fused_adam(next(model.parameters()).device)
     if isinstance(model, GridNetwork):  # the grids learn at their own rate
         return torch.optim.Adam([{"params": model.mlp.parameters(), "lr": config.learning_rate},
-                                 {"params": model.grids.parameters(), "lr": config.grid_learning_rate,
-                                  "eps": config.grid_adam_epsilon}],
+                                 {"params": model.grids.parameters(), "lr": config.grid.learning_rate,
+                                  "eps": config.grid.adam_epsilon}],
                                 eps=config.adam_epsilon, fused=fused or None)
     return torch.optim.Adam(model.parameters(), lr=config.learning_rate, eps=config.adam_epsilon,
                             fused=fused or None)
@@ -248,20 +249,54 @@ def restore_generator(generator: torch.Generator, state: dict[str, Any], path: o
     generator.set_state(saved.cpu())  # map_location moved it onto the device
 
 
-def train(
-    volume: Volume,
-    config: TrainConfig,
-    out_dir: str | os.PathLike[str],
-    resume: bool = False,
-    progress: bool = True,
-    per_epoch: Callable[[ModelFile], dict[str, Any]] | None = None,
-) -> tuple[FunnelMLP | GridNetwork, ModelFile, dict[str, Any]]:
-    """Train on ``volume``; writes checkpoint.pt (every epoch), model.npz and history.json to ``out_dir``.
+@dataclasses.dataclass
+class _Run:
+    """One training run's state, passed between the steps of :func:`train`."""
 
-    ``per_epoch`` (optional) gets the model file of the weights after each epoch; what it returns (e.g. a
-    slice's FLIP) joins that epoch's record in history.json. Its time is not counted as training time.
-    """
-    out_dir = make_folder(out_dir)
+    volume: Volume
+    config: TrainConfig
+    out_dir: Path
+    device: torch.device
+    encoding: EncodingSpec
+    range_spec: RangeSpec
+    weighting: VisibleWeight | None
+    train_samples: Samples
+    test_samples: Samples | None
+    graphed: bool
+    model: FunnelMLP | GridNetwork
+    optimizer: torch.optim.Optimizer
+    base_rates: list[float]
+    steps_per_epoch: int
+    schedule_steps: int
+    # A graphed run keeps its schedule on the device (trainer/cudagraph.py): no torch scheduler.
+    scheduler: torch.optim.lr_scheduler.LRScheduler | None
+    # The one generator of the shuffle and the off-lattice draws: a resume restores its state, so that the
+    # epochs after it draw what an uninterrupted run draws (the split's numpy generator is re-made from the seed).
+    generator: torch.Generator
+    history: dict[str, Any] = dataclasses.field(default_factory=lambda: {"epochs": [], "train_seconds": 0.0})
+    start_epoch: int = 0
+    done: int = 0  # steps taken (the eager loop's count; a graphed run's is graph.done)
+    # Set by _stage_data: the samples on the device, and what refills them off the lattice each epoch.
+    coordinates: torch.Tensor | None = None
+    targets: torch.Tensor | None = None
+    lattice: tuple[torch.Tensor, torch.Tensor] | None = None
+    off_lattice: Any = None  # trainer.offlattice.OffLattice
+    drawn: int = 0
+    graph: GraphedSteps | None = None
+
+    @property
+    def checkpoint_path(self) -> Path:
+        return self.out_dir / "checkpoint.pt"
+
+    def learning_rate(self) -> float:
+        if self.graph is not None:
+            return self.graph.learning_rate()
+        return self.scheduler.get_last_lr()[0]  # type: ignore[union-attr]
+
+
+def _set_up(volume: Volume, config: TrainConfig, out_dir: str | os.PathLike[str]) -> _Run:
+    """A fresh run: the device, the samples and their split, the network, Adam and its schedule, all seeded."""
+    out = make_folder(out_dir)
     device = pick_device(config.device)
     if device.type == "cpu":  # each step's large buffers stay mapped: no page faults per step (trainer/allocator.py)
         keep_freed_memory()
@@ -275,140 +310,184 @@ def train(
     base_rates = [float(group["lr"]) for group in optimizer.param_groups]
     steps_per_epoch = math.ceil(len(train_samples) / config.batch_size)
     schedule_steps = steps_per_epoch * config.epochs
-    # A graphed run keeps its schedule on the device (trainer/cudagraph.py): no torch scheduler.
     scheduler = None if graphed else make_scheduler(optimizer, config, schedule_steps, isinstance(model, GridNetwork))
-    history: dict[str, Any] = {"epochs": [], "train_seconds": 0.0}
-    start_epoch = done = 0
-    # The one generator of the shuffle and the off-lattice draws: a resume restores its state, so that the
-    # epochs after it draw what an uninterrupted run draws (the split's numpy generator is re-made from the seed).
-    generator = torch.Generator().manual_seed(config.seed)
-    checkpoint_path = out_dir / "checkpoint.pt"
-    if resume and checkpoint_path.exists():
-        state = read_checkpoint(checkpoint_path, device)
-        # Neither the per-epoch diagnostic nor graph replay changes the training: they may differ on resume.
-        free = ("epoch_flip_size", "cuda_graph")
-        # Options added since a checkpoint was written take their defaults, which is how it was trained.
-        saved = {**config_to_dict(TrainConfig()), **state["config"]}
-        saved = {key: value for key, value in saved.items() if key not in free}
-        if saved != {key: value for key, value in config_to_dict(config).items() if key not in free}:
-            raise GratNetError(
-                f"{checkpoint_path} was made with a different configuration; start afresh without --resume"
-            )
-        if state["scheduler"] is None and scheduler is not None:
-            raise GratNetError(f"{checkpoint_path} was trained with --cuda-graph (on a GPU): resume it on a CUDA "
-                               "device, or start afresh without --resume")
-        model.load_state_dict(state["model"])
-        optimizer.load_state_dict(state["optimizer"])
-        for group in optimizer.param_groups:  # the saved groups carry the writer's choice; this device's wins
-            group["fused"], group["foreach"] = optimizer.defaults["fused"], optimizer.defaults["foreach"]
-        if scheduler is not None:
-            scheduler.load_state_dict(state["scheduler"])
-        # Steps taken: recorded since graph replay; before, the scheduler's count.
-        done = int(state.get("steps", state["scheduler"]["last_epoch"] if state["scheduler"] else 0))
-        history, start_epoch = state["history"], state["epoch"]
-        torch.set_rng_state(state["torch_rng"].cpu())  # map_location moved it onto the device
-        if start_epoch < config.epochs:  # else nothing is left to draw
-            restore_generator(generator, state, checkpoint_path, config.seed + start_epoch)
-    # The whole data set resident on the device, indexed there: no per-step host gather or copy.
-    coordinates_all = torch.from_numpy(train_samples.coordinates).to(device)
-    targets_all = torch.from_numpy(train_samples.targets).to(device)
-    off_lattice, lattice_data = None, (coordinates_all, targets_all)
-    drawn = round(config.off_lattice * len(train_samples))
-    if drawn:
+    return _Run(volume, config, out, device, encoding, range_spec, weighting, train_samples, test_samples, graphed,
+                model, optimizer, base_rates, steps_per_epoch, schedule_steps, scheduler,
+                torch.Generator().manual_seed(config.seed))
+
+
+def _resume(run: _Run) -> None:
+    """Continue ``run`` from its checkpoint.pt, made by the same configuration: the weights, Adam, the schedule,
+    the history, torch's random state and the shuffle's generator, as an uninterrupted run would have them."""
+    path, config = run.checkpoint_path, run.config
+    state = read_checkpoint(path, run.device)
+    # Neither the per-epoch diagnostic nor graph replay changes the training: they may differ on resume.
+    free = ("epoch_flip_size", "cuda_graph")
+    # Options added since a checkpoint was written take their defaults, which is how it was trained; one saved
+    # before the grid options were nested (flat grid_* keys) reads as one saved after.
+    saved = {key: value for key, value in saved_config_dict(TrainConfig, state["config"]).items() if key not in free}
+    if saved != {key: value for key, value in config_to_dict(config).items() if key not in free}:
+        raise GratNetError(f"{path} was made with a different configuration; start afresh without --resume")
+    if state["scheduler"] is None and run.scheduler is not None:
+        raise GratNetError(f"{path} was trained with --cuda-graph (on a GPU): resume it on a CUDA device, or start "
+                           "afresh without --resume")
+    run.model.load_state_dict(state["model"])
+    run.optimizer.load_state_dict(state["optimizer"])
+    for group in run.optimizer.param_groups:  # the saved groups carry the writer's choice; this device's wins
+        group["fused"], group["foreach"] = run.optimizer.defaults["fused"], run.optimizer.defaults["foreach"]
+    if run.scheduler is not None:
+        run.scheduler.load_state_dict(state["scheduler"])
+    # Steps taken: recorded since graph replay; before, the scheduler's count.
+    run.done = int(state.get("steps", state["scheduler"]["last_epoch"] if state["scheduler"] else 0))
+    run.history, run.start_epoch = state["history"], state["epoch"]
+    torch.set_rng_state(state["torch_rng"].cpu())  # map_location moved it onto the device
+    if run.start_epoch < config.epochs:  # else nothing is left to draw
+        restore_generator(run.generator, state, path, config.seed + run.start_epoch)
+
+
+def _stage_data(run: _Run) -> None:
+    """The whole training set resident on the device, indexed there (no per-step host gather or copy); the
+    off-lattice draws' buffers; the CUDA graph of the step, when the run replays one."""
+    samples, device = run.train_samples, run.device
+    run.coordinates = torch.from_numpy(samples.coordinates).to(device)
+    run.targets = torch.from_numpy(samples.targets).to(device)
+    run.lattice = (run.coordinates, run.targets)
+    run.drawn = round(run.config.off_lattice * len(samples))
+    if run.drawn:
         from trainer.offlattice import OffLattice
 
-        off_lattice = OffLattice(train_samples.coordinates, train_samples.targets, train_samples.slice_index,
-                                 2.0 * slice_parameters(volume) - 1.0, volume.resolution, device)
+        run.off_lattice = OffLattice(samples.coordinates, samples.targets, samples.slice_index,
+                                     2.0 * slice_parameters(run.volume) - 1.0, run.volume.resolution, device)
         # Each epoch's samples are refilled in place (a CUDA graph holds these buffers' addresses).
-        coordinates_all, targets_all = torch.empty_like(coordinates_all), torch.empty_like(targets_all)
-    graph = None
-    if graphed:
-        graph = GraphedSteps(model, optimizer, base_rates, schedule_steps, config.final_learning_rate_ratio, done,
-                             encoding, weighting, coordinates_all, targets_all, config.batch_size)
+        run.coordinates, run.targets = torch.empty_like(run.coordinates), torch.empty_like(run.targets)
+    if run.graphed:
+        run.graph = GraphedSteps(run.model, run.optimizer, run.base_rates, run.schedule_steps,
+                                 run.config.final_learning_rate_ratio, run.done, run.encoding, run.weighting,
+                                 run.coordinates, run.targets, run.config.batch_size)
 
-    def learning_rate() -> float:
-        return graph.learning_rate() if graph is not None else scheduler.get_last_lr()[0]  # type: ignore[union-attr]
 
-    for epoch in range(start_epoch, config.epochs):
-        started = time.perf_counter()
-        if off_lattice is not None:  # a random (1 − F) of the lattice samples, and F·N fresh points between them
-            kept = len(train_samples) - drawn
-            keep = torch.randperm(len(train_samples), generator=generator)[:kept].to(device)
-            coordinates_all[:kept], targets_all[:kept] = lattice_data[0][keep], lattice_data[1][keep]
-            coordinates_all[kept:], targets_all[kept:] = off_lattice.draw(drawn, generator)
-        order = torch.randperm(len(train_samples), generator=generator).to(device)
-        running = torch.zeros((), dtype=torch.float64, device=device)  # on the device: no per-step sync
-        if graph is not None:
-            graph.begin_epoch()
-            running = graph.running
-        bar = tqdm(
-            range(steps_per_epoch),
-            desc=f"epoch {epoch + 1}/{config.epochs}",
-            disable=not progress,
-            leave=False,
-            unit="batch",
+def _train_epoch(run: _Run, epoch: int, progress: bool) -> tuple[dict[str, Any], float]:
+    """One pass over the training samples (drawn afresh off the lattice first, when asked): the epoch's record
+    (loss, seconds, learning rate) and its seconds unrounded."""
+    config, device, samples = run.config, run.device, run.train_samples
+    coordinates, targets = run.coordinates, run.targets
+    assert coordinates is not None and targets is not None and run.lattice is not None  # _stage_data's
+    started = time.perf_counter()
+    if run.off_lattice is not None:  # a random (1 − F) of the lattice samples, and F·N fresh points between them
+        kept = len(samples) - run.drawn
+        keep = torch.randperm(len(samples), generator=run.generator)[:kept].to(device)
+        coordinates[:kept], targets[:kept] = run.lattice[0][keep], run.lattice[1][keep]
+        coordinates[kept:], targets[kept:] = run.off_lattice.draw(run.drawn, run.generator)
+    order = torch.randperm(len(samples), generator=run.generator).to(device)
+    running = torch.zeros((), dtype=torch.float64, device=device)  # on the device: no per-step sync
+    if run.graph is not None:
+        run.graph.begin_epoch()
+        running = run.graph.running
+    bar = tqdm(range(run.steps_per_epoch), desc=f"epoch {epoch + 1}/{config.epochs}", disable=not progress,
+               leave=False, unit="batch")
+    for step in bar:
+        batch = order[step * config.batch_size : (step + 1) * config.batch_size]
+        if run.graph is not None:
+            run.graph.step(batch)  # updates graph.running, which ``running`` is
+        else:
+            value = train_step(run.model, run.optimizer, run.scheduler, coordinates[batch],  # type: ignore[arg-type]
+                               targets[batch], run.encoding, run.weighting).double()
+            running = 0.98 * running + 0.02 * value if step else value
+            run.done += 1
+        if progress and step % 20 == 0:  # the only host sync of the loop, and only with a progress bar
+            bar.set_postfix(loss=f"{float(running):.3e}", lr=f"{run.learning_rate():.2e}")
+    seconds = time.perf_counter() - started
+    record = {"epoch": epoch + 1, "train_loss": float(running), "seconds": round(seconds, 2),
+              "learning_rate": run.learning_rate()}
+    return record, seconds
+
+
+def _score_epoch(run: _Run, per_epoch: Callable[[ModelFile], dict[str, Any]] | None) -> dict[str, Any]:
+    """What joins an epoch's record beside its training (not counted as training time): the held-out loss, when
+    samples are held out, and what ``per_epoch`` makes of the weights' model file."""
+    scores: dict[str, Any] = {}
+    if run.test_samples is not None:
+        scores["held_out_loss"] = held_out_loss(run.model, run.test_samples, run.encoding, run.device,
+                                                run.config.batch_size)
+    if per_epoch is not None:
+        snapshot = copy.deepcopy(run.model).cpu().to_model_file(encoding=run.encoding, range=run.range_spec,
+                                                                scheme=run.volume.metadata["scheme"], metadata={})
+        scores.update(per_epoch(snapshot))
+    return scores
+
+
+def _save_checkpoint(run: _Run, epochs_done: int) -> None:
+    """checkpoint.pt after ``epochs_done`` epochs, written atomically: what :func:`_resume` restores."""
+    with atomic_path(run.checkpoint_path) as temporary:
+        torch.save(
+            {
+                "model": run.model.state_dict(),
+                "optimizer": run.optimizer.state_dict(),
+                "scheduler": run.scheduler.state_dict() if run.scheduler is not None else None,
+                "steps": run.graph.done if run.graph is not None else run.done,
+                "history": run.history,
+                "epoch": epochs_done,
+                "config": config_to_dict(run.config),
+                "torch_rng": torch.get_rng_state(),
+                "generator": run.generator.get_state(),
+            },
+            temporary,
         )
-        for step in bar:
-            batch = order[step * config.batch_size : (step + 1) * config.batch_size]
-            if graph is not None:
-                graph.step(batch)  # updates graph.running, which ``running`` is
-            else:
-                value = train_step(model, optimizer, scheduler, coordinates_all[batch],  # type: ignore[arg-type]
-                                   targets_all[batch], encoding, weighting).double()
-                running = 0.98 * running + 0.02 * value if step else value
-                done += 1
-            if progress and step % 20 == 0:  # the only host sync of the loop, and only with a progress bar
-                bar.set_postfix(loss=f"{float(running):.3e}", lr=f"{learning_rate():.2e}")
-        seconds = time.perf_counter() - started
-        record = {
-            "epoch": epoch + 1,
-            "train_loss": float(running),
-            "seconds": round(seconds, 2),
-            "learning_rate": learning_rate(),
-        }
-        if test_samples is not None:
-            record["held_out_loss"] = held_out_loss(model, test_samples, encoding, device, config.batch_size)
-        if per_epoch is not None:
-            snapshot = copy.deepcopy(model).cpu().to_model_file(encoding=encoding, range=range_spec,
-                                                                scheme=volume.metadata["scheme"], metadata={})
-            record.update(per_epoch(snapshot))
-        history["epochs"].append(record)
-        history["train_seconds"] = round(history["train_seconds"] + seconds, 2)
-        if progress:
-            tqdm.write(f"epoch {epoch + 1}: " + ", ".join(f"{k} {v:.4g}" for k, v in record.items() if k != "epoch"))
-        with atomic_path(checkpoint_path) as temporary:
-            torch.save(
-                {
-                    "model": model.state_dict(),
-                    "optimizer": optimizer.state_dict(),
-                    "scheduler": scheduler.state_dict() if scheduler is not None else None,
-                    "steps": graph.done if graph is not None else done,
-                    "history": history,
-                    "epoch": epoch + 1,
-                    "config": config_to_dict(config),
-                    "torch_rng": torch.get_rng_state(),
-                    "generator": generator.get_state(),
-                },
-                temporary,
-            )
+
+
+def _finish(run: _Run) -> tuple[FunnelMLP | GridNetwork, ModelFile, dict[str, Any]]:
+    """The run's summary into its history; model.npz and history.json written."""
+    from gratnet.modelfile import save_model
+
+    model, history, samples = run.model, run.history, run.train_samples
     history.update(
         {
             "parameters": model.parameter_count,
             "layer_sizes": model.sizes,
-            "device": str(device),
-            "cuda_graph": graphed,
-            "train_samples": len(train_samples),
-            "held_out_samples": len(test_samples or []),
-            "samples_per_second": round(len(train_samples) * len(history["epochs"]) / max(history["train_seconds"],
-                                                                                         1e-9)),
+            "device": str(run.device),
+            "cuda_graph": run.graphed,
+            "train_samples": len(samples),
+            "held_out_samples": len(run.test_samples or []),
+            "samples_per_second": round(len(samples) * len(history["epochs"]) / max(history["train_seconds"], 1e-9)),
         }
     )
     if isinstance(model, GridNetwork):
-        history.update({"grid_shapes": [list(shape) for shape in config.grid_shapes()],
-                        "grid_bytes": model.grid_bytes, "volume_bytes": int(volume.xyz.size * 4)})
-    from gratnet.modelfile import save_model
-
-    model_file = trained_model_file(model, config, volume, history)
-    save_model(out_dir / "model.npz", model_file)
-    write_text_atomic(out_dir / "history.json", json.dumps(history, indent=2) + "\n")
+        history.update({"grid_shapes": [list(shape) for shape in run.config.grid_shapes()],
+                        "grid_bytes": model.grid_bytes, "volume_bytes": int(run.volume.xyz.size * 4)})
+    model_file = trained_model_file(model, run.config, run.volume, history)
+    save_model(run.out_dir / "model.npz", model_file)
+    write_text_atomic(run.out_dir / "history.json", json.dumps(history, indent=2) + "\n")
     return model, model_file, history
+
+
+def train(
+    volume: Volume,
+    config: TrainConfig,
+    out_dir: str | os.PathLike[str],
+    resume: bool = False,
+    progress: bool = True,
+    per_epoch: Callable[[ModelFile], dict[str, Any]] | None = None,
+) -> tuple[FunnelMLP | GridNetwork, ModelFile, dict[str, Any]]:
+    """Train on ``volume``; writes checkpoint.pt (every epoch), model.npz and history.json to ``out_dir``.
+
+    ``resume`` continues from ``out_dir``'s checkpoint.pt when there is one. ``per_epoch`` (optional) gets the
+    model file of the weights after each epoch; what it returns (e.g. a slice's FLIP) joins that epoch's record in
+    history.json. Its time is not counted as training time. An interruption (Ctrl-C) leaves the last finished
+    epoch's checkpoint.
+
+    The steps: :func:`_set_up`, :func:`_resume`, :func:`_stage_data`; per epoch :func:`_train_epoch`,
+    :func:`_score_epoch` and :func:`_save_checkpoint`; :func:`_finish`.
+    """
+    run = _set_up(volume, config, out_dir)
+    if resume and run.checkpoint_path.exists():
+        _resume(run)
+    _stage_data(run)
+    for epoch in range(run.start_epoch, config.epochs):
+        record, seconds = _train_epoch(run, epoch, progress)
+        record.update(_score_epoch(run, per_epoch))
+        run.history["epochs"].append(record)
+        run.history["train_seconds"] = round(run.history["train_seconds"] + seconds, 2)
+        if progress:
+            tqdm.write(f"epoch {epoch + 1}: " + ", ".join(f"{k} {v:.4g}" for k, v in record.items() if k != "epoch"))
+        _save_checkpoint(run, epoch + 1)
+    return _finish(run)

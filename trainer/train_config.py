@@ -9,15 +9,80 @@ from typing import Literal
 
 import numpy as np
 
-from gratnet.config import config_field
+from gratnet.config import config_field, flat_keywords, nested_field
 from gratnet.encoding import EncodingSpec, RangeSpec, range_forward
 from gratnet.errors import GratNetError
 from gratnet.volume import Volume
 
 
 @dataclasses.dataclass(frozen=True)
+class GridConfig:
+    """The feature grids of ``--architecture grid`` (``TrainConfig.grid``; flags ``--grid-*``, keys ``grid_*``):
+    their levels and nodes, features, initialisation, optimiser and storage. Checked by TrainConfig, and only for
+    that architecture (an mlp run accepts any)."""
+
+    levels: int = config_field(3, "grid: levels, each half the u*/v* node intervals of the next")
+    resolution: int = config_field(251, "grid: nodes per u*/v* axis of the finest level (251 = every 4th of a "
+                                   "1001² volume's samples)")
+    t_resolution: int = config_field(11, "grid: nodes along t of every level (11 = the volume's slices)")
+    level_t: str = config_field("", "grid: nodes along t per level, coarse to fine, comma-separated (overrides "
+                                "--grid-t-resolution; e.g. 11,11,2 for a fine level that varies little in t)")
+    level_step: int = config_field(2, "grid: ratio of u*/v* node intervals between neighbouring levels (2: "
+                                   "each coarser level has half the intervals of the next)")
+    features: int = config_field(2, "grid: features per level, C (1 to 16: the shader reads a level as "
+                                 "ceil(C/4) RGBA textures, features 4k..4k+3 in the k-th; 2 keeps the default "
+                                 "grid at 3.65 MB as float16)")
+    init: float = config_field(1e-4, "grid: initial features uniform in ±this")
+    learning_rate: float = config_field(1e-2, "grid: Adam's initial learning rate of the grids (same schedule)")
+    dtype: Literal["float16", "float32"] = config_field("float16", "grid: storage dtype in the model file")
+    interpolation: Literal["linear", "smoothstep"] = config_field(
+        "linear", "grid: between nodes, linear (trilinear, C⁰) or smoothstep (C¹: f → f²(3 − 2f) per axis; the "
+        "same cost)"
+    )
+    adam_epsilon: float = config_field(
+        1e-8, "grid: Adam's ε of the grids (their sqrt(v) ends near 1e-10, so at 1e-8 ε sets their step; "
+        "instant-NGP uses 1e-15)"
+    )
+
+    def check(self) -> None:
+        """The checks of a grid run's options (the sizes, features, initialisation, rate, interpolation, dtype);
+        ``adam_epsilon`` is TrainConfig's to check, beside the MLP's."""
+        from gratnet.featuregrid import MAX_FEATURES, check_interpolation
+
+        self.shapes()  # checks the sizes
+        if not 1 <= self.features <= MAX_FEATURES:
+            raise GratNetError(f"--grid-features must be from 1 to {MAX_FEATURES}, got {self.features}")
+        if not (self.init >= 0 and self.learning_rate > 0):
+            raise GratNetError(f"--grid-init must be ≥ 0 and --grid-learning-rate > 0, got {self.init}, "
+                               f"{self.learning_rate}")
+        check_interpolation(self.interpolation)
+        if self.dtype not in ("float16", "float32"):
+            raise GratNetError(f"--grid-dtype must be float16 or float32, got {self.dtype!r}")
+
+    def shapes(self) -> list[tuple[int, int, int, int]]:
+        """(T, R, R, C) of every level, coarse to fine."""
+        from gratnet.featuregrid import level_resolutions
+
+        t_nodes: int | list[int] = self.t_resolution
+        if self.level_t.strip():
+            try:
+                t_nodes = [int(part) for part in self.level_t.split(",")]
+            except ValueError:
+                raise GratNetError(f"--grid-level-t must be comma-separated integers (one per level), got "
+                                   f"{self.level_t!r}") from None
+        return [(t, r, r, self.features) for r, t in level_resolutions(self.levels, self.resolution, t_nodes,
+                                                                        self.level_step)]
+
+
+@flat_keywords
+@dataclasses.dataclass(frozen=True)
 class TrainConfig:
-    """Network, encoding, range transform and optimisation of one training run."""
+    """Network, encoding, range transform and optimisation of one training run.
+
+    The grid options are nested (``config.grid``, a :class:`GridConfig`) under flat public names: the flags
+    ``--grid-levels`` …, the keywords and sweep keys ``grid_levels`` … (``TrainConfig(grid_levels=2)`` is
+    ``TrainConfig(grid=GridConfig(levels=2))``), and a config saved with flat keys, before the nesting, loads.
+    """
 
     architecture: Literal["mlp", "grid"] = config_field(
         "mlp", "network: mlp (the paper's funnel MLP on the encoding) or grid (learned feature grids over "
@@ -37,24 +102,7 @@ class TrainConfig:
     )
     test_slices: str = config_field("4,7,10", "held-out slice indices for --split slices")
     test_fraction: float = config_field(0.1, "held-out fraction for --split random")
-    grid_levels: int = config_field(3, "grid: levels, each half the u*/v* node intervals of the next")
-    grid_resolution: int = config_field(251, "grid: nodes per u*/v* axis of the finest level (251 = every 4th of a "
-                                        "1001² volume's samples)")
-    grid_t_resolution: int = config_field(11, "grid: nodes along t of every level (11 = the volume's slices)")
-    grid_level_t: str = config_field("", "grid: nodes along t per level, coarse to fine, comma-separated (overrides "
-                                     "--grid-t-resolution; e.g. 11,11,2 for a fine level that varies little in t)")
-    grid_level_step: int = config_field(2, "grid: ratio of u*/v* node intervals between neighbouring levels (2: "
-                                        "each coarser level has half the intervals of the next)")
-    grid_features: int = config_field(2, "grid: features per level, C (1 to 16: the shader reads a level as "
-                                      "ceil(C/4) RGBA textures, features 4k..4k+3 in the k-th; 2 keeps the default "
-                                      "grid at 3.65 MB as float16)")
-    grid_init: float = config_field(1e-4, "grid: initial features uniform in ±this")
-    grid_learning_rate: float = config_field(1e-2, "grid: Adam's initial learning rate of the grids (same schedule)")
-    grid_dtype: Literal["float16", "float32"] = config_field("float16", "grid: storage dtype in the model file")
-    grid_interpolation: Literal["linear", "smoothstep"] = config_field(
-        "linear", "grid: between nodes, linear (trilinear, C⁰) or smoothstep (C¹: f → f²(3 − 2f) per axis; the "
-        "same cost)"
-    )
+    grid: GridConfig = nested_field(GridConfig, "grid")
     loss_visible_y: str = config_field(
         "", "display-weighted loss: 'LOW,HIGH', a band of CIE Y (the volume's units, 1 = a perfect mirror's peak) "
         "whose samples weigh --loss-visible-weight in the LogCosh mean; e.g. 6e-8,5e-4 is what sRGB shows at "
@@ -78,10 +126,6 @@ class TrainConfig:
         "near-Nyquist weights, which the samples hardly constrain, from growing "
         "(docs/experiments/2026-11-25-scratches-adam-epsilon.md)"
     )
-    grid_adam_epsilon: float = config_field(
-        1e-8, "grid: Adam's ε of the grids (their sqrt(v) ends near 1e-10, so at 1e-8 ε sets their step; "
-        "instant-NGP uses 1e-15)"
-    )
     seed: int = config_field(0, "seed of initialisation, shuffling and the random split")
     device: str = config_field("auto", "torch device: auto (CUDA when present), cpu, cuda")
     cuda_graph: Literal["auto", "on", "off"] = config_field(
@@ -98,7 +142,7 @@ class TrainConfig:
             raise GratNetError(f"--epochs and --batch-size must be ≥ 1, got {self.epochs}, {self.batch_size}")
         if not self.learning_rate > 0:
             raise GratNetError(f"--learning-rate must be positive, got {self.learning_rate}")
-        for flag, epsilon in (("--adam-epsilon", self.adam_epsilon), ("--grid-adam-epsilon", self.grid_adam_epsilon)):
+        for flag, epsilon in (("--adam-epsilon", self.adam_epsilon), ("--grid-adam-epsilon", self.grid.adam_epsilon)):
             if not (math.isfinite(epsilon) and epsilon > 0):
                 raise GratNetError(f"{flag} must be a positive number, got {epsilon}")
         if not 0 <= self.epoch_flip_size <= 1024:
@@ -106,19 +150,7 @@ class TrainConfig:
         if self.architecture not in ("mlp", "grid"):
             raise GratNetError(f"--architecture must be mlp or grid, got {self.architecture!r}")
         if self.architecture == "grid":
-            from gratnet.featuregrid import MAX_FEATURES
-
-            self.grid_shapes()  # checks the sizes
-            if not 1 <= self.grid_features <= MAX_FEATURES:
-                raise GratNetError(f"--grid-features must be from 1 to {MAX_FEATURES}, got {self.grid_features}")
-            if not (self.grid_init >= 0 and self.grid_learning_rate > 0):
-                raise GratNetError(f"--grid-init must be ≥ 0 and --grid-learning-rate > 0, got {self.grid_init}, "
-                                   f"{self.grid_learning_rate}")
-            from gratnet.featuregrid import check_interpolation
-
-            check_interpolation(self.grid_interpolation)
-            if self.grid_dtype not in ("float16", "float32"):
-                raise GratNetError(f"--grid-dtype must be float16 or float32, got {self.grid_dtype!r}")
+            self.grid.check()
         if not (math.isfinite(self.loss_visible_weight) and self.loss_visible_weight > 0):
             raise GratNetError(f"--loss-visible-weight must be a positive number, got {self.loss_visible_weight}")
         self.visible_band()  # checks the band
@@ -179,19 +211,7 @@ class TrainConfig:
 
     def grid_shapes(self) -> list[tuple[int, int, int, int]]:
         """(T, R, R, C) of every grid level, coarse to fine ([] for the mlp architecture)."""
-        if self.architecture != "grid":
-            return []
-        from gratnet.featuregrid import level_resolutions
-
-        t_nodes: int | list[int] = self.grid_t_resolution
-        if self.grid_level_t.strip():
-            try:
-                t_nodes = [int(part) for part in self.grid_level_t.split(",")]
-            except ValueError:
-                raise GratNetError(f"--grid-level-t must be comma-separated integers (one per level), got "
-                                   f"{self.grid_level_t!r}") from None
-        return [(t, r, r, self.grid_features)
-                for r, t in level_resolutions(self.grid_levels, self.grid_resolution, t_nodes, self.grid_level_step)]
+        return self.grid.shapes() if self.architecture == "grid" else []
 
     def visible_band(self) -> tuple[float, float] | None:
         """The display-weighted loss's band as range-transformed targets (y_low, y_high) of CIE Y, or None when

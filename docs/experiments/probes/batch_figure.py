@@ -10,7 +10,6 @@ from __future__ import annotations
 
 import argparse
 import json
-import sys
 from pathlib import Path
 
 import matplotlib
@@ -18,6 +17,7 @@ import matplotlib
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 
+from analysis.results_table import PAPER_FLIP_PAPER_DATASETS, SLICE_ORDER
 from gratnet.figures import save_figure
 
 #: The same recipe at every batch size (no loss weighting, encoding or grid change): the runs compared.
@@ -29,9 +29,6 @@ def main() -> None:
     parser.add_argument("--data", default="docs/data/gpu_runs_batch.json")
     parser.add_argument("--out", default="docs/images/batch_size_cd.png")
     arguments = parser.parse_args()
-    sys.path.insert(0, str(Path(__file__).resolve().parents[3]))  # the repository root, for benchmarks/
-    from benchmarks.results_table import PAPER_FLIP_PAPER_DATASETS, SLICE_ORDER
-
     normal = SLICE_ORDER[0]  # (0°, 0°) 2000 RU
     paper = PAPER_FLIP_PAPER_DATASETS["paper-cd"]
     # The interpolation oracle of the volume these runs trained on, as the shipped model's evaluation scored it.

@@ -83,8 +83,7 @@ def main() -> int:
         return 0
     for part in ("thread", "child"):
         with tempfile.TemporaryDirectory() as cache:
-            environment = {**os.environ, "MESA_SHADER_CACHE_DIR": cache,
-                           "PYTHONPATH": os.pathsep.join([str(REPOSITORY), os.environ.get("PYTHONPATH", "")])}
+            environment = {**os.environ, "MESA_SHADER_CACHE_DIR": cache}
             environment.pop("MESA_SHADER_CACHE_DISABLE", None)
             if part == "thread":
                 subprocess.run([sys.executable, __file__, model, "--thread"], env=environment, check=True)
@@ -94,5 +93,4 @@ def main() -> int:
 
 
 if __name__ == "__main__":
-    sys.path.insert(0, str(REPOSITORY))
     sys.exit(main())

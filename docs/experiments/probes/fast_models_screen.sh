@@ -25,8 +25,20 @@ declare -A candidates=(
     [g4x4-501-L4-h56]="--hidden 56,32,16 --grid-levels 4 --grid-resolution 501 --grid-level-t 4,4,4,2 --grid-features 4 --frequencies 4 --t-frequencies 2"
     [g8-L2-h40]="--hidden 40,24 --grid-levels 3 --grid-resolution 251 --grid-t-resolution 5 --grid-features 8 --frequencies 2 --t-frequencies 1"
     [g4-L19-h24]="--hidden 24,16 --grid-levels 3 --grid-resolution 251 --grid-t-resolution 6 --grid-features 4"
+    # Band encodings: only the spatial terms j₀…18 that the 251² grid cannot carry (--first-frequency j₀).
+    [g4-b12-h48]="--hidden 48,24,12 --grid-levels 3 --grid-resolution 251 --grid-t-resolution 6 --grid-features 4 --first-frequency 12"
+    [g8-b12-h40]="--hidden 40,24,12 --grid-levels 3 --grid-resolution 251 --grid-t-resolution 5 --grid-features 8 --first-frequency 12 --t-frequencies 2"
+    [g4-b14-h32]="--hidden 32,16 --grid-levels 3 --grid-resolution 251 --grid-t-resolution 6 --grid-features 4 --first-frequency 14"
+    # Line levels (--grid-lines N): a u*-line (T, 2, N, C) and a v*-line (T, N, 2, C) at the volume's full
+    # resolution beside the square levels, so that the grid, not the encoding, carries the narrow orders.
+    [g4-L4-h56]="--hidden 56,32,16 --grid-levels 3 --grid-resolution 251 --grid-t-resolution 6 --grid-features 4 --frequencies 4 --t-frequencies 2"
+    [ln4-L4-h56]="--hidden 56,32,16 --grid-levels 3 --grid-resolution 251 --grid-t-resolution 6 --grid-features 4 --frequencies 4 --t-frequencies 2 --grid-lines 1001"
+    [ln4-L8-h40]="--hidden 40,24,12 --grid-levels 3 --grid-resolution 251 --grid-t-resolution 6 --grid-features 4 --frequencies 8 --t-frequencies 2 --grid-lines 1001"
+    [ln4-L2-h48]="--hidden 48,24 --grid-levels 3 --grid-resolution 251 --grid-t-resolution 6 --grid-features 4 --frequencies 2 --t-frequencies 1 --grid-lines 1001"
+    [ln8-L4-h48]="--hidden 48,32,16 --grid-levels 3 --grid-resolution 251 --grid-t-resolution 5 --grid-features 8 --frequencies 4 --t-frequencies 2 --grid-lines 1001"
 )
-order=(base g8-L4-h56 g8-L8-h44 g4x4-501-L4-h56 g8-L2-h40 g4-L19-h24)
+order=(base g4-b12-h48 g8-b12-h40 ln4-L4-h56 g4-L4-h56 ln4-L8-h40 ln4-L2-h48 ln8-L4-h48 g4-L19-h24 g4-b14-h32 g8-L4-h56
+       g8-L8-h44 g4x4-501-L4-h56 g8-L2-h40)
 names=("$@")
 [ ${#names[@]} -gt 0 ] || names=("${order[@]}")
 for name in "${names[@]}"; do

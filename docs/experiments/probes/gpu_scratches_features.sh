@@ -3,7 +3,7 @@
 # paper-scratches ground truth on the GPU, then four trainings at once on it (the control is the shipped recipe,
 # 8 features at t 11; the others move the grid's bytes to 12 or 16 features per node at fewer t nodes, or widen
 # the MLP), stopped at DEADLINE seconds from the start; a run stopped before its last epoch is written out from
-# its last checkpoint (benchmarks/checkpoint_model.py). Writes to $OUT (7 files: a device call returns 8 at most):
+# its last checkpoint (python -m analysis.checkpoint_model). Writes to $OUT (7 files: a device call returns 8 at most):
 # NAME.npz per run, epochs.txt (each run's per-epoch lines: loss, seconds, learning rate, FLIP of (0°, 0°) at
 # 128²), job.log and logs.tgz (commands, histories, log tails).
 #
@@ -70,7 +70,7 @@ for name in "${!runs[@]}"; do
     | tail -2 | tee -a $OUT/job.log
   if [ ! -f $W/$name/model.npz ] && [ -f $W/$name/checkpoint.pt ]; then
     log "$name: exporting its last checkpoint"
-    $py benchmarks/checkpoint_model.py $W/$name/checkpoint.pt $vol --out $W/$name/model.npz >> $W/$name.log 2>&1 &
+    $py -m analysis.checkpoint_model $W/$name/checkpoint.pt $vol --out $W/$name/model.npz >> $W/$name.log 2>&1 &
   fi
 done
 wait

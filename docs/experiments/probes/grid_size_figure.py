@@ -11,7 +11,6 @@ from __future__ import annotations
 
 import argparse
 import json
-import sys
 from pathlib import Path
 
 import matplotlib
@@ -20,6 +19,7 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
+from analysis.results_table import PAPER_FLIP_PAPER_DATASETS, SLICE_ORDER
 from gratnet.figures import save_figure
 
 
@@ -28,9 +28,6 @@ def main() -> None:
     parser.add_argument("--data", default="docs/data/cpu_runs_scratches_grid.json")
     parser.add_argument("--out", default="docs/images/grid_size_scratches.png")
     arguments = parser.parse_args()
-    sys.path.insert(0, str(Path(__file__).resolve().parents[3]))  # the repository root, for benchmarks/
-    from benchmarks.results_table import PAPER_FLIP_PAPER_DATASETS, SLICE_ORDER
-
     data = json.loads(Path(arguments.data).read_text())
     runs, oracle = data["runs"], data["oracle_flip"]
     figure, axes = plt.subplots(1, 2, figsize=(11, 4.2))

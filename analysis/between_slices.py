@@ -1,6 +1,6 @@
 """A network's BRDF-slice error against the distance of each pixel's key vector from the nearest w-slice.
 
-    python benchmarks/between_slices.py MODEL.npz --heightfield paper-scratches [--volume VOLUME.exr]
+    python -m analysis.between_slices MODEL.npz --heightfield paper-scratches [--volume VOLUME.exr]
         [--views '0,0,2000;30,135,5000'] [--cache-dir out/cache] [--bins 5] [--json OUT.json]
 
 A volume holds S w-slices at t_s = s/(S − 1) (trainer/sampling.py); the network is trained on them only and

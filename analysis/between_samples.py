@@ -1,6 +1,6 @@
 """A network's error on its training samples against its error between them, per volume slice (y-space).
 
-    python benchmarks/between_samples.py VOLUME.exr MODEL.npz [MODEL.npz …] [--slices 2,5,8]
+    python -m analysis.between_samples VOLUME.exr MODEL.npz [MODEL.npz …] [--slices 2,5,8]
 
 For each slice of the volume, with the model's own range transform (targets y as in training):
 

@@ -1,6 +1,6 @@
 """FLIP error maps of several models at one BRDF slice, side by side (to see the pattern of an error, not its mean).
 
-    python benchmarks/flip_maps.py MODEL.npz [MODEL.npz …] --heightfield paper-scratches --view 72,30,5000
+    python docs/experiments/probes/flip_maps.py MODEL.npz [MODEL.npz …] --heightfield paper-scratches --view 72,30,5000
         [--labels 'shipped;4 features, t 11/11/21'] [--cache-dir out/cache] --out maps.png
 
 Each panel is NVIDIA's FLIP error map (flip-evaluator, as `gratnet evaluate` computes it) of one model's slice

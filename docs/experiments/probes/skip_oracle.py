@@ -9,7 +9,8 @@ lit (display sRGB > 0):
 
 and prints the largest possible reduction of MLP evaluations, 1 / lit fraction, for both. JSON lines.
 
-    python benchmarks/skip_oracle.py [--size 256] [--cache-dir out/cache] [--plot docs/images/skip_oracle.png]
+    python docs/experiments/probes/skip_oracle.py [--size 256] [--cache-dir out/cache]
+        [--plot docs/images/skip_oracle.png]
 
 Ground-truth slices missing from the cache are computed (minutes each, 81 wavelengths).
 """

@@ -1,14 +1,14 @@
 """A model file from a training checkpoint, or from the average of several: to look at a run stopped before its
 end, or at the mean of its late epochs' weights.
 
-    python benchmarks/checkpoint_model.py RUN/checkpoint.pt VOLUME.exr --out MODEL.npz
-    python benchmarks/checkpoint_model.py RUN/checkpoint-e8.pt RUN/checkpoint-e9.pt RUN/checkpoint.pt VOLUME.exr \
+    python -m analysis.checkpoint_model RUN/checkpoint.pt VOLUME.exr --out MODEL.npz
+    python -m analysis.checkpoint_model RUN/checkpoint-e8.pt RUN/checkpoint-e9.pt RUN/checkpoint.pt VOLUME.exr \
         --out MODEL.npz
 
 `gratnet train` writes RUN/checkpoint.pt after every epoch and the model file only at its end. This builds the
 network of the checkpoint's configuration, loads its weights, and writes the model file the trainer's own way
 (trainer.train.trained_model_file: encoding, scheme and metadata from the volume it was trained on), so that
-`gratnet evaluate`, benchmarks/flip_maps.py and benchmarks/encoding_weights.py can read a stopped run at its
+`gratnet evaluate`, docs/experiments/probes/flip_maps.py and analysis.encoding_weights can read a stopped run at its
 last finished epoch.
 
 Given several checkpoints of one run (copies of checkpoint.pt taken after different epochs; one configuration),

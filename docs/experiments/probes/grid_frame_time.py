@@ -1,6 +1,6 @@
 """Frame time of feature-grid models against the pure MLP on the texture path (docs/benchmarks.md).
 
-    python benchmarks/grid_frame_time.py [--size 256] [--repeats 5]
+    python docs/experiments/probes/grid_frame_time.py [--size 256] [--repeats 5]
 
 Random weights of the sizes in CASES (the time does not depend on the values: skipping is off), 256² BRDF
 slice at (30°, 0°), renders interleaved across the cases, median and minimum per case.

@@ -4,7 +4,7 @@ For each run folder (holding model.npz, metrics.json and history.json from ``gra
 sizes, MACs per pixel, training samples, epochs, training seconds, mean FLIP over the five evaluation
 slices, FLIP at (0°, 0°) and mean PSNR (as ``gratnet bench`` reads them).
 
-    python benchmarks/sweep_errors.py out/sweep/* out/sweep_seed1/* out/sweep_seed2/* assets/blazed
+    python docs/experiments/probes/sweep_errors.py out/sweep/* out/sweep_seed1/* out/sweep_seed2/* assets/blazed
 
 ``gratnet sweep`` writes the same figures for its runs as OUT/results.{csv,md,json} (sweep/tasks.py
 ``result_row``); this script remains for run folders made by hand.

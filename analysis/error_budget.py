@@ -1,6 +1,6 @@
 """How small a network's error must be for a FLIP target: FLIP against an error of known size and kind.
 
-    python benchmarks/error_budget.py MODEL.npz --heightfield paper-scratches [--volume VOLUME.exr]
+    python -m analysis.error_budget MODEL.npz --heightfield paper-scratches [--volume VOLUME.exr]
         [--sigmas 5e-4,1e-3,1.5e-3,2e-3,3e-3] [--views '0,0,2000;30,0,5000'] [--cache-dir out/cache]
         [--target 0.0123] [--json OUT.json] [--figure OUT.png]
 

@@ -7,7 +7,7 @@ fraction the bound skips, the fraction the network leaves dark, and for the dark
 skipped the 10/50/90 % quantiles of network/step and bound/step. A bound/step just above 1 there means a
 tighter bound would skip them; a network/step near 1 means the network's own faint floor is in the way.
 
-    OMP_NUM_THREADS=1 python benchmarks/skip_gap.py assets/blazed/model.npz assets/sinusoidal/model.npz
+    OMP_NUM_THREADS=1 python docs/experiments/probes/skip_gap.py assets/blazed/model.npz assets/sinusoidal/model.npz
 """
 
 from __future__ import annotations

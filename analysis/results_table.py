@@ -1,7 +1,7 @@
 """Build docs/results.md from data alone: assets/*/ (metrics, histories, model files), docs/data/*.json and the
 presets of trainer/datasets.py, with fixed template text here (no hand-typed figures, no hand-written section).
 
-python benchmarks/results_table.py [--out docs/results.md]
+python -m analysis.results_table [--out docs/results.md]
 
 The experiment logs behind the shipped models are docs/experiments/*.md; the page links them.
 """
@@ -13,6 +13,7 @@ import json
 import re
 from pathlib import Path
 
+from analysis import oracle_table, seed_summary
 from gratnet.atomic import write_text_atomic
 from trainer.datasets import PRESETS
 from trainer.evaluate import STANDARD_SLICE_LABELS
@@ -165,11 +166,11 @@ PAPER_COLUMNS = {name: (preset.paper_column, preset.paper_flip) for name, preset
                  if preset.paper_flip is not None}
 PAPER_FLIP_PAPER_DATASETS = {name: figure for name, (_, figure) in PAPER_COLUMNS.items()}
 
-#: benchmarks/oracle_table.py's --json output for the paper's datasets (committed: the volumes are not).
+#: analysis.oracle_table's --json output for the paper's datasets (committed: the volumes are not).
 ORACLE_JSON = Path("docs/data/oracle_paper.json")
 
 
-#: benchmarks/oracle_table.py --device cuda on volumes of more w-slices than the CPU here affords (computed on a
+#: analysis.oracle_table --device cuda on volumes of more w-slices than the CPU here affords (computed on a
 #: GPU): docs/data/oracle_NAME_slices.json for the preset paper-NAME (pits: 11, 21, 41; scratches: 21, 41).
 SLICES_JSON = "docs/data/oracle_{name}_slices.json"
 
@@ -232,7 +233,7 @@ def paper_datasets_table(assets: Path) -> list[str]:
         trained_on = _trained_volume(folder)
         config = json.loads((folder / "model.config.json").read_text())["train"]
         network = (f"grid {len(shapes)}×{shapes[-1][3]}@{shapes[-1][1]}², t {shapes[-1][0]}, "
-                   f"{config.get('grid_interpolation', 'linear')}; MLP {'-'.join(map(str, history['layer_sizes']))}"
+                   f"{config.get('grid', {}).get('interpolation', config.get('grid_interpolation', 'linear'))}; MLP {'-'.join(map(str, history['layer_sizes']))}"
                    if shapes else "-".join(map(str, history["layer_sizes"])))
         column, paper = PAPER_COLUMNS.get(folder.name, ("—", None))
         shipped.add(folder.name)
@@ -256,11 +257,9 @@ def paper_datasets_table(assets: Path) -> list[str]:
 
 
 def _oracle_section(path: Path = ORACLE_JSON) -> list[str]:
-    """The interpolation oracle of the paper presets' full volumes, from benchmarks/oracle_table.py's JSON."""
+    """The interpolation oracle of the paper presets' full volumes, from analysis.oracle_table's JSON."""
     if not path.exists():
         return []
-    from oracle_table import markdown  # the sibling script (benchmarks/ is sys.path[0] when run as a script)
-
     rows = json.loads(path.read_text())
     above = [name for row in rows if (name := str(row["volume"]).removesuffix(".exr")) in PAPER_FLIP_PAPER_DATASETS
              and row["brdf_slices"][0]["flip"] > PAPER_FLIP_PAPER_DATASETS[name]]
@@ -269,9 +268,9 @@ def _oracle_section(path: Path = ORACLE_JSON) -> list[str]:
         "oracle's mean FLIP per BRDF slice at 256², and the (0°, 0°) slice's PSNR and its lit regions' FLIP):",
         "",
         "    gratnet groundtruth paper-NAME --sampling simple-max --out VOLUMES/paper-NAME.exr",
-        f"    python benchmarks/oracle_table.py VOLUMES --json {path.as_posix()}",
+        f"    python -m analysis.oracle_table VOLUMES --json {path.as_posix()}",
         "",
-        *markdown(rows).splitlines(),
+        *oracle_table.markdown(rows).splitlines(),
         "",
         "Against the paper's reported mean FLIP at (0°, 0°) 2000 RU (issue 15): " + "; ".join(
             f"{name} oracle {row['brdf_slices'][0]['flip']:.4f} vs paper {PAPER_FLIP_PAPER_DATASETS[name]:g}"
@@ -466,11 +465,9 @@ SEEDS_JSON = Path("docs/data/seeds_paper.json")
 
 def _seeds_section(path: Path = SEEDS_JSON) -> list[str]:
     """Seeds against the paper (issue 34's rule: a recipe ships only if its mean over ≥ 3 seeds beats the paper's
-    column), from benchmarks/seed_summary.py's JSON; empty when none is recorded."""
+    column), from analysis.seed_summary's JSON; empty when none is recorded."""
     if not path.exists():
         return []
-    from seed_summary import markdown  # the sibling script (benchmarks/ is sys.path[0] when run as a script)
-
     rows = json.loads(path.read_text(encoding="utf-8"))
     return [
         "## Seeds: each recipe's mean and spread against the paper",
@@ -478,10 +475,10 @@ def _seeds_section(path: Path = SEEDS_JSON) -> list[str]:
         "A recipe counts as meeting the paper's figure only if the mean of its (0°, 0°) FLIP over at least three",
         "seeds (`--seed K`; initialisation and shuffling) does. Each seed trained with the shipped recipe and",
         "evaluated as above (`SEEDS=\"0 1 2\" bash scripts/reproduce_paper_models.sh NAME`, then",
-        "`python benchmarks/seed_summary.py RUNS --json docs/data/seeds_paper.json`). The worst-slice ratios are means",
+        "`python -m analysis.seed_summary RUNS --json docs/data/seeds_paper.json`). The worst-slice ratios are means",
         "over the seeds. Datasets not listed have one seed only (the table above).",
         "",
-        *markdown(rows).splitlines(),
+        *seed_summary.markdown(rows).splitlines(),
         "",
     ]
 
@@ -494,9 +491,9 @@ def _reproduce_section() -> list[str]:
         "    bash scripts/reproduce_paper_models.sh [NAME …]   # the paper-* models from their train_command.json",
         "    bash scripts/ship_materials.sh                    # the 20 µm tiles",
         "    bash scripts/reevaluate_materials.sh NAME         # today's evaluation of a shipped model",
-        "    python benchmarks/oracle_table.py VOLUMES --json docs/data/oracle_paper.json",
+        "    python -m analysis.oracle_table VOLUMES --json docs/data/oracle_paper.json",
         "    bash scripts/compare_paper_models.sh [NAME …]     # docs/data/compare/NAME.json: volume, gratnet compare",
-        "    python benchmarks/results_table.py                # this page",
+        "    python -m analysis.results_table                  # this page",
         "",
         "Each experiment log in docs/experiments/ gives its own commands and data.",
         "",
@@ -512,7 +509,7 @@ def main() -> None:
     lines = [
         "# Results: shipped materials",
         "",
-        "Generated by `python benchmarks/results_table.py` from data alone: `assets/*/` (metrics.json, history.json,",
+        "Generated by `python -m analysis.results_table` from data alone: `assets/*/` (metrics.json, history.json,",
         "the model files), `docs/data/*.json` and the presets of trainer/datasets.py. Every figure is measured;",
         "the paper's column is its reported mean FLIP at the BRDF slice (0°, 0°), 2000 RU. The studies that chose",
         "these models are logged one per file in [docs/experiments/](experiments/README.md); their lasting findings",

@@ -1,6 +1,6 @@
 """How much each encoding frequency weighs in a network: the first layer's column norms per frequency.
 
-    python benchmarks/encoding_weights.py MODEL.npz … [--json OUT.json]
+    python -m analysis.encoding_weights MODEL.npz … [--json OUT.json]
 
 The first layer of the funnel MLP reads [grid features (feature-grid models), (u*, v*, t), eq. 6's sines and
 cosines]. The spatial part holds 4 groups (u*, v*, u*+v*, u*−v*) × (sin, cos) × L frequencies, the t part

@@ -1,11 +1,11 @@
 """Gather finished training runs into one JSON record and a Markdown table (the run tables of docs/experiments/).
 
-    python benchmarks/collect_runs.py RUN[=LABEL] … [--json docs/data/NAME.json] [--meta KEY=VALUE …]
+    python -m analysis.collect_runs RUN[=LABEL] … [--json docs/data/NAME.json] [--meta KEY=VALUE …]
         [--figure docs/images/NAME.png]
 
 Each RUN is a folder written by `gratnet train` (model.config.json, history.json) and evaluated by `gratnet
 evaluate` (metrics.json in RUN/eval or in RUN itself, as in assets/NAME); RUN/error_budget.json, written by
-benchmarks/error_budget.py --json, is added when present. A run stopped before its end has only its
+analysis.error_budget --json, is added when present. A run stopped before its end has only its
 checkpoint.pt: its configuration and epochs so far are read from there, with no views.
 
 Per run the record holds the command that rebuilds it (the flags that differ from `gratnet train`'s
@@ -30,7 +30,7 @@ from typing import Any
 import numpy as np
 
 from gratnet.atomic import atomic_path
-from gratnet.config import changed_flags
+from gratnet.config import changed_flags, flat_fields
 from gratnet.errors import GratNetError
 from trainer.evaluate import STANDARD_SLICES, slice_label
 from trainer.train_config import TrainConfig
@@ -77,7 +77,8 @@ def _stopped_run(run: Path) -> tuple[dict[str, Any], dict[str, Any]]:
 
 def train_config(train: dict[str, Any]) -> TrainConfig:
     """The run's TrainConfig from its saved dict (fields added since take their defaults; unknown ones are dropped)."""
-    return TrainConfig(**{name: value for name, value in train.items() if name in TrainConfig.__dataclass_fields__})
+    known = set(TrainConfig.__dataclass_fields__) | set(flat_fields(TrainConfig))  # nested and pre-nesting flat keys
+    return TrainConfig(**{name: value for name, value in train.items() if name in known})
 
 
 def train_command(config: TrainConfig, volume: str | None) -> str:

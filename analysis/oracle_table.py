@@ -5,7 +5,7 @@ slices (trainer/diagnostics.py VolumeOracle), scored against the exact ground-tr
 project's own metrics (mean FLIP, PSNR of CIE XYZ inside the view disc) and split by region. No network is
 involved: this is the floor a network trained on that grid could reach if it interpolated perfectly.
 
-    python benchmarks/oracle_table.py VOLUME_DIR [--size 256] [--cache-dir out/cache] [--json out.json]
+    python -m analysis.oracle_table VOLUME_DIR [--size 256] [--cache-dir out/cache] [--json out.json]
         [--figure docs/images/oracle_slices.png] [--device cpu|cuda] [--uv-stride 1,2]
         [--stride-figure docs/images/oracle_uv_stride.png]
 

@@ -1,6 +1,6 @@
 """Where Adam's ε sets the step: sqrt(v) of every parameter tensor of a training checkpoint, against ε.
 
-    python benchmarks/adam_state.py RUN/checkpoint.pt [--json OUT.json]
+    python -m analysis.adam_state RUN/checkpoint.pt [--json OUT.json]
 
 Adam moves a parameter by lr · m̂ / (sqrt(v̂) + ε). Where sqrt(v̂) ≪ ε the step is lr · m̂ / ε: plain momentum
 SGD at rate lr/ε, proportional to the gradient, not normalised by it. The LogCosh loss of range-transformed
@@ -10,7 +10,7 @@ count) and the share of entries whose sqrt(v̂) is below the group's ε. Entries
 (sqrt(v) = 0: grid nodes no sample reaches) are left out of both.
 
 It also prints the median sqrt(v̂) of the first layer's weight columns per encoding frequency (eq. 6's layout,
-sine and cosine apart; benchmarks/encoding_weights.py): the columns of the top frequency's sine, which is zero at
+sine and cosine apart; analysis.encoding_weights): the columns of the top frequency's sine, which is zero at
 every training sample up to float32 rounding, get only rounding-noise gradients, and this shows how far below
 the other columns' their sqrt(v̂) lies, i.e. which ε keeps them still while normalising the rest.
 """
@@ -25,13 +25,9 @@ from typing import Any
 
 import numpy as np
 
+from analysis.encoding_weights import split_first_layer
 from gratnet.atomic import atomic_path
 from gratnet.errors import GratNetError
-
-try:  # run as a script: benchmarks/ is sys.path[0]
-    from encoding_weights import split_first_layer
-except ModuleNotFoundError:  # imported as benchmarks.adam_state (the tests)
-    from benchmarks.encoding_weights import split_first_layer
 
 
 def _sqrt_v_hat(entry: dict[str, Any], group: dict[str, Any]) -> np.ndarray:

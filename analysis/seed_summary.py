@@ -1,6 +1,6 @@
 """Seeds against targets: the mean and spread of each paper dataset's (0°, 0°) FLIP over its seeds.
 
-    python benchmarks/seed_summary.py RUNS_DIR [--json OUT.json] [--markdown OUT.md]
+    python -m analysis.seed_summary RUNS_DIR [--json OUT.json] [--markdown OUT.md]
 
 RUNS_DIR holds NAME/seed-K/metrics.json (``SEEDS="0 1 2" bash scripts/reproduce_paper_models.sh``). Per dataset:
 the seeds found, the mean, standard deviation (ddof 1), lowest and highest FLIP at (0°, 0°) 2000 RU, the paper's

@@ -1,6 +1,6 @@
 """How finely a volume's u*/v* lattice must sample F: F's own spectrum over (u, v) against the lattice's Nyquist.
 
-    python benchmarks/lattice_band_limit.py HEIGHTFIELD [--centre 0.5,0] [--w -1.5] [--span 0.25]
+    python -m analysis.lattice_band_limit HEIGHTFIELD [--centre 0.5,0] [--w -1.5] [--span 0.25]
         [--points 512] [--wavelengths 380,550,780] [--resolutions 1001,2001] [--plot PNG]
 
 HEIGHTFIELD and its optics and load flags (--sigma-s, --dx-um, …) are those of ``gratnet groundtruth``.
