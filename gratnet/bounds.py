@@ -45,6 +45,7 @@ import json
 import math
 import os
 import sys
+from collections.abc import Iterable
 from pathlib import Path
 
 import numpy as np
@@ -246,7 +247,7 @@ def compute_output_bounds(model: ModelFile, parameters: BoundParameters | None =
     row_max = np.empty((t_samples, resolution, cells, 3), dtype=np.float32)
     rows_per_batch = max(1, 65536 // resolution)
     batches = [(k, start) for k in range(t_samples) for start in range(0, resolution, rows_per_batch)]
-    iterator = batches
+    iterator: Iterable[tuple[int, int]] = batches
     if progress:
         from tqdm import tqdm
 

@@ -18,6 +18,7 @@ import re
 import sys
 import typing
 from collections.abc import Sequence
+from typing import Any
 
 from gratnet import __version__, interrupts
 from gratnet.errors import GratNetError
@@ -67,9 +68,9 @@ class GratNetParser(argparse.ArgumentParser):
     # argparse takes only '-5' and '-.5' for negative numbers; comma lists, exponents, inf and nan too.
     _NEGATIVE_VALUE = re.compile(r"^-(?:\d|\.\d|inf|nan)[\w.,+-]*$", re.IGNORECASE)
 
-    def __init__(self, *args: object, **kwargs: object) -> None:
+    def __init__(self, *args: Any, **kwargs: Any) -> None:
         kwargs.setdefault("formatter_class", _HelpFormatter)
-        super().__init__(*args, **kwargs)  # type: ignore[arg-type]
+        super().__init__(*args, **kwargs)
         self._negative_number_matcher = self._NEGATIVE_VALUE
 
     def error(self, message: str) -> typing.NoReturn:

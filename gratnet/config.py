@@ -29,11 +29,14 @@ import os
 import typing
 from collections.abc import Mapping
 from pathlib import Path
-from typing import Any, Literal, NamedTuple, TypeVar, get_args, get_origin
+from typing import TYPE_CHECKING, Any, Literal, NamedTuple, TypeVar, get_args, get_origin
 
 from gratnet.atomic import write_text_atomic
 
-ConfigT = TypeVar("ConfigT")
+if TYPE_CHECKING:
+    from _typeshed import DataclassInstance
+
+ConfigT = TypeVar("ConfigT", bound="DataclassInstance")
 
 #: Largest finite float32 and smallest positive normal float32.
 FLOAT32_MAX = 3.4028234663852886e38
@@ -203,7 +206,7 @@ def flat_keywords(config_class: type[ConfigT]) -> type[ConfigT]:
     def __init__(self: Any, *args: Any, **values: Any) -> None:
         init(self, *args, **nested_values(config_class, values))
 
-    config_class.__init__ = __init__  # type: ignore[misc]
+    config_class.__init__ = __init__  # type: ignore[method-assign]  # replaces the dataclass's generated constructor
     for name, flat in flat_fields(config_class).items():
         if len(flat.path) > 1:
             setattr(config_class, name, property(functools.partial(_read_path, path=flat.path),
@@ -271,8 +274,8 @@ def _add_fields(group: Any, config_class: type, prefix: str,
 
 def from_arguments(config_class: type[ConfigT], arguments: argparse.Namespace, prefix: str = "") -> ConfigT:
     """Build a ``config_class`` instance from parsed arguments (fields left out keep their defaults)."""
-    values = {}
-    for field in dataclasses.fields(config_class):  # type: ignore[arg-type]
+    values: dict[str, Any] = {}
+    for field in dataclasses.fields(config_class):
         nested = _nested(field)
         if nested is not None:
             values[field.name] = from_arguments(nested[1], arguments, f"{prefix}{nested[0]}-")
@@ -332,7 +335,7 @@ def config_text(output: str | os.PathLike[str], **configs: Any) -> str:
     """The JSON document of the resolved configs (and the GratNet version) of ``output``."""
     from gratnet import __version__
 
-    document = {"gratnet_version": __version__, "output": os.fspath(output)}
+    document: dict[str, Any] = {"gratnet_version": __version__, "output": os.fspath(output)}
     document.update({name: config_to_dict(config) for name, config in configs.items()})
     return json.dumps(document, indent=2, sort_keys=False) + "\n"
 

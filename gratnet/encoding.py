@@ -29,15 +29,16 @@ from __future__ import annotations
 import dataclasses
 import functools
 import math
-from typing import Any, Literal
+from typing import Any
 
 import array_api_compat
 import numpy as np
 
+from gratnet.codes import RANGE, SCHEME, choices_text
 from gratnet.errors import GratNetError
 
-RangeKind = Literal["power-log", "log", "log1p"]
-Scheme = Literal["regular", "simple", "simple-max"]
+RangeKind = str  #: one of gratnet.codes.RANGE.names
+Scheme = str  #: one of gratnet.codes.SCHEME.names
 TINY = 1e-30  # floor before log2: x ≤ 1e-30 maps to y = 0 for any B ≤ 99
 
 
@@ -84,8 +85,8 @@ class RangeSpec:
     white: tuple[float, float, float] = (0.9504297, 1.0, 1.0888006)  # XYZ of a perfect mirror (eq. 3)
 
     def __post_init__(self) -> None:
-        if self.kind not in ("power-log", "log", "log1p"):
-            raise GratNetError(f"unknown range transform {self.kind!r}; choose power-log, log or log1p")
+        if self.kind not in RANGE:
+            raise GratNetError(f"unknown range transform {self.kind!r}; choose {choices_text(RANGE.names)}")
         # Finite too: B = inf maps every x > 0 to y = 1, and the model file refuses it only after training.
         if not (0 < self.bits < math.inf and 0 < self.power < math.inf):
             raise GratNetError(f"range transform needs finite B > 0 and n > 0, got B={self.bits}, n={self.power}")
@@ -96,7 +97,7 @@ def key_to_grid(key: Any, scheme: Scheme) -> Any:
     xp = _namespace(key)
     if scheme == "regular":
         return key
-    if scheme in ("simple", "simple-max"):
+    if scheme in SCHEME:  # simple, simple-max: the square-root domain
         return xp.sign(key) * 2.0 * xp.sqrt(xp.clip(xp.abs(key) * 0.5, 0.0, None))
     raise GratNetError(f"unknown sampling scheme {scheme!r}")
 

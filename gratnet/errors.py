@@ -1,5 +1,9 @@
 """One error type for bad input: the CLI prints its message on one line and exits non-zero."""
 
+from __future__ import annotations
+
+import os
+
 
 class GratNetError(Exception):
     """A user-facing error: bad input, unsupported file, impossible parameters.
@@ -10,11 +14,11 @@ class GratNetError(Exception):
     exit_code = 2
 
 
-def read_magic(path: object, what: str, size: int) -> bytes:
+def read_magic(path: str | os.PathLike[str], what: str, size: int) -> bytes:
     """The first ``size`` bytes of an existing regular file, or one GratNetError naming ``what`` (e.g. 'model file')."""
     from pathlib import Path
 
-    source = Path(path)  # type: ignore[arg-type]
+    source = Path(path)
     if not source.exists():
         raise GratNetError(f"{what} {source} does not exist")
     if not source.is_file():

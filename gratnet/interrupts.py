@@ -30,6 +30,7 @@ import signal
 import sys
 import threading
 import time
+import types
 
 __all__ = ["GRACE", "POLL", "SIGNALS", "done", "pending", "supervise", "written"]
 
@@ -79,25 +80,25 @@ def _forked() -> None:
         signal.signal(signal.SIGINT, signal.default_int_handler)
 
 
-def _unraisable(unraisable: object) -> None:
+def _unraisable(unraisable: sys.UnraisableHookArgs) -> None:
     """``sys.unraisablehook`` of the child: a KeyboardInterrupt raised inside a weakref callback or a ``__del__``
     (Ctrl-C during a garbage collection) cannot propagate, so Python printed a traceback and went on, and the
     command ran to its end (seen in gratnet train's report). Instead the signal is sent again, to be raised where
     the command can answer it: a little later, from a thread (sent from here, it would be raised here, in the hook,
     and be lost the same way; if it lands in a callback again, this repeats)."""
-    if isinstance(getattr(unraisable, "exc_value", None), KeyboardInterrupt):
+    if isinstance(unraisable.exc_value, KeyboardInterrupt):
         later = threading.Timer(0.02, os.kill, (os.getpid(), signal.SIGINT))
         later.daemon = True
         later.start()
         return
-    sys.__unraisablehook__(unraisable)  # type: ignore[arg-type]
+    sys.__unraisablehook__(unraisable)
 
 
-def _answered(number: int, frame: object) -> None:
+def _answered(number: int, frame: types.FrameType | None) -> None:
     """The child's SIGINT handler: Python's (KeyboardInterrupt), after telling the supervisor that the command
     answers the signal itself (it then leaves the command to its own cleanup, however long, and its own line)."""
     _tell(b"!")
-    signal.default_int_handler(number, frame)  # type: ignore[arg-type]
+    signal.default_int_handler(number, frame)
 
 
 def _tell(kind: bytes, path: str | os.PathLike[str] | None = None) -> None:
@@ -153,7 +154,7 @@ def supervise(command: str) -> int | None:
     return _wait(child, reader, taken, command)
 
 
-def _wait(child: int, reader: int, taken: list[int], command: str) -> int:
+def _wait(child: int, reader: int, taken: list[signal.Signals], command: str) -> int:
     """The supervisor's loop: pass signals on, read the child's messages, stop it if it is stuck after a SIGINT;
     the child's exit status."""
     os.set_blocking(reader, False)

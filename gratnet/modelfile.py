@@ -48,6 +48,7 @@ import array_api_compat
 import numpy as np
 
 from gratnet.atomic import atomic_path
+from gratnet.codes import SCHEME
 from gratnet.encoding import EncodingSpec, RangeSpec, encode, network_coordinates, range_inverse
 from gratnet.errors import GratNetError, read_magic
 from gratnet.featuregrid import INTERPOLATIONS, MAX_FEATURES, grid_features
@@ -91,7 +92,7 @@ GRID_FORMAT_VERSION = 2
 GRID_DTYPES = ("float16", "float32")
 
 #: Sampling schemes of the source volume (see ``gratnet.encoding.key_to_grid``).
-SCHEMES = ("regular", "simple", "simple-max")
+SCHEMES = SCHEME.names
 
 _METADATA_ARRAY = "metadata_json"
 _TEXTURE_ARRAY = "texture"

@@ -20,6 +20,7 @@ from collections.abc import Sequence
 
 import numpy as np
 
+from gratnet.codes import HIDDEN, OUTPUT
 from gratnet.errors import GratNetError
 
 __all__ = [
@@ -37,9 +38,9 @@ __all__ = [
 ]
 
 #: Hidden-layer activations. ``leaky_relu`` has negative slope :data:`LEAKY_RELU_SLOPE`.
-ACTIVATIONS = ("relu", "leaky_relu", "silu")
+ACTIVATIONS = HIDDEN.names  # gratnet.codes: the names, their GLSL codes and expressions
 #: Output activations: ``clamp`` clips to [0, 1], ``sigmoid`` is 1 / (1 + e^−x), ``none`` is the identity.
-OUTPUT_ACTIVATIONS = ("clamp", "sigmoid", "none")
+OUTPUT_ACTIVATIONS = OUTPUT.names
 LEAKY_RELU_SLOPE = 0.01
 #: Number of network outputs: the three range-transformed CIE XYZ channels.
 OUTPUTS = 3

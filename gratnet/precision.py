@@ -172,7 +172,7 @@ def _grid_inputs(model: ModelFile, coordinates: np.ndarray, texel_shift: np.ndar
 def _inputs(model: ModelFile, keys: np.ndarray, sinusoid_shift: np.ndarray | None,
             texel_shift: np.ndarray | None, texel_error: float | None = None,
             t_shift: np.ndarray | None = None) -> np.ndarray:
-    coordinates = network_coordinates(keys[:, 0], keys[:, 1], keys[:, 2], model.scheme)  # type: ignore[arg-type]
+    coordinates = network_coordinates(keys[:, 0], keys[:, 1], keys[:, 2], model.scheme)
     if t_shift is not None:
         coordinates[:, 2] += t_shift
     encoded = encode(coordinates, model.encoding)
@@ -202,7 +202,7 @@ def driver_bound(model: ModelFile, u: Any, v: Any, w: Any, errors: DriverErrors 
     u, v, w = np.broadcast_arrays(*(np.asarray(c, dtype=np.float64) for c in (u, v, w)))
     shape = u.shape
     keys = np.stack([u.ravel(), v.ravel(), w.ravel()], axis=-1)
-    count = keys.shape[0]
+    count: int = keys.shape[0]
     eta = (np.full((count, 1), errors.key_error) if key_error is None
            else np.broadcast_to(np.asarray(key_error, dtype=np.float64), shape).reshape(count, 1))
     outputs = _forward(valid, _inputs(valid, keys, None, None), None)

@@ -160,9 +160,11 @@ def _specular_radius(model: ModelFile) -> float:
     """``MIN_SPECULAR_RADIUS``, or 10 specular-lobe widths at the longest wavelength when that is wider
     (a model trained with a smaller coherence window σs has a wider specular lobe: std λ / (2π σs))."""
     volume = model.metadata.get("volume") if isinstance(model.metadata, dict) else None
+    if not isinstance(volume, dict):
+        return MIN_SPECULAR_RADIUS
     try:
-        sigma_um = float(volume["sigma_s_um"])  # type: ignore[index]
-        longest_um = max(float(x) for x in volume["wavelengths_nm"]) / 1000.0  # type: ignore[index]
+        sigma_um = float(volume["sigma_s_um"])
+        longest_um = max(float(x) for x in volume["wavelengths_nm"]) / 1000.0
     except (KeyError, TypeError, ValueError):
         return MIN_SPECULAR_RADIUS
     if not (math.isfinite(sigma_um) and sigma_um > 0 and math.isfinite(longest_um) and longest_um > 0):

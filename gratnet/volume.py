@@ -540,7 +540,7 @@ def _check_headers(source: Path, opened: _OpenedFile) -> tuple[list[str], dict[s
 
 def _part_size(source: Path, name: str, header: dict[str, Any]) -> int:
     """Side ``R`` of a part whose data window must be ``(0, 0) - (R-1, R-1)``."""
-    window = header.get("dataWindow")
+    window: Any = header.get("dataWindow")  # the file's: None or malformed raises below
     try:
         x0, y0 = (int(v) for v in window[0])
         x1, y1 = (int(v) for v in window[1])

@@ -30,6 +30,7 @@ from pathlib import Path
 
 from gratnet.config import add_arguments, add_quiet_flag, config_field, from_arguments
 from gratnet.errors import GratNetError
+from gratnet.lights import POINT
 from viewer.scene_config import SceneConfig, add_scene_arguments
 
 __all__ = ["MitsubaRenderConfig", "parse_environment", "register", "run"]
@@ -98,9 +99,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     )
     parser.add_argument("--out", required=True, metavar="IMAGE.png|IMAGE.exr",
                         help="output: .png (display sRGB, 8-bit) or .exr (linear sRGB float, R G B)")
-    add_scene_arguments(parser, point_light="point light position in metres instead of --light (intensity "
-                        "--light-intensity)", exposure_of="the radiance (made for --light-intensity 1 without an "
-                        "environment)")
+    add_scene_arguments(parser, lights={POINT.name: "point light position in metres instead of --light (intensity "
+                                                    "--light-intensity)"},
+                        exposure_of="the radiance (made for --light-intensity 1 without an environment)")
     parser.add_argument("--environment", dest="environment", default="none", metavar="none|RADIANCE|R,G,B|MAP.exr",
                         help="environment light: none (default), a constant radiance in linear sRGB (typical: "
                         "1e-5 to 1e-3 with the default exposure), or a lat-long EXR whose up is +z")
@@ -155,9 +156,7 @@ def run(arguments: argparse.Namespace) -> int:
                     fov_deg=config.fov_degrees)
     light = None
     if config.light_intensity > 0.0:
-        light = (Light.point(config.point_light, config.light_intensity) if config.point_light is not None
-                 else Light.directional(config.light_theta_degrees, config.light_phi_degrees,
-                                        config.light_intensity))
+        light = Light.from_config(config, config.light_intensity)
     model_path = resolve_material(config.material)
     load_model(model_path)  # a corrupt model file: one line now, not a Mitsuba traceback later
     mesh = build_mesh(config.mesh)

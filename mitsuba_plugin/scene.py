@@ -8,9 +8,10 @@
   (viewer.meshes.load_obj): one warning on the ``gratnet.mitsuba`` logger says so.
 - **Camera**: ``viewer.camera.Camera`` as Mitsuba's ``perspective`` sensor (same eye, target, up, vertical
   field of view, clip range), or an ``orthographic`` one looking along the same axis.
-- **Lights**: ``viewer.camera.Light``: directional → ``directional`` with ``irradiance`` = its intensity
-  (irradiance on a plane facing the light); point → ``point`` with ``intensity`` = its intensity (W/sr,
-  so the irradiance at d metres is intensity/d², as the GL runtime's 1/d² falloff). White (1, 1, 1).
+- **Lights**: ``viewer.camera.Light``, as its kind's entry of gratnet.lights says (``LightKind.mitsuba``):
+  directional → ``directional`` with ``irradiance`` = its intensity (irradiance on a plane facing the light);
+  point → ``point`` with ``intensity`` = its intensity (W/sr, so the irradiance at d metres is intensity/d², as
+  the GL runtime's 1/d² falloff). White (1, 1, 1).
 - **Environment**: a constant radiance (linear sRGB) or a lat-long EXR (``envmap``), rotated so that its
   up (Mitsuba's +y) is GratNet's +z.
 - **Film**: ``hdrfilm`` with a box filter (each pixel the mean over its area), linear sRGB float.
@@ -28,6 +29,7 @@ from typing import Any
 import numpy as np
 
 from gratnet.errors import GratNetError
+from gratnet.lights import light_kind
 from mitsuba_plugin.bsdf import LOGGER, no_tangent_warning
 from mitsuba_plugin.runtime import interrupted, plugin_errors
 from viewer.camera import Camera, Light
@@ -115,11 +117,7 @@ def emitters(light: Light | None, environment: float | tuple[float, float, float
     result: dict[str, dict[str, Any]] = {}
     if light is not None:
         white = {"type": "rgb", "value": [float(light.intensity)] * 3}
-        if light.kind == "directional":
-            result["light"] = {"type": "directional", "direction": [-float(c) for c in light.vector],
-                               "irradiance": white}
-        else:
-            result["light"] = {"type": "point", "position": [float(c) for c in light.vector], "intensity": white}
+        result["light"] = light_kind(light.kind).mitsuba(light.vector, white)  # gratnet/lights.py
     if isinstance(environment, (str, Path)):
         import mitsuba as mi
 

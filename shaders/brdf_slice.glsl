@@ -5,7 +5,8 @@
 // output 1 (when a second attachment is bound): the network's XYZ alone (0 where the MLP was skipped).
 // The MLP is skipped where A = 0 and where the bound of skip.glsl says the display would show 0.
 // With REFERENCE the ground-truth volume's look-up (reference.glsl) takes the network's place.
-// Needs the defines of mlp.glsl and encoding.glsl (and SKIP_COUNTER_BINDING with COUNT_EVALUATIONS).
+// Needs the defines of mlp.glsl and encoding.glsl; the COUNTER_* codes come from codes.glsl (gratnet/codes.py).
+#include "codes.glsl"
 #include "fullscreen.glsl"
 
 #ifdef FRAGMENT_SHADER

@@ -4,8 +4,6 @@
 //            covered texel, factor = exposure * irradiance * A, cleared to (0, 0, 0, -1) = background):
 //            texels that need the network (factor > 0 and not excluded by skip.glsl's bound) are appended
 //            to the list; every other texel is finished here: (0, 0, 0, coverage).
-//   ARGS     one invocation: the list length -> the indirect dispatch size of SHADE (groups of
-//            SHADE_GROUP, spread over x and y: at most 65535 groups per dimension).
 //   SHADE    one invocation per list entry: encoding -> MLP -> inverse range (the same encoding.glsl,
 //            mlp.glsl and range.glsl as the forward path's surface.glsl) and the texel becomes
 //            (factor * XYZ, 1): exposed CIE XYZ and coverage, as the forward path writes.
@@ -16,12 +14,12 @@
 //   RESOLVE  per pixel: the mean of its u_samples texels (sample k at row y + k * u_height) times u_scale,
 //            added to the output when u_accumulate is set (samples in several chunks).
 //
-// COMPACT and RESOLVE run in bands of rows from u_first_row (a multiple of 8: no texel twice), SHADE in
+// COMPACT and RESOLVE run in bands of rows from u_first_row (a multiple of DEFERRED_TILE: no texel twice), SHADE in
 // pieces of the list (viewer/deferred.py binds it from an entry on): no dispatch runs long (issue 36).
 //
 // So background, A = 0 and bound-dark pixels never reach the MLP: the skip rules of the forward path
 // become the list's length. Needs the defines of mlp.glsl and encoding.glsl (SHADE), skip.glsl's (COMPACT),
-// DEFERRED_LIST_BINDING and SHADE_GROUP (SHADE_TILED: mlp_tiled.glsl's TILED_* instead of SHADE_GROUP).
+// and SHADE_GROUP (SHADE_TILED: mlp_tiled.glsl's TILED_* instead of SHADE_GROUP); the bindings come from codes.glsl.
 
 #ifdef COMPUTE_SHADER
 // An #extension must come before any declaration.
@@ -33,8 +31,11 @@
 precision highp float;
 precision highp int;
 
-// The list: the indirect dispatch arguments (written by ARGS), the entry count, then one packed texel
-// coordinate (x | y << 16) per entry.
+#include "codes.glsl"  // the bindings, image units, DEFERRED_TILE and COUNTER_* (gratnet/codes.py)
+
+// The list: a 16-byte header, then one packed texel coordinate (x | y << 16) per entry. The header's first
+// three words are not read by any kernel (viewer/deferred.py writes them); the fourth is the entry count,
+// which viewer/deferred.py reads back at byte 12 and sets for each SHADE piece.
 layout(std430, binding = DEFERRED_LIST_BINDING) buffer DeferredList {
     uint dispatch_x;
     uint dispatch_y;
@@ -50,9 +51,9 @@ layout(std430, binding = DEFERRED_LIST_BINDING) buffer DeferredList {
 #ifdef COMPACT
 #include "skip.glsl"
 
-layout(local_size_x = 8, local_size_y = 8) in;
-layout(rgba32f, binding = 0) uniform restrict image2D u_gbuffer;
-uniform int u_first_row;  // the dispatch's first texel row (bands of rows; a multiple of 8 but for the last)
+layout(local_size_x = DEFERRED_TILE, local_size_y = DEFERRED_TILE) in;
+layout(rgba32f, binding = GBUFFER_IMAGE_BINDING) uniform restrict image2D u_gbuffer;
+uniform int u_first_row;  // the first texel row (bands of rows; a multiple of DEFERRED_TILE but for the last)
 
 void main() {
     ivec2 texel = ivec2(gl_GlobalInvocationID.xy) + ivec2(0, u_first_row);
@@ -83,17 +84,6 @@ void main() {
 }
 #endif
 
-#ifdef ARGS
-layout(local_size_x = 1) in;
-
-void main() {
-    uint groups = (entry_count + uint(SHADE_GROUP) - 1u) / uint(SHADE_GROUP);
-    dispatch_x = min(groups, 65535u);
-    dispatch_y = groups == 0u ? 0u : (groups + 65534u) / 65535u;
-    dispatch_z = 1u;
-}
-#endif
-
 #if defined(SHADE) || defined(SHADE_TILED)
 // Both shading kernels' includes, once (see above): the work group's size first (mlp.glsl's shared-memory copy
 // reads gl_WorkGroupSize), featuregrid.glsl before mlp.glsl (its baked stand-in includes nothing),
@@ -103,7 +93,7 @@ layout(local_size_x = SHADE_GROUP) in;
 #else
 layout(local_size_x = TILED_GROUP) in;
 #endif
-layout(rgba32f, binding = 0) uniform restrict image2D u_gbuffer;
+layout(rgba32f, binding = GBUFFER_IMAGE_BINDING) uniform restrict image2D u_gbuffer;
 #include "featuregrid.glsl"
 #include "mlp.glsl"
 #include "mlp_tiled.glsl"
@@ -154,9 +144,9 @@ void main() {
 #endif
 
 #ifdef RESOLVE
-layout(local_size_x = 8, local_size_y = 8) in;
-layout(rgba32f, binding = 0) uniform restrict readonly image2D u_gbuffer;
-layout(rgba32f, binding = 1) uniform restrict image2D u_output;
+layout(local_size_x = DEFERRED_TILE, local_size_y = DEFERRED_TILE) in;
+layout(rgba32f, binding = GBUFFER_IMAGE_BINDING) uniform restrict readonly image2D u_gbuffer;
+layout(rgba32f, binding = RESOLVED_IMAGE_BINDING) uniform restrict image2D u_output;
 uniform int u_samples;     // samples in this chunk of the G-buffer
 uniform int u_height;      // image rows per sample
 uniform float u_scale;     // 1 / (all samples of the pixel)

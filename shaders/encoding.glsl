@@ -11,9 +11,8 @@
 // result matches a float64 evaluation at the same float32 key to ~2e-7 rad. `precise` stops the
 // compiler from reassociating (which would cancel the error terms to zero).
 
-const int SCHEME_REGULAR = 0;
-const int SCHEME_SIMPLE = 1;
-const int SCHEME_SIMPLE_MAX = 2;
+#include "codes.glsl"  // SCHEME_*
+
 const float PI = 3.14159265358979;
 
 uniform int u_scheme;          // SCHEME_* of the source volume (physics.md "Sampling")

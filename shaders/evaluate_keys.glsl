@@ -4,7 +4,8 @@
 //   MODE_NETWORK   key vector -> the network's outputs (range-transformed XYZ, before eq. 7's inverse)
 //   MODE_ENCODING  key vector -> encoded input features 4*u_block ... 4*u_block+3 (eq. 6)
 //   MODE_A_TERM    light direction (u_inputs), view direction (u_inputs2) -> A (eq. 5) in .x
-// Needs the defines of mlp.glsl and encoding.glsl.
+// Needs the defines of mlp.glsl and encoding.glsl; MODE_* come from codes.glsl (gratnet/codes.py).
+#include "codes.glsl"
 #include "fullscreen.glsl"
 
 #ifdef FRAGMENT_SHADER
@@ -16,11 +17,6 @@ precision highp int;
 #include "mlp.glsl"
 #include "range.glsl"
 #include "brdf.glsl"
-
-const int MODE_XYZ = 0;
-const int MODE_NETWORK = 1;
-const int MODE_ENCODING = 2;
-const int MODE_A_TERM = 3;
 
 uniform highp sampler2D u_inputs;   // RGBA32F, .xyz per pixel
 uniform highp sampler2D u_inputs2;  // RGBA32F, MODE_A_TERM only

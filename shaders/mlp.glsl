@@ -17,14 +17,8 @@
 //   WEIGHTS_FP16     with either buffer: each texel stored as four IEEE halves (uvec2, packHalf2x16 order),
 //                    unpacked to float32 before the arithmetic (fp16 storage, fp32 sums).
 
+#include "codes.glsl"  // HIDDEN_*, OUTPUT_* (each branch below computes the name's expression in gratnet/codes.py)
 #include "featuregrid.glsl"
-
-const int HIDDEN_RELU = 0;
-const int HIDDEN_LEAKY_RELU = 1;
-const int HIDDEN_SILU = 2;
-const int OUTPUT_CLAMP = 0;
-const int OUTPUT_SIGMOID = 1;
-const int OUTPUT_NONE = 2;
 
 #if defined(WEIGHTS_SSBO) || defined(WEIGHTS_SHARED)
 #ifdef WEIGHTS_FP16
@@ -86,7 +80,7 @@ vec4 hidden_activation(vec4 x) {
     if (u_hidden_activation == HIDDEN_LEAKY_RELU) {
         return max(x, LEAKY_RELU_SLOPE * x);  // equals x > 0 ? x : slope * x for 0 < slope < 1
     }
-    return x * sigmoid(x);  // SiLU
+    return x * sigmoid(x);  // HIDDEN_SILU
 }
 
 vec4 output_activation(vec4 x) {
@@ -96,7 +90,7 @@ vec4 output_activation(vec4 x) {
     if (u_output_activation == OUTPUT_SIGMOID) {
         return sigmoid(x);
     }
-    return x;
+    return x;  // OUTPUT_NONE
 }
 
 // The network's three outputs (range-transformed XYZ, eq. 7 domain) for the key set by encoding_set_key.

@@ -1,9 +1,7 @@
 // Inverse range transform: network outputs y -> CIE XYZ (docs/physics.md eq. 7, including the
 // multiplication by the D65 white of eq. 3); mirrors gratnet.encoding.range_inverse.
 
-const int RANGE_POWER_LOG = 0;
-const int RANGE_LOG = 1;
-const int RANGE_LOG1P = 2;
+#include "codes.glsl"  // RANGE_*
 
 uniform int u_range_kind;     // RANGE_*
 uniform float u_range_bits;   // B

@@ -17,7 +17,9 @@
 // (key, exposure * irradiance * A) for shaders/deferred.glsl to evaluate; see surface_inputs below.
 // Reference renders (gratnet render --reference): compiled with REFERENCE, the ground-truth volume's look-up
 // (reference.glsl) takes the network's place; everything else is the same code.
-// Needs the defines of mlp.glsl and encoding.glsl (and SKIP_COUNTER_BINDING with COUNT_EVALUATIONS).
+// Needs the defines of mlp.glsl and encoding.glsl; the codes (COUNTER_*, LIGHT_*) come from codes.glsl.
+
+#include "codes.glsl"
 
 #ifdef VERTEX_SHADER
 in vec3 in_position;  // metres, world space
@@ -69,13 +71,7 @@ precision highp int;
 // shader writes no depth and never discards, so this changes no pixel.
 layout(early_fragment_tests) in;
 
-const int LIGHT_DIRECTIONAL = 0;
-const int LIGHT_POINT = 1;
-
 uniform vec3 u_eye;              // camera position, metres
-uniform int u_light_kind;        // LIGHT_*
-uniform vec3 u_light;            // directional: unit vector towards the light; point: its position
-uniform float u_light_intensity; // directional: irradiance scale; point: at 1 m (falls off as 1/d^2)
 uniform float u_exposure;
 uniform float u_ior;             // <= 0: Fresnel off
 
@@ -99,6 +95,8 @@ vec3 safe_normalize(vec3 v) {
     return length_squared > 1e-30 && length_squared < 1e30 ? v * inversesqrt(length_squared) : vec3(0.0);
 }
 
+#include "lights.glsl"  // the light: u_light_kind, u_light, u_light_intensity -> light_incidence
+
 // The shading inputs of this fragment: the key vector, A(wi, wo), and the factor that multiplies the
 // network's XYZ, exposure * irradiance * A (0 when nothing lights the point: back face, either direction
 // at or below the horizon, a degenerate frame, no irradiance). Returns false when the factor is 0.
@@ -116,15 +114,8 @@ bool surface_inputs(out vec3 key, out float a, out float factor) {
     mat3 world_to_tangent = transpose(mat3(t, b, n));  // rows t, b, n
 
     vec3 wi_world;
-    float irradiance = u_light_intensity;
-    if (u_light_kind == LIGHT_POINT) {
-        vec3 offset = u_light - v_position;
-        float distance_squared = dot(offset, offset);
-        wi_world = safe_normalize(offset);
-        irradiance = distance_squared > 0.0 ? u_light_intensity / distance_squared : 0.0;
-    } else {
-        wi_world = u_light;
-    }
+    float irradiance;
+    light_incidence(v_position, wi_world, irradiance);
     vec3 wo_world = safe_normalize(u_eye - v_position);
     vec3 wi = world_to_tangent * wi_world;
     vec3 wo = world_to_tangent * wo_world;

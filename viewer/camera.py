@@ -13,13 +13,13 @@ from __future__ import annotations
 
 import dataclasses
 import math
-from typing import Literal
 
 import numpy as np
 import pyrr
 
 from gratnet.brdf import direction
 from gratnet.errors import GratNetError
+from gratnet.lights import DIRECTIONAL, POINT, chosen_kind, light_kind
 
 __all__ = ["Camera", "Light", "world_direction"]
 
@@ -143,10 +143,10 @@ class Camera:
 
 @dataclasses.dataclass(frozen=True)
 class Light:
-    """A directional or point light (world space).
+    """A light of one of the kinds of :data:`gratnet.lights.LIGHT_KINDS` (world space): a directional or point light.
 
     Attributes:
-        kind: ``"directional"`` or ``"point"``.
+        kind: the kind's name, ``"directional"`` or ``"point"``.
         vector: for a directional light the unit direction **towards** the light; for a point light its
             position (metres).
         intensity: a directional light's irradiance scale; a point light's at 1 m (falls off as 1/d²).
@@ -155,21 +155,13 @@ class Light:
     intensity (directional) or ``intensity / d²`` (point), as a BRDF slice with a unit light (physics.md).
     """
 
-    kind: Literal["directional", "point"]
+    kind: str
     vector: tuple[float, float, float]
     intensity: float = 1.0
 
     def __post_init__(self) -> None:
-        if self.kind not in ("directional", "point"):
-            raise GratNetError(f"light kind must be directional or point, got {self.kind!r}")
-        vector = np.asarray(_vector("light vector", self.vector))
-        if self.kind == "directional":
-            largest = float(np.max(np.abs(vector)))
-            if largest == 0.0:
-                raise GratNetError("a directional light needs a non-zero direction")
-            vector = vector / largest  # first: |v| of (1e308, 1e308, 0) overflows, of denormals loses digits
-            vector = vector / float(np.linalg.norm(vector))
-        object.__setattr__(self, "vector", tuple(float(c) for c in vector))
+        kind = light_kind(self.kind)
+        object.__setattr__(self, "vector", kind.prepare(_vector("light vector", self.vector)))
         intensity = _finite("light intensity", self.intensity)
         if intensity < 0.0:
             raise GratNetError(f"light intensity must be ≥ 0, got {self.intensity!r}")
@@ -178,20 +170,25 @@ class Light:
     @classmethod
     def directional(cls, theta_deg: float, phi_deg: float, intensity: float = 1.0) -> Light:
         """A light in the world direction at polar angle θ from +z and azimuth φ (degrees)."""
-        return cls("directional", tuple(world_direction(_finite("light θ", theta_deg),  # type: ignore[arg-type]
-                                                        _finite("light φ", phi_deg))), intensity)
+        return cls(DIRECTIONAL.name, tuple(world_direction(_finite("light θ", theta_deg),  # type: ignore[arg-type]
+                                                           _finite("light φ", phi_deg))), intensity)
 
     @classmethod
     def point(cls, position: object, intensity: float = 1.0) -> Light:
         """A point light at ``position`` (metres)."""
-        return cls("point", _vector("light position", position), intensity)
+        return cls(POINT.name, _vector("light position", position), intensity)
+
+    @classmethod
+    def from_config(cls, config: object, intensity: float = 1.0) -> Light:
+        """The light a scene config (``viewer.scene_config.SceneConfig``) describes: the kind whose flag's field is
+        set (``point_light``), else the directional light at its ``light_theta_degrees``, ``light_phi_degrees``."""
+        kind = chosen_kind(config)
+        if kind.flag is None:
+            return cls.directional(config.light_theta_degrees, config.light_phi_degrees,  # type: ignore[attr-defined]
+                                   intensity)
+        return cls(kind.name, getattr(config, kind.flag.field), intensity)
 
     def towards(self, point: object) -> tuple[np.ndarray, float]:
-        """``(unit direction from point to the light, irradiance scale)`` at a world ``point``."""
-        if self.kind == "directional":
-            return np.asarray(self.vector), self.intensity
-        offset = np.asarray(self.vector) - np.asarray(point, dtype=np.float64)
-        distance_squared = float(np.dot(offset, offset))
-        if distance_squared == 0.0:
-            return np.zeros(3), 0.0
-        return offset / math.sqrt(distance_squared), self.intensity / distance_squared
+        """``(unit direction from point to the light, irradiance scale)`` at a world ``point``: what
+        shaders/lights.glsl computes."""
+        return light_kind(self.kind).incidence(self.vector, self.intensity, point)

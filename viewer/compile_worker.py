@@ -258,7 +258,7 @@ def _warm(model_path: Path, paths: Sequence[str], groups: Sequence[str], folder:
             release_headless_context(ctx)
             ctx = None
             print(f"ready {path} {group} {time.perf_counter() - started:.3f}", flush=True)
-    if render_path == "auto" and "surface" in groups and not software:  # the window's auto on a CPU is forward
+    if render_path == "auto" and "surface" in groups and not software:  # on a CPU the window's auto is deferred, no probe
         with contextlib.suppress(OSError):
             os.nice(_BAKED_NICENESS)  # the window is up by now: the probe must not slow it
         for path in done:

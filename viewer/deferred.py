@@ -29,10 +29,11 @@ stacked in one texture (sample k in rows ``k·H … k·H + H − 1``, each drawn
 list, then the per-pixel mean (coverage averaged too). N = 1 at offset (0, 0) is the un-jittered render.
 Where ``N · H`` exceeds the largest texture, the samples are taken in chunks, each accumulated.
 
-Weights of the compute pass (:data:`DEFERRED_WEIGHTS`): ``texture`` (the packed RGBA32F texture, as the
-forward path), ``ssbo`` (the same texels in a std430 buffer), ``shared`` (that buffer copied into each work
-group's shared memory: only nets whose texels fit the driver's shared memory, 32 KiB on llvmpipe, i.e.
-not the shipped 28k-MAC nets) or ``baked`` (viewer/baked.py's literals, the fastest form on llvmpipe).
+Weights of the compute pass (:data:`DEFERRED_WEIGHTS`, each parsed into a :class:`gratnet.codes.WeightForm`):
+``texture`` (the packed RGBA32F texture, as the forward path), ``ssbo`` (the same texels in a std430 buffer),
+``shared`` (that buffer copied into each work group's shared memory: only nets whose texels fit the driver's
+shared memory, 32 KiB on llvmpipe, i.e. not the shipped 28k-MAC nets) or ``baked`` (viewer/baked.py's
+literals, the fastest form on llvmpipe).
 ``ssbo-fp16`` / ``shared-fp16``: the same with each weight stored as an IEEE half (``unpackHalf2x16``, GL
 4.3 core; the sums stay float32): half the memory traffic, at an error measured in docs/benchmarks.md.
 ``tiled``, ``tiled-fp16``: the same buffer (float32, or halves as ``ssbo-fp16``) read by another kernel,
@@ -46,7 +47,7 @@ elsewhere, e.g. on llvmpipe; half storage, float32 sums across chunks).
 ``auto``: ``baked`` when the :class:`~viewer.renderer.NetworkRenderer` bakes; else ``texture`` on a
 software rasterizer (llvmpipe: 1.2–1.3× faster than ``ssbo``, docs/benchmarks.md "Render paths") and
 ``ssbo`` on a GPU (the fastest form of the H100 micro-benchmark, shared/notes/opengl-on-a-gpu.md; the
-compute pass itself is not measured on a GPU yet).
+compute pass's H100 frame times: docs/benchmarks.md "GPU bench").
 
 Which path a render takes: :func:`viewer.scene.choose_render_path`.
 
@@ -62,6 +63,16 @@ from collections.abc import Callable
 import moderngl
 import numpy as np
 
+from gratnet.codes import (
+    BINDINGS,
+    DEFERRED_TILE,
+    DEFERRED_WEIGHTS,
+    TILED_WEIGHTS,
+    Kernel,
+    Precision,
+    WeightForm,
+    WeightSource,
+)
 from gratnet.errors import GratNetError
 from viewer.antialias import check_offsets, jitter_matrix
 from viewer.camera import Camera, Light
@@ -75,11 +86,6 @@ from viewer.tiled import HALF_EXTENSIONS, TilePlan, half_extension, plan_for_con
 __all__ = ["CHUNK_TEXELS", "DEFERRED_WEIGHTS", "FP16_MAX", "FP16_RELATIVE_ERROR", "TILED_WEIGHTS", "DeferredRenderer"]
 
 _LOG = logging.getLogger("gratnet.deferred")  # the gratnet command shows its INFO lines (gratnet/cli.py)
-#: Where the compute pass reads the weights (see the module docstring).
-DEFERRED_WEIGHTS = ("auto", "texture", "ssbo", "shared", "baked", "ssbo-fp16", "shared-fp16", "tiled", "tiled-fp16",
-                    "tiled-half")
-#: The weights forms of the tiled kernel (SHADE_TILED).
-TILED_WEIGHTS = ("tiled", "tiled-fp16", "tiled-half")
 #: Largest finite IEEE half: a weight beyond it cannot be stored as fp16.
 FP16_MAX = 65504.0
 #: The documented error of the fp16 weight sources against fp32: relative, per XYZ channel, on pixels at
@@ -90,9 +96,10 @@ _HALF_AS_FLOAT = "float"  # tiled-half's code path in float types (half_as_float
 _HALF_DEFINES = {**HALF_EXTENSIONS, _HALF_AS_FLOAT: "TILED_HALF_AS_FLOAT"}  # deferred.glsl enables the extension
 _PROGRAM = "deferred"
 _SHADE_GROUP = 64  # invocations per SHADE work group
-_TILE = 8  # COMPACT / RESOLVE work groups: 8×8 texels
-_LIST_BINDING = 7  # SSBO bindings: skip counters 5 (renderer.py), weights 6, the list 7
-_WEIGHTS_BINDING = 6
+_LIST_BINDING = BINDINGS["DEFERRED_LIST_BINDING"]  # gratnet/codes.py: the bindings, the tile of COMPACT / RESOLVE
+_WEIGHTS_BINDING = BINDINGS["WEIGHTS_BINDING"]
+_GBUFFER_IMAGE = BINDINGS["GBUFFER_IMAGE_BINDING"]
+_RESOLVED_IMAGE = BINDINGS["RESOLVED_IMAGE_BINDING"]
 CHUNK_TEXELS = 1 << 26  # G-buffer texels per chunk of samples at most (1 GiB of RGBA32F)
 _MAX_GROUPS = 65535  # work groups per dimension of a dispatch (the least GL 4.3 guarantees)
 _PIECE_ENTRIES = 256  # SHADE pieces start at multiples of 256 list entries: 1 KiB-aligned SSBO offsets
@@ -113,37 +120,41 @@ class DeferredRenderer:
     Args:
         network: the owner's :class:`~viewer.renderer.NetworkRenderer`: the defines, model uniforms, weights
             and skip bound (:mod:`viewer.surface` sets the camera and light).
-        weights: one of :data:`DEFERRED_WEIGHTS`.
+        weights: one of :data:`DEFERRED_WEIGHTS`, or its :class:`~gratnet.codes.WeightForm`.
         half_as_float: with ``tiled-half``, compile its half-precision code path with float types
             (``TILED_HALF_AS_FLOAT``): the kernel's structure checked where no driver has half arithmetic
             (llvmpipe; tests/test_tiled.py). Not faster than ``tiled``.
 
     Attributes:
-        weights: the weights source chosen (never ``auto``).
+        form: the weight form chosen (never ``auto``); ``weights``: its name, as configs save it.
     """
 
-    def __init__(self, network: NetworkRenderer, weights: str = "auto", half_as_float: bool = False) -> None:
-        if weights not in DEFERRED_WEIGHTS:
-            raise GratNetError(f"deferred weights must be one of {', '.join(DEFERRED_WEIGHTS)}, got {weights!r}")
-        if weights == "auto":
+    def __init__(self, network: NetworkRenderer, weights: str | WeightForm = "auto",
+                 half_as_float: bool = False) -> None:
+        form = WeightForm.parse(weights)
+        baked = WeightSource(network.weights_path) is WeightSource.BAKED
+        if form.source is WeightSource.AUTO:
             software = is_software_rasterizer(network.ctx)
-            weights = "baked" if network.weights_path == "baked" else "texture" if software else "ssbo"
-        if weights == "baked" and network.weights_path != "baked":
+            form = WeightForm.reading(WeightSource.BAKED if baked else WeightSource.TEXTURE if software
+                                      else WeightSource.BUFFER)
+        if form.source is WeightSource.BAKED and not baked:
             raise GratNetError("deferred weights 'baked' need a SceneRenderer with weights_path='baked'")
         #: Weights stored as IEEE halves in the buffer (``*-fp16``, ``tiled-half``).
-        self.fp16_storage = weights.endswith("-fp16") or weights == "tiled-half"
+        self.fp16_storage = form.storage is Precision.FLOAT16
         if self.fp16_storage and not np.all(np.abs(network.packed_weights) <= FP16_MAX):
-            raise GratNetError(f"deferred weights {weights!r}: the net has weights beyond fp16's range (±{FP16_MAX:g})")
+            raise GratNetError(f"deferred weights {form.name!r}: the net has weights beyond fp16's range "
+                               f"(±{FP16_MAX:g})")
         self.ctx = network.ctx
         self.network = network
-        self.weights = weights
+        self.form = form
+        self.weights = form.name
         #: The tiled kernel's plan (:mod:`viewer.tiled`; ``None`` for the per-entry SHADE kernel).
         self.tile_plan: TilePlan | None = None
         self._half_extension: str | None = None
-        if weights in TILED_WEIGHTS:
-            if weights == "tiled-half" and half_as_float:
+        if form.kernel is Kernel.TILED:
+            if form.arithmetic is Precision.FLOAT16 and half_as_float:
                 self._half_extension = _HALF_AS_FLOAT
-            elif weights == "tiled-half":
+            elif form.arithmetic is Precision.FLOAT16:
                 self._half_extension = half_extension(network.ctx)
                 if self._half_extension is None:
                     renderer = network.ctx.info.get("GL_RENDERER", "this driver")
@@ -152,7 +163,7 @@ class DeferredRenderer:
                                        f"tiled-fp16")
             self.tile_plan = plan_for_context(network.ctx, network.layout,
                                               half=self._half_extension not in (None, _HALF_AS_FLOAT))
-            _LOG.debug("deferred weights %s: %s", weights, self.tile_plan.describe(network.layout))
+            _LOG.debug("deferred weights %s: %s", form.name, self.tile_plan.describe(network.layout))
         self._programs: dict[str, moderngl.Program | moderngl.ComputeShader] = {}
         self._weight_buffer: moderngl.Buffer | None = None
         self._list: moderngl.Buffer | None = None
@@ -172,7 +183,7 @@ class DeferredRenderer:
     # Programs
 
     def _defines(self) -> dict[str, int | float]:
-        return {**self.network.defines, "DEFERRED_LIST_BINDING": _LIST_BINDING, "SHADE_GROUP": _SHADE_GROUP}
+        return {**self.network.defines, "SHADE_GROUP": _SHADE_GROUP}
 
     def _gbuffer_program(self) -> moderngl.Program:
         if "gbuffer" not in self._programs:
@@ -185,12 +196,12 @@ class DeferredRenderer:
         if key not in self._programs:
             defines = {**self._defines(), kernel: 1}
             overrides = None
+            form = self.form
             if kernel == "SHADE":
-                overrides = self.network.overrides if self.weights == "baked" else None
-                if self.weights not in ("texture", "baked"):
-                    defines["WEIGHTS_BINDING"] = _WEIGHTS_BINDING
+                overrides = self.network.overrides if form.source is WeightSource.BAKED else None
+                if form.buffer:
                     texels = int(np.prod(self.network.packed_weights.shape[:2]))
-                    if self.weights.startswith("shared"):
+                    if form.source is WeightSource.SHARED:
                         defines["WEIGHTS_SHARED"] = texels
                     else:
                         defines["WEIGHTS_SSBO"] = 1  # ssbo*, and the tiled kernel's staging reads
@@ -201,18 +212,17 @@ class DeferredRenderer:
                     defines.update(SHADE_TILED=1, **self.tile_plan.defines())
                     if self._half_extension is not None:
                         defines.update({"TILED_HALF": 1, _HALF_DEFINES[self._half_extension]: 1})
-                if self.weights == "baked":
+                if form.source is WeightSource.BAKED:
                     _LOG.info("deferred shading program with baked weights (%d MACs per pixel): the first dispatch "
                               "JIT-compiles it (~25 s at 28k MACs on llvmpipe; Mesa's shader cache keeps it)",
                               self.network.model.macs_per_evaluation)
             if counting:
-                defines.update(COUNT_EVALUATIONS=1, SKIP_COUNTER_BINDING=5)
+                defines["COUNT_EVALUATIONS"] = 1
             try:
                 program = compile_compute(self.ctx, _PROGRAM, defines, self.network.shader_root, overrides)
             except GratNetError as error:
-                if self.weights.startswith("shared") and kernel == "SHADE":
-                    bytes_needed = (8 if self.weights.endswith("-fp16") else 16) * int(
-                        np.prod(self.network.packed_weights.shape[:2]))
+                if form.source is WeightSource.SHARED and kernel == "SHADE":
+                    bytes_needed = form.texel_bytes * int(np.prod(self.network.packed_weights.shape[:2]))
                     raise GratNetError(f"deferred weights 'shared': the net's {bytes_needed} bytes of weights must fit "
                                        f"the GPU's compute shared memory (32 KiB on llvmpipe): {error}") from error
                 if self.tile_plan is not None and kernel == "SHADE":  # name the plan (GRATNET_TILE_PLAN may change it)
@@ -220,15 +230,14 @@ class DeferredRenderer:
                     raise GratNetError(f"deferred weights {self.weights!r} ({plan}): {error}") from error
                 raise
             if kernel == "SHADE":
-                uniforms = "ssbo" if self.fp16_storage or self.tile_plan is not None else self.weights
-                self.network.model_uniforms(program, uniforms)
+                self.network.model_uniforms(program, form.source)
             self._programs[key] = program
         return self._programs[key]  # type: ignore[return-value]
 
     def _bind_weights(self) -> None:
-        if self.weights == "texture" or self.network.model.grids:
+        if self.form.source is WeightSource.TEXTURE or self.network.model.grids:
             self.network.use_weights(0)  # the weight texture, and a feature-grid model's grids on their units
-        if self.weights not in ("texture", "baked"):
+        if self.form.buffer:
             if self._weight_buffer is None:
                 texels = self.network.packed_weights
                 if self.fp16_storage:  # four halves per texel, in packHalf2x16 order (little-endian)
@@ -326,16 +335,16 @@ class DeferredRenderer:
                                        lambda done: report(_GBUFFER_SHARE * done))
                     list_buffer.write(np.array([0, 1, 1, 0], dtype=np.uint32).tobytes())
                     list_buffer.bind_to_storage_buffer(_LIST_BINDING)
-                    texture.bind_to_image(0, read=True, write=True)
+                    texture.bind_to_image(_GBUFFER_IMAGE, read=True, write=True)
                     bound.use(location=unit)
                     for first, end in self.compact_pacer.pieces(height * len(chunk), np.tile(row_costs, len(chunk)),
-                                                                multiple=_TILE):
+                                                                multiple=DEFERRED_TILE):
                         set_uniform(compact, "u_first_row", first)
-                        compact.run(_groups(width, _TILE), _groups(end - first, _TILE))
+                        compact.run(_groups(width, DEFERRED_TILE), _groups(end - first, DEFERRED_TILE))
                     self.ctx.memory_barrier()
                     entries = int(np.frombuffer(list_buffer.read(4, offset=12), dtype=np.uint32)[0])
                     self._bind_weights()
-                    texture.bind_to_image(0, read=True, write=True)
+                    texture.bind_to_image(_GBUFFER_IMAGE, read=True, write=True)
                     share = (1.0 - _GBUFFER_SHARE) / max(entries, 1)
                     for first, end in self.shade_pacer.pieces(
                             entries, multiple=_PIECE_ENTRIES,
@@ -347,11 +356,11 @@ class DeferredRenderer:
                         set_uniform(resolve, "u_height", height)
                         set_uniform(resolve, "u_scale", 1.0 / len(offsets))
                         set_uniform(resolve, "u_accumulate", number > 0)
-                        texture.bind_to_image(0, read=True, write=False)
-                        output.bind_to_image(1, read=True, write=True)
-                        for first, end in self.resolve_pacer.pieces(height, multiple=_TILE):
+                        texture.bind_to_image(_GBUFFER_IMAGE, read=True, write=False)
+                        output.bind_to_image(_RESOLVED_IMAGE, read=True, write=True)
+                        for first, end in self.resolve_pacer.pieces(height, multiple=DEFERRED_TILE):
                             set_uniform(resolve, "u_first_row", first)
-                            resolve.run(_groups(width, _TILE), _groups(end - first, _TILE))
+                            resolve.run(_groups(width, DEFERRED_TILE), _groups(end - first, DEFERRED_TILE))
                         self.ctx.memory_barrier()
                     report(1.0)
                 if statistics is not None:
@@ -408,7 +417,7 @@ class DeferredRenderer:
         try:
             shade = self._compute("SHADE")
             self._bind_weights()
-            texture.bind_to_image(0, read=True, write=True)
+            texture.bind_to_image(_GBUFFER_IMAGE, read=True, write=True)
             query = self.ctx.query(time=True) if timings is not None else None
             for repeat in range(max(1, repeats)):
                 if repeat:

@@ -14,6 +14,11 @@ A program is one file ``shaders/NAME.glsl`` holding both stages, selected with `
    a key of ``overrides`` takes that :class:`GeneratedSource` instead of the file (e.g. the MLP with the
    weights baked in, :mod:`viewer.baked`); its text may not include further files.
 
+``#include "codes.glsl"`` takes no file either: it stands for :func:`gratnet.codes.glsl_source`, the ``#define``s
+of the codes Python and the GLSL share (schemes, activations, range kinds, light kinds, counters, bindings). Its
+text goes after the defines of step 3, wherever the first include of it stands (inside an ``#if`` too), so that
+its names hold everywhere in the program; a define of ``defines`` may not take one of its names.
+
 Every stretch of text taken from a file is preceded by ``#line L FILEID``. Mesa reports the source
 number (FILEID) only for preprocessor and syntax errors — its semantic errors always say ``0:`` (measured
 with Mesa 22/llvmpipe) — so the line number carries the file too: ``L = FILEID · LINE_STRIDE + line``.
@@ -33,11 +38,13 @@ from pathlib import Path
 
 import moderngl
 
+from gratnet.codes import GLSL_INCLUDE, glsl_defines, glsl_source
 from gratnet.errors import GratNetError
 from shaders import SHADER_ROOT as PACKAGED_SHADER_ROOT
 from viewer.pacing import sigint_deferred
 
 __all__ = [
+    "CODES_SOURCE",
     "LINE_STRIDE",
     "SHADER_ROOT",
     "GeneratedSource",
@@ -86,6 +93,10 @@ class GeneratedSource:
 #: Include argument (as written after ``#include``, e.g. ``"mlp.glsl"``) → the source that replaces that file.
 Overrides = Mapping[str, GeneratedSource]
 
+#: The source of ``#include "codes.glsl"`` (:mod:`gratnet.codes`), put in the program's header.
+CODES_SOURCE = GeneratedSource(f"<generated {GLSL_INCLUDE}: gratnet/codes.py>", glsl_source())
+_CODE_NAMES = frozenset(glsl_defines())
+
 
 @dataclasses.dataclass(frozen=True)
 class ProgramSource:
@@ -110,6 +121,8 @@ def _define_lines(defines: Defines) -> list[str]:
             raise GratNetError(f"invalid GLSL define name {name!r}: use letters, digits and _, not starting GL_ or __")
         if name in _ALL_STAGES.values():
             raise GratNetError(f"define {name} is reserved: the preprocessor sets it from the stage")
+        if name in _CODE_NAMES:
+            raise GratNetError(f"define {name} is a shared code: gratnet/codes.py defines it ({GLSL_INCLUDE})")
         if isinstance(value, bool) or not isinstance(value, (int, float)):
             raise GratNetError(f"GLSL define {name} must be an int or a float, got {value!r}")
         if isinstance(value, float):
@@ -129,6 +142,7 @@ class _Preprocessor:
         self.files: list[Path | str] = []
         self.done: set[Path | str] = set()
         self.lines: list[str] = []
+        self.header: list[str] = []  # codes.glsl, once included: it goes before the program's text
         self.overrides: dict[str, GeneratedSource] = {}
         for key, source in (overrides or {}).items():
             if not isinstance(source, GeneratedSource):
@@ -141,17 +155,17 @@ class _Preprocessor:
             self.files.append(path)
         return self.files.index(path) + 1
 
-    def _expand_generated(self, source: GeneratedSource) -> None:
+    def _expand_generated(self, source: GeneratedSource, lines: list[str]) -> None:
         source_lines = source.text.splitlines()
         if len(source_lines) >= LINE_STRIDE:
             raise GratNetError(f"{source.name} has {len(source_lines)} lines; at most {LINE_STRIDE - 1} are supported")
         file_id = self._file_id(source.name)
         self.done.add(source.name)
-        self.lines.append(f"#line {file_id * LINE_STRIDE + 1} {file_id}")
+        lines.append(f"#line {file_id * LINE_STRIDE + 1} {file_id}")
         for number, line in enumerate(source_lines, start=1):
             if _VERSION.match(line) or _INCLUDE.match(line):
                 raise GratNetError(f"{source.name}:{number}: a generated source may hold no #version or #include")
-            self.lines.append(line)
+            lines.append(line)
 
     def expand(self, path: Path, stack: tuple[Path, ...]) -> None:
         try:
@@ -175,9 +189,14 @@ class _Preprocessor:
             if argument is None:
                 raise GratNetError(f'{path}:{number}: malformed include, expected #include "file.glsl"')
             generated = self.overrides.get(argument.group(1))
+            if generated is None and argument.group(1) == GLSL_INCLUDE:
+                if CODES_SOURCE.name not in self.done:  # once, into the header: its names hold in every #if branch
+                    self._expand_generated(CODES_SOURCE, self.header)
+                self.lines.append(f"#line {file_id * LINE_STRIDE + number + 1} {file_id}")
+                continue
             if generated is not None:
                 if generated.name not in self.done:  # include-once, as for files
-                    self._expand_generated(generated)
+                    self._expand_generated(generated, self.lines)
                 self.lines.append(f"#line {file_id * LINE_STRIDE + number + 1} {file_id}")
                 continue
             target = (path.parent / argument.group(1)).resolve()
@@ -216,9 +235,10 @@ def preprocess(
     if not path.is_file():
         raise GratNetError(f"shader program {name!r} not found (looked for {path})")
     preprocessor = _Preprocessor(overrides)
-    preprocessor.lines += [GLSL_VERSION, f"#define {stage_define}", *_define_lines(defines)]
+    header = [GLSL_VERSION, f"#define {stage_define}", *_define_lines(defines)]
     preprocessor.expand(path, (path,))
-    return ProgramSource("\n".join(preprocessor.lines) + "\n", tuple(preprocessor.files))
+    lines = header + preprocessor.header + preprocessor.lines
+    return ProgramSource("\n".join(lines) + "\n", tuple(preprocessor.files))
 
 
 def load_program_source(

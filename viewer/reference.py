@@ -25,6 +25,7 @@ from pathlib import Path
 import moderngl
 import numpy as np
 
+from gratnet.codes import SCHEME
 from gratnet.errors import GratNetError
 from gratnet.reference import FLOAT16_SCALE, check_precision, check_uniform_slices, stored_values, texture_bytes
 from gratnet.volume import Volume
@@ -39,7 +40,6 @@ MAX_TEXTURE_BYTES = 2 * 1024**3
 #: Texture unit of ``u_reference`` (units 0–3 are the network's and the passes' inputs; 1 and 2 are evaluate_keys'
 #: and accumulate's inputs, so the volume takes one no program shares).
 REFERENCE_UNIT = 6
-_SCHEMES = {"regular": 0, "simple": 1, "simple-max": 2}  # shaders/encoding.glsl's SCHEME_* codes
 _DEFINES = {"REFERENCE": 1, "MAX_FREQUENCIES": 1}  # encoding.glsl's arrays: the look-up uses no frequency
 
 
@@ -78,8 +78,8 @@ class ReferenceRenderer(ShadingPrograms):
                  precision: str = "float16") -> None:
         self.precision = check_precision(precision)
         scheme = volume.metadata.get("scheme")
-        if scheme not in _SCHEMES:
-            raise GratNetError(f"the volume's metadata names no sampling scheme ({', '.join(_SCHEMES)}), got "
+        if scheme not in SCHEME:
+            raise GratNetError(f"the volume's metadata names no sampling scheme ({', '.join(SCHEME.names)}), got "
                                f"{scheme!r}")
         check_uniform_slices(volume.metadata, volume.slices)
         check_reference_limits(volume.slices, volume.resolution, precision, ctx.info)
@@ -107,7 +107,7 @@ class ReferenceRenderer(ShadingPrograms):
         """The look-up's uniforms: the texture's unit, the storage scale and the volume's scheme."""
         set_uniform(program, "u_reference", REFERENCE_UNIT)
         set_uniform(program, "u_reference_scale", float(self._scale))
-        set_uniform(program, "u_scheme", _SCHEMES[self.scheme])
+        set_uniform(program, SCHEME.uniform, SCHEME.code(self.scheme))
 
     def material_textures(self) -> tuple[tuple[moderngl.Texture, int], ...]:
         return ((self._texture, REFERENCE_UNIT),)

@@ -49,6 +49,7 @@ from typing import TYPE_CHECKING
 
 from gratnet.config import add_arguments, add_quiet_flag, from_arguments
 from gratnet.errors import GratNetError
+from gratnet.lights import POINT, chosen_kind
 from viewer.scene_config import (
     DEFAULT_MATERIAL,
     MAX_SAMPLES,
@@ -97,7 +98,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     )
     parser.add_argument("--out", required=True, metavar="IMAGE.png|IMAGE.exr",
                         help="output: .png (display sRGB, 8-bit) or .exr (linear sRGB float, R G B)")
-    add_scene_arguments(parser, point_light="point light position in metres instead of --light (irradiance 1 at 1 m)")
+    add_scene_arguments(parser, lights={POINT.name: "point light position in metres instead of --light (irradiance 1 "
+                                                    "at 1 m)"})
     add_quiet_flag(parser)
     actions = add_arguments(parser, RenderConfig)
     # None when left out: --reference without --material renders the volume alone (no network, no model).
@@ -113,8 +115,9 @@ def resolve_config(arguments: argparse.Namespace) -> RenderConfig:
     check_scene(config)
     if config.slice and config.width != config.height:
         raise GratNetError(f"--slice renders a square image; give --size N,N (got {config.width},{config.height})")
-    if config.slice and config.point_light is not None:
-        raise GratNetError("--slice takes a directional light (--light θ,φ), not --point-light")
+    light_flag = chosen_kind(config).flag
+    if config.slice and light_flag is not None:
+        raise GratNetError(f"--slice takes a directional light (--light θ,φ), not {light_flag.flag}")
     if isinstance(config.spp, bool) or not 1 <= config.spp <= MAX_SAMPLES:
         raise GratNetError(f"--spp (samples per pixel) must be an integer in 1 … {MAX_SAMPLES}, got {config.spp}")
     if config.slice and config.spp != 1:
@@ -197,8 +200,7 @@ def _render(arguments: argparse.Namespace, out: Path) -> int:
         raise GratNetError("--skip-dark applies to .png output only: an EXR keeps values below the display's step")
     camera = Camera(config.camera_distance, config.camera_azimuth_degrees, config.camera_elevation_degrees,
                     fov_deg=config.fov_degrees)
-    light = (Light.point(config.point_light) if config.point_light is not None
-             else Light.directional(config.light_theta_degrees, config.light_phi_degrees))
+    light = Light.from_config(config)
     model_path = None if reference_only else resolve_material(config.material)
     volume = (load_reference(config.reference, config.reference_precision,
                              None if reference_only else config.material) if config.reference else None)
@@ -216,7 +218,7 @@ def _render(arguments: argparse.Namespace, out: Path) -> int:
     try:
         check_render_size(ctx, config)  # before any program compiles: a size this machine cannot render is refused
         with SceneRenderer(ctx, model, weights_path=config.weights_path, render_path=config.render_path,
-                           deferred_weights=config.deferred_weights,
+                           deferred_weights=config.weight_form,
                            reference_precision=config.reference_precision) as renderer:
             # A BRDF slice has one path (a full-screen fragment pass); a mesh takes the one chosen.
             resolved = ({"path": "forward", "reason": "BRDF slices are rendered by the fragment pass only"}

@@ -21,6 +21,7 @@ import moderngl
 import numpy as np
 
 from gratnet.bounds import DISPLAY_SKIP_THRESHOLD, OutputBounds, display_skip_matrix, output_bounds
+from gratnet.codes import HIDDEN, MODE, OUTPUT, RANGE, SCHEME, WEIGHTS_PATHS, WeightSource
 from gratnet.errors import GratNetError
 from gratnet.featuregrid import CHUNK_FEATURES, grid_chunks
 from gratnet.modelfile import LEAKY_RELU_SLOPE, ModelFile, pack_texture, texture_layout
@@ -44,9 +45,9 @@ __all__ = [
     "xyz_to_linear_srgb_matrix",
 ]
 
-#: Where the MLP's weights come from: ``texture`` (shaders/mlp.glsl reads the packed RGBA32F texture),
-#: ``baked`` (viewer/baked.py writes them into the shader as literals) or ``auto`` (:func:`choose_weights_path`).
-WEIGHTS_PATHS = ("auto", "texture", "baked")
+# WEIGHTS_PATHS (gratnet.codes): where the MLP's weights come from: ``texture`` (shaders/mlp.glsl reads the packed
+# RGBA32F texture), ``baked`` (viewer/baked.py writes them into the shader as literals) or ``auto``
+# (:func:`choose_weights_path`).
 #: The largest net (multiply-adds per evaluation) that ``auto`` bakes on a software rasterizer: the first
 #: compile grows faster than the net. Measured on Mesa llvmpipe (2 cores, shader cache off), brdf_slice
 #: compile + first draw: 2.8 s at 3.9k MACs, 23–29 s at 28.4k (the shipped 163-108-66-40-24-3), 131 s at
@@ -55,12 +56,7 @@ BAKED_MAX_MACS = 32_000
 SOFTWARE_RASTERIZERS = ("llvmpipe", "softpipe", "swrast")  # substrings of GL_RENDERER
 _LOG = logging.getLogger("gratnet.renderer")  # the gratnet command shows its INFO lines (gratnet/cli.py)
 
-# Codes of the GLSL `const int`s (shaders/encoding.glsl, mlp.glsl, range.glsl, evaluate_keys.glsl).
-_SCHEMES = {"regular": 0, "simple": 1, "simple-max": 2}
-_HIDDEN = {"relu": 0, "leaky_relu": 1, "silu": 2}
-_OUTPUT = {"clamp": 0, "sigmoid": 1, "none": 2}
-_RANGES = {"power-log": 0, "log": 1, "log1p": 2}
-_MODE_XYZ, _MODE_NETWORK, _MODE_ENCODING, _MODE_A_TERM = 0, 1, 2, 3
+# The codes of the GLSL (schemes, activations, range kinds, evaluate_keys' modes) are gratnet/codes.py's.
 _PASS_WIDTH = 1024  # pixels per row of a key-evaluation pass
 _PASS_PIXELS = 1 << 20  # keys per pass: bounds memory and the time of one draw
 _FREQUENCY_BITS = 10  # significant bits of the exact part of s^j (see shaders/encoding.glsl)
@@ -244,36 +240,37 @@ class NetworkRenderer(ShadingPrograms):
     # ---------------------------------------------------------------------------------------------
     # Programs
 
-    def model_uniforms(self, program: moderngl.Program | moderngl.ComputeShader, weights: str | None = None) -> None:
-        """Everything the encoding, MLP and range-transform includes read, from the model. ``weights``: where
-        the program's mlp.glsl reads them (``texture``, ``baked``, or the deferred path's ``ssbo``/``shared``;
-        default: :attr:`weights_path`)."""
-        weights = self.weights_path if weights is None else weights
+    def model_uniforms(self, program: moderngl.Program | moderngl.ComputeShader,
+                       source: WeightSource | None = None) -> None:
+        """Everything the encoding, MLP and range-transform includes read, from the model. ``source``: where
+        the program's mlp.glsl reads the weights (the texture, baked literals, or the deferred path's buffer or
+        shared memory; default: :attr:`weights_path`)."""
+        source = WeightSource(self.weights_path) if source is None else source
         layers = np.zeros((int(self.defines["MAX_LAYERS"]), 4), dtype=np.int32)
         for k, entry in enumerate(self.layout):
             layers[k, :3] = entry["row_offset"], entry["in_blocks"], entry["out_blocks"]
         model = self.model
-        if weights != "baked":  # the baked mlp.glsl has the layout and activations in its code
-            if weights == "texture":
+        if source is not WeightSource.BAKED:  # the baked mlp.glsl has the layout and activations in its code
+            if source is WeightSource.TEXTURE:
                 set_uniform(program, "u_weights", 0)
             else:
                 set_uniform(program, "u_weights_width", int(self.packed_weights.shape[1]))
             set_uniform(program, "u_layer_count", len(self.layout))
             set_uniform(program, "u_layers", layers)
-            set_uniform(program, "u_hidden_activation", _HIDDEN[model.activation])
-            set_uniform(program, "u_output_activation", _OUTPUT[model.output_activation])
+            set_uniform(program, HIDDEN.uniform, HIDDEN.code(model.activation))
+            set_uniform(program, OUTPUT.uniform, OUTPUT.code(model.output_activation))
         if self._grids:
             set_uniform(program, "u_grid", np.arange(_GRID_UNIT, _GRID_UNIT + len(self._grids), dtype=np.int32))
             set_uniform(program, "u_grid_hardware_filter", int(self.grid_filter == "hardware"))
             set_uniform(program, "u_grid_smoothstep", int(model.grid_interpolation == "smoothstep"))
-        set_uniform(program, "u_scheme", _SCHEMES[model.scheme])
+        set_uniform(program, SCHEME.uniform, SCHEME.code(model.scheme))
         # encoded_feature (encoding.glsl) reads the counts; the baked MLP has them in its code, so baked
         # programs that do not call encoded_feature (all but encode_keys) lack these uniforms.
-        if weights != "baked" or "u_frequencies" in program:
+        if source is not WeightSource.BAKED or "u_frequencies" in program:
             set_uniform(program, "u_frequencies", model.encoding.frequencies)
             set_uniform(program, "u_t_frequencies", model.encoding.t_frequencies)
         set_uniform(program, "u_frequency", _frequency_table(model, int(self.defines["MAX_FREQUENCIES"])))
-        set_uniform(program, "u_range_kind", _RANGES[model.range.kind])
+        set_uniform(program, RANGE.uniform, RANGE.code(model.range.kind))
         set_uniform(program, "u_range_bits", float(model.range.bits))
         set_uniform(program, "u_range_power", float(model.range.power))
         set_uniform(program, "u_range_white", tuple(float(c) for c in model.range.white))
@@ -372,7 +369,7 @@ class NetworkRenderer(ShadingPrograms):
                   ior: float = 0.0) -> np.ndarray:
         """Run evaluate_keys in ``mode`` on ``(N, 3)`` inputs; returns ``(N, 4)`` float32."""
         program = self.program("evaluate_keys")
-        set_uniform(program, "u_mode", mode)
+        set_uniform(program, MODE.uniform, mode)
         set_uniform(program, "u_block", block)
         set_uniform(program, "u_ior", ior)
         count = first.shape[0]
@@ -426,14 +423,14 @@ class NetworkRenderer(ShadingPrograms):
         keys, shape = self._keys(u, v, w)
         if keys.shape[0] == 0:
             return np.zeros((*shape, 3), dtype=np.float32)
-        return self._evaluate(_MODE_XYZ, keys)[:, :3].reshape(*shape, 3)
+        return self._evaluate(MODE.code("xyz"), keys)[:, :3].reshape(*shape, 3)
 
     def network_outputs(self, u: object, v: object, w: object) -> np.ndarray:
         """The network's raw outputs (range-transformed XYZ, before eq. 7's inverse), ``float32`` ``(…, 3)``."""
         keys, shape = self._keys(u, v, w)
         if keys.shape[0] == 0:
             return np.zeros((*shape, 3), dtype=np.float32)
-        return self._evaluate(_MODE_NETWORK, keys)[:, :3].reshape(*shape, 3)
+        return self._evaluate(MODE.code("network"), keys)[:, :3].reshape(*shape, 3)
 
     def encode_keys(self, u: object, v: object, w: object) -> np.ndarray:
         """The shader's encoded input features (eq. 6) at key vectors, ``float32`` ``(…, features)``.
@@ -444,7 +441,7 @@ class NetworkRenderer(ShadingPrograms):
         features = self.model.encoding.features
         if keys.shape[0] == 0:
             return np.zeros((*shape, features), dtype=np.float32)
-        blocks = [self._evaluate(_MODE_ENCODING, keys, block=b) for b in range(-(-features // 4))]
+        blocks = [self._evaluate(MODE.code("encoding"), keys, block=b) for b in range(-(-features // 4))]
         return np.concatenate(blocks, axis=-1)[:, :features].reshape(*shape, features)
 
     def a_term(self, light: np.ndarray, view: np.ndarray, ior: float | None = 1.5) -> np.ndarray:
@@ -456,7 +453,8 @@ class NetworkRenderer(ShadingPrograms):
         first = light.reshape(-1, 3).astype(np.float32)
         if first.shape[0] == 0:
             return np.zeros(shape, dtype=np.float32)
-        values = self._evaluate(_MODE_A_TERM, first, view.reshape(-1, 3).astype(np.float32), ior=ior_uniform(ior))
+        values = self._evaluate(MODE.code("a_term"), first, view.reshape(-1, 3).astype(np.float32),
+                                ior=ior_uniform(ior))
         return values[:, 0].reshape(shape)
 
     # ---------------------------------------------------------------------------------------------

@@ -49,6 +49,7 @@ from pathlib import Path
 import moderngl
 import numpy as np
 
+from gratnet.codes import RENDER_PATHS, WeightForm
 from gratnet.display import xyz_to_display_srgb8, xyz_to_linear_srgb
 from gratnet.errors import GratNetError
 from gratnet.modelfile import ModelFile
@@ -67,9 +68,8 @@ __all__ = ["PROBE_SIZE", "RENDER_PATHS", "SceneRenderer", "check_render_path", "
            "render_path_cache_file"]
 
 _LOG = logging.getLogger("gratnet.scene")  # the gratnet command shows its INFO lines (gratnet/cli.py)
+# RENDER_PATHS (gratnet.codes): ``render_path`` values of SceneRenderer and ``--render-path``.
 
-#: ``render_path`` values of :class:`SceneRenderer` and ``--render-path``.
-RENDER_PATHS = ("auto", "forward", "deferred")
 #: The ``auto`` probe: the CD disc at this size (pixels), each path timed as the best of two renders (one
 #: when it is already 1.5× slower than the other's best), after one untimed render that compiles it.
 PROBE_SIZE = (128, 128)
@@ -100,7 +100,7 @@ class SceneRenderer:
             images; :meth:`render_layers` (key vectors and A) and BRDF slices always run forward, and
             ``depth_prepass`` only concerns the forward path.
         deferred_weights: where the deferred path's compute shader reads the weights
-            (:data:`viewer.deferred.DEFERRED_WEIGHTS`).
+            (:data:`viewer.deferred.DEFERRED_WEIGHTS`, or its :class:`~gratnet.codes.WeightForm`).
         measure_render_path: ``auto`` may time both paths when nothing is cached (False: ``forward`` then;
             the viewer, whose compile process measures off the window's thread).
 
@@ -121,7 +121,7 @@ class SceneRenderer:
 
     def __init__(self, ctx: moderngl.Context, model: ModelFile | Volume, shader_root: str | Path | None = None,
                  weights_path: str = "auto", baked_source: str | None = None, render_path: str = "auto",
-                 deferred_weights: str = "auto", measure_render_path: bool = True,
+                 deferred_weights: str | WeightForm = "auto", measure_render_path: bool = True,
                  reference_precision: str = "float16") -> None:
         self._requested_path = check_render_path(render_path)
         self.ctx = ctx

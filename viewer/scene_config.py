@@ -27,8 +27,10 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import Any, TypeVar
 
+from gratnet.codes import DEFERRED_WEIGHTS, RENDER_PATHS, SCHEME, WEIGHTS_PATHS, WeightForm
 from gratnet.config import config_field, parse_float, parse_numbers
 from gratnet.errors import GratNetError
+from gratnet.lights import DISTANCE_RANGE_METRES, LIGHT_KINDS, LightFlag, light_kind
 from viewer.defaults import FALLBACK, FOV_DEGREES, SceneDefaults, resolve_defaults
 
 ConfigT = TypeVar("ConfigT")
@@ -41,13 +43,9 @@ __all__ = ["DEFAULT_MATERIAL", "DEFERRED_WEIGHTS", "DEFERRED_WEIGHTS_HELP", "MAX
 _OUTPUT_SUFFIXES = (".png", ".exr")
 #: Largest --spp of ``gratnet render``: viewer.antialias.MAX_SAMPLES (repeated: this module defers numpy).
 MAX_SAMPLES = 1024
-#: ``--weights-path`` choices: viewer.renderer.WEIGHTS_PATHS (repeated here: importing it loads moderngl).
-WEIGHT_PATHS = ("auto", "texture", "baked")
-#: ``--render-path`` choices: viewer.scene.RENDER_PATHS (repeated here for the same reason).
-RENDER_PATHS = ("auto", "forward", "deferred")
-#: ``--deferred-weights`` choices: viewer.deferred.DEFERRED_WEIGHTS (repeated here for the same reason).
-DEFERRED_WEIGHTS = ("auto", "texture", "ssbo", "shared", "baked", "ssbo-fp16", "shared-fp16", "tiled", "tiled-fp16",
-                    "tiled-half")
+#: ``--weights-path`` choices (gratnet.codes.WEIGHTS_PATHS; ``--render-path``'s and ``--deferred-weights``' come
+#: from there too: RENDER_PATHS, DEFERRED_WEIGHTS).
+WEIGHT_PATHS = WEIGHTS_PATHS
 #: ``--deferred-weights`` help, shared by gratnet render and gratnet bench (there a comma-separated list).
 DEFERRED_WEIGHTS_HELP = (
     "the deferred path's network kernel and where it reads the weights: texture, ssbo, shared, baked (one "
@@ -119,8 +117,8 @@ class RenderConfig(SceneConfig):
     reference: str = config_field(
         "", "a ground-truth volume (gratnet groundtruth's EXR) to render instead of the network: the volume looked "
         "up per pixel (trilinear, exact at its samples) with the same A-term, Fresnel and exposure; with --material "
-        "the volume must come from the material's surface; without it, an unset --exposure puts the picture's "
-        "brightest 0.5 %% at white", metavar="VOLUME.exr")
+        "the volume must come from the material's surface; without it, an unset --exposure puts the 99th percentile "
+        "of the lit pixels at white (raised until 3 %% of the picture shows; gratnet.showcase.suggest_exposure)", metavar="VOLUME.exr")
     reference_precision: str = config_field(
         "float16", "storage of the --reference texture: float16 (XYZ·2^15: 11 significant bits for values down to "
         "2e-9 of a mirror's peak; 66 MB for 11 slices of 1001²) or float32 (exact, twice the memory)",
@@ -130,6 +128,11 @@ class RenderConfig(SceneConfig):
         "sub-pixel offsets (Halton 2,3; the first at the pixel centre); costs about spp × one render. As "
         "mitsuba-render's --spp", aliases=("--samples",))
 
+    @property
+    def weight_form(self) -> WeightForm:
+        """``deferred_weights`` parsed: the deferred path's kernel and where and how it reads the weights."""
+        return WeightForm.parse(self.deferred_weights)
+
 
 def _numbers(text: str, count: int | tuple[int, ...], flag: str, form: str) -> list[float]:
     """Comma-separated numbers that float32 holds (``count`` of them), or a one-line GratNetError naming
@@ -138,14 +141,14 @@ def _numbers(text: str, count: int | tuple[int, ...], flag: str, form: str) -> l
 
 
 #: Ranges of the scene's numbers that the float32 shaders handle (beyond them view matrices, 1/d² and
-#: exposure · A · XYZ overflow or lose every digit).
+#: exposure · A · XYZ overflow or lose every digit); DISTANCE_RANGE_METRES (metres) is gratnet.lights'.
 ANGLE_LIMIT_DEGREES = 1e6
-DISTANCE_RANGE_METRES = (1e-6, 1e6)
 
 
-def check_scene_numbers(light: tuple[float, float] | None, point: tuple[float, ...] | None,
-                        camera: tuple[float, float, float]) -> None:
-    """Refuse (one line) light, point-light and camera values the float32 shaders cannot use."""
+def check_scene_numbers(light: tuple[float, float] | None, camera: tuple[float, float, float],
+                        lights: dict[str, tuple[float, ...]] | None = None) -> None:
+    """Refuse (one line) light, camera and other light kinds' values (``lights``: kind name → its flag's values,
+    gratnet.lights) that the float32 shaders cannot use."""
     low, high = DISTANCE_RANGE_METRES
     for flag, angles in (("--light", light or ()), ("--camera", camera[1:])):
         for angle in angles:
@@ -155,11 +158,10 @@ def check_scene_numbers(light: tuple[float, float] | None, point: tuple[float, .
     if not low <= camera[0] <= high:
         raise GratNetError(f"--camera distance must be from {low:g} to {high:g} metres (typical: 0.1 to 1), "
                            f"got {camera[0]:g}")
-    if point is not None:
-        if max(abs(value) for value in point) > high:
-            raise GratNetError(f"--point-light coordinates must lie within ±{high:g} metres, got {point}")
-        if math.hypot(*point) < low:
-            raise GratNetError(f"--point-light must be at least {low:g} m from the origin, got {point}")
+    for name, values in (lights or {}).items():
+        flag = light_kind(name).flag
+        if flag is not None:
+            flag.check(values, flag.flag)
 
 
 def parse_size(text: str) -> tuple[int, int]:
@@ -174,19 +176,23 @@ def parse_size(text: str) -> tuple[int, int]:
     return width, int(values[-1])
 
 
-def add_scene_arguments(parser: argparse.ArgumentParser, *, point_light: str | None = None,
+def add_scene_arguments(parser: argparse.ArgumentParser, *, lights: dict[str, str] | None = None,
                         exposure_of: str = "XYZ", size: str = "image size in pixels (typical: 256,256 to 1024,1024)"
                         ) -> None:
-    """``--light``, ``--camera``, ``--exposure``, ``--size`` (and ``--point-light`` where ``point_light`` gives its
-    help): one declaration for ``render``, ``view`` and ``mitsuba-render``, so that they mean the same and have
-    the same defaults everywhere (:func:`scene_fields` parses them)."""
+    """``--light``, ``--camera``, ``--exposure``, ``--size`` (and the flag of each other light kind that ``lights``
+    names, with its help: ``{"point": …}`` adds ``--point-light``; gratnet.lights): one declaration for ``render``,
+    ``view`` and ``mitsuba-render``, so that they mean the same and have the same defaults everywhere
+    (:func:`scene_fields` parses them)."""
     shown = "chosen from the material and mesh so that the diffraction shows"
     same = "the same in render, view and mitsuba-render"
     parser.add_argument("--light", dest="light_text", default=None, metavar="θ,φ",
                         help=f"directional light in world space: polar angle from +z and azimuth from +x, degrees "
                         f"(default: {shown}; {same})")
-    if point_light is not None:
-        parser.add_argument("--point-light", dest="point_light_text", default=None, metavar="X,Y,Z", help=point_light)
+    for name, help_text in (lights or {}).items():
+        flag = light_kind(name).flag
+        if flag is None:
+            raise GratNetError(f"the {name} light is --light's: it has no flag of its own")
+        parser.add_argument(flag.flag, dest=flag.dest, default=None, metavar=flag.metavar, help=help_text)
     parser.add_argument("--camera", dest="camera_text", default=None, metavar="DIST,AZIMUTH,ELEVATION",
                         help="orbit camera around the origin: metres, degrees, degrees (default: chosen with the "
                         "light: the distance that frames the mesh, azimuth -90)")
@@ -197,18 +203,19 @@ def add_scene_arguments(parser: argparse.ArgumentParser, *, point_light: str | N
 
 
 def scene_fields(arguments: argparse.Namespace) -> dict[str, Any]:
-    """``--light``, ``--point-light``, ``--camera`` and ``--size`` parsed into the config fields that ``render``,
-    ``mitsuba-render`` (and ``view``) share: ``light_theta_degrees`` … ``height`` (one line if malformed)."""
+    """``--light``, the other light kinds' flags (``--point-light``), ``--camera`` and ``--size`` parsed into the
+    config fields that ``render``, ``mitsuba-render`` (and ``view``) share: ``light_theta_degrees`` … ``height``
+    (one line if malformed); a light kind's field is ``None`` when its flag was not given."""
     theta, phi = _numbers(arguments.light_text, 2, "--light", "θ,φ in degrees such as 45,90")
     distance, azimuth, elevation = _numbers(arguments.camera_text, 3, "--camera",
                                             "DIST,AZIMUTH,ELEVATION (metres, degrees, degrees) such as 0.25,-90,45")
-    point = None
-    if getattr(arguments, "point_light_text", None) is not None:
-        point = tuple(_numbers(arguments.point_light_text, 3, "--point-light", "X,Y,Z in metres such as 0,0.1,0.2"))
+    fields: dict[str, Any] = {"light_theta_degrees": theta, "light_phi_degrees": phi}
+    for flag in (kind.flag for kind in LIGHT_KINDS if kind.flag is not None):
+        text = getattr(arguments, flag.dest, None)
+        fields[flag.field] = None if text is None else tuple(_numbers(text, flag.count, flag.flag, flag.form))
     width, height = parse_size(arguments.size_text)
-    return {"light_theta_degrees": theta, "light_phi_degrees": phi, "point_light": point,
-            "camera_distance": distance, "camera_azimuth_degrees": azimuth, "camera_elevation_degrees": elevation,
-            "width": width, "height": height}
+    return {**fields, "camera_distance": distance, "camera_azimuth_degrees": azimuth,
+            "camera_elevation_degrees": elevation, "width": width, "height": height}
 
 
 def check_scene(config: Any) -> None:
@@ -220,7 +227,9 @@ def check_scene(config: Any) -> None:
     check_exposure(config.exposure)
     check_ior(config.ior)  # 0: no Fresnel; 1 is its limit (physics.md, "The A-term")
     camera = (config.camera_distance, config.camera_azimuth_degrees, config.camera_elevation_degrees)
-    check_scene_numbers((config.light_theta_degrees, config.light_phi_degrees), config.point_light, camera)
+    lights = {kind.name: getattr(config, kind.flag.field) for kind in LIGHT_KINDS
+              if kind.flag is not None and getattr(config, kind.flag.field, None) is not None}
+    check_scene_numbers((config.light_theta_degrees, config.light_phi_degrees), camera, lights)
     Camera(*camera, fov_deg=config.fov_degrees)  # checks the elevation and the field of view
 
 
@@ -254,8 +263,8 @@ def load_reference(path: str | Path, precision: str, material: str | None = None
 
     name = f"--reference {path}"
     header = read_volume_header(path)
-    if header.metadata.get("scheme") not in ("regular", "simple", "simple-max"):
-        raise GratNetError(f"{name}: the volume names no sampling scheme (regular, simple, simple-max)")
+    if header.metadata.get("scheme") not in SCHEME:
+        raise GratNetError(f"{name}: the volume names no sampling scheme ({', '.join(SCHEME.names)})")
     check_uniform_slices(header.metadata, header.slices, name)
     check_reference_limits(header.slices, header.resolution, precision, name=name)
     if material is not None:
@@ -310,15 +319,16 @@ def fill_scene_defaults(arguments: argparse.Namespace) -> SceneDefaults | None:
     (``arguments.light_text``, ``camera_text``, ``exposure`` left ``None``) from :func:`resolve_defaults`.
 
     Flags the user gave are kept as given (and checked later by the command's own validation). Nothing is
-    computed when all three are given, or when ``--point-light`` replaces the light and the camera and
-    exposure are given.
+    computed when all three are given, or when another light kind's flag (``--point-light``) replaces the light
+    and the camera and exposure are given. The default exposure is scaled as that light asks
+    (``LightFlag.exposure_scale``: a point light's |position|²).
 
     Returns:
         the defaults used, or ``None`` when none were needed.
     """
-    point_light = getattr(arguments, "point_light_text", None) is not None
-    if arguments.light_text is None and point_light:
-        arguments.light_text = FALLBACK.light_text  # unused: --point-light replaces the directional light
+    other_light = _other_light(arguments)
+    if arguments.light_text is None and other_light is not None:
+        arguments.light_text = FALLBACK.light_text  # unused: the other kind replaces the directional light
     if arguments.light_text is not None and arguments.camera_text is not None and arguments.exposure is not None:
         return None
     fresnel = getattr(arguments, "fresnel", True)
@@ -335,25 +345,31 @@ def fill_scene_defaults(arguments: argparse.Namespace) -> SceneDefaults | None:
     if arguments.camera_text is None:
         arguments.camera_text = defaults.camera_text
     if arguments.exposure is None:
-        arguments.exposure = defaults.exposure * (_point_light_distance_squared(arguments) or 1.0)
+        arguments.exposure = defaults.exposure * (_exposure_scale(other_light) or 1.0)
     return defaults
 
 
-def _point_light_distance_squared(arguments: argparse.Namespace) -> float | None:
-    """|position|² (m²) of a ``--point-light X,Y,Z`` whose irradiance at the origin is 1/|position|² of a
-    directional light's: the default exposure is scaled by it. ``None`` without one, or when it does not
-    parse (the command's own check reports that)."""
-    text = getattr(arguments, "point_light_text", None)
-    if text is None:
+def _other_light(arguments: argparse.Namespace) -> tuple[LightFlag, str] | None:
+    """``(flag, text)`` of the first other light kind's flag given (gratnet.lights), or ``None``."""
+    for flag in (kind.flag for kind in LIGHT_KINDS if kind.flag is not None):
+        text = getattr(arguments, flag.dest, None)
+        if text is not None:
+            return flag, str(text)
+    return None
+
+
+def _exposure_scale(other_light: tuple[LightFlag, str] | None) -> float | None:
+    """The factor on the default exposure that another light kind's flag asks for (a ``--point-light X,Y,Z``'s
+    |position|²: its irradiance at the origin is 1/|position|² of a directional light's); ``None`` without one,
+    or when its text does not parse (the command's own check reports that)."""
+    if other_light is None:
         return None
+    flag, text = other_light
     try:
-        position = [float(part) for part in str(text).split(",")]
+        values = [float(part) for part in text.split(",")]
     except ValueError:
         return None
-    squared = sum(x * x for x in position)
-    if len(position) != 3 or not (math.isfinite(squared) and squared > 0):
-        return None
-    return float(f"{squared:.3g}")  # as the defaults are rounded (viewer.defaults)
+    return flag.exposure_scale(values) if len(values) == flag.count else None
 
 
 def warn_if_black(xyz: object, exposure: float) -> None:

@@ -20,6 +20,7 @@ import moderngl
 import numpy as np
 
 from gratnet.brdf import direction
+from gratnet.codes import BINDINGS, COUNTER, COUNTER_SLOTS
 from gratnet.display import xyz_to_display_srgb8
 from gratnet.errors import GratNetError
 from viewer.glsl import GeneratedSource, compile_program
@@ -28,10 +29,10 @@ from viewer.pacing import Blocks, Pacer, Progress, disc_block_costs, read_rows
 __all__ = ["SKIP_COUNTER_BINDING", "STATISTICS_KEYS", "ShadingPrograms", "ior_uniform", "set_uniform",
            "skip_threshold_value"]
 
-STATISTICS_KEYS = ("fragments", "evaluations", "skipped_a_zero", "skipped_bound", "background")
-#: SSBO binding of the work counters (shaders/counters.glsl).
-SKIP_COUNTER_BINDING = 5
-_COUNTER_SLOTS = 8
+#: The work counters' names (gratnet.codes.COUNTER, in slot order), the keys of a render's ``statistics``.
+STATISTICS_KEYS = COUNTER.names
+#: SSBO binding of the work counters (shaders/counters.glsl; gratnet.codes.BINDINGS).
+SKIP_COUNTER_BINDING = BINDINGS["SKIP_COUNTER_BINDING"]
 _COUNTING_SUFFIX = "#count"  # program-cache key of a program compiled with COUNT_EVALUATIONS
 _DEPTH_ONLY_SUFFIX = "#depth"  # ... and of one compiled with DEPTH_ONLY (the depth pre-pass)
 _FIRST_SLICE_PIXELS = 2048  # a BRDF slice's first band: ~2k pixels in the disc
@@ -134,8 +135,7 @@ class ShadingPrograms:
         key = name + _COUNTING_SUFFIX
         if key not in self.compiled:
             self.program(name)  # compile errors surface from the plain program first
-            self._compile(key, name, {**self.defines, "COUNT_EVALUATIONS": 1,
-                                      "SKIP_COUNTER_BINDING": SKIP_COUNTER_BINDING})
+            self._compile(key, name, {**self.defines, "COUNT_EVALUATIONS": 1})
         return key, self.compiled[key]
 
     def depth_only_program(self, name: str) -> moderngl.Program:
@@ -181,8 +181,8 @@ class ShadingPrograms:
     def reset_counters(self) -> None:
         """Zero the work counters and bind them for the next counting draw."""
         if self._counters is None:
-            self._counters = self.ctx.buffer(reserve=4 * _COUNTER_SLOTS)
-        self._counters.write(np.zeros(_COUNTER_SLOTS, dtype=np.uint32).tobytes())
+            self._counters = self.ctx.buffer(reserve=4 * COUNTER_SLOTS)
+        self._counters.write(np.zeros(COUNTER_SLOTS, dtype=np.uint32).tobytes())
         self._counters.bind_to_storage_buffer(SKIP_COUNTER_BINDING)
 
     def read_counters(self, statistics: dict[str, int]) -> None:

@@ -18,6 +18,7 @@ import moderngl
 import numpy as np
 
 from gratnet.errors import GratNetError
+from gratnet.lights import light_kind
 from viewer.camera import Camera, Light
 from viewer.meshes import Mesh
 from viewer.renderer import ior_uniform, set_uniform
@@ -28,7 +29,6 @@ __all__ = ["MAX_IMAGE_SIZE", "MeshBuffers", "check_size", "set_surface_uniforms"
 MAX_IMAGE_SIZE = 16384
 #: The surface program's vertex attributes and the Mesh fields that feed them (float32 xyz each).
 ATTRIBUTES = (("in_position", "positions"), ("in_normal", "normals"), ("in_tangent", "tangents"))
-_LIGHT_KINDS = {"directional": 0, "point": 1}  # LIGHT_* of shaders/surface.glsl
 
 
 def check_size(size: object) -> tuple[int, int]:
@@ -116,8 +116,7 @@ def set_surface_uniforms(program: moderngl.Program, camera: Camera, light: Light
         raise GratNetError(f"exposure must be a finite number ≥ 0, got {exposure!r}")
     set_uniform(program, "u_view_projection", np.ascontiguousarray(camera.view_projection(width / height)))
     set_uniform(program, "u_eye", tuple(float(c) for c in camera.eye()))
-    set_uniform(program, "u_light_kind", _LIGHT_KINDS[light.kind])
-    set_uniform(program, "u_light", tuple(float(c) for c in light.vector))
-    set_uniform(program, "u_light_intensity", float(light.intensity))
+    for name, value in light_kind(light.kind).uniforms(light.vector, light.intensity).items():  # shaders/lights.glsl
+        set_uniform(program, name, value)
     set_uniform(program, "u_exposure", float(exposure))
     set_uniform(program, "u_ior", ior_uniform(ior))
