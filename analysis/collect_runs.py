@@ -89,7 +89,7 @@ def train_command(config: TrainConfig, volume: str | None) -> str:
 
 def _grid_bytes(config: TrainConfig) -> int:
     """Bytes of the run's grids as the model file stores them (``--grid-dtype``)."""
-    return sum(t * rv * ru * c for t, rv, ru, c in config.grid_shapes()) * np.dtype(config.grid_dtype).itemsize
+    return sum(t * rv * ru * c for t, rv, ru, c in config.grid_shapes()) * np.dtype(config.grid.dtype).itemsize
 
 
 def collect_run(run: Path, label: str) -> dict[str, Any]:

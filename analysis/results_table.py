@@ -193,7 +193,7 @@ def _trained_volume(folder: Path) -> dict:
         return json.loads(str(archive["metadata_json"]))["metadata"].get("volume", {})
 
 
-def paper_oracle(folder: Path, normal: dict, slices: int) -> float | None:
+def paper_oracle(folder: Path, normal: dict, slices: int | None) -> float | None:
     """The oracle's FLIP at (0°, 0°) for the volume the model was trained on: from its own evaluation, or (a
     volume scored on the GPU machine, as pits' 41 and scratches' 21 slices) from the committed oracle table of
     the same slice count."""
@@ -232,9 +232,11 @@ def paper_datasets_table(assets: Path) -> list[str]:
         shapes = history.get("grid_shapes") or []
         trained_on = _trained_volume(folder)
         config = json.loads((folder / "model.config.json").read_text())["train"]
-        network = (f"grid {len(shapes)}×{shapes[-1][3]}@{shapes[-1][1]}², t {shapes[-1][0]}, "
-                   f"{config.get('grid', {}).get('interpolation', config.get('grid_interpolation', 'linear'))}; MLP {'-'.join(map(str, history['layer_sizes']))}"
-                   if shapes else "-".join(map(str, history["layer_sizes"])))
+        network = "-".join(map(str, history["layer_sizes"]))
+        if shapes:
+            interpolation = config.get("grid", {}).get("interpolation", config.get("grid_interpolation", "linear"))
+            network = (f"grid {len(shapes)}×{shapes[-1][3]}@{shapes[-1][1]}², t {shapes[-1][0]}, "
+                       f"{interpolation}; MLP {network}")
         column, paper = PAPER_COLUMNS.get(folder.name, ("—", None))
         shipped.add(folder.name)
         flip = normal.get("flip")
@@ -438,7 +440,7 @@ def _meshes_section(folder: Path = COMPARE_DATA) -> list[str]:
     for path in files:
         data = json.loads(path.read_text(encoding="utf-8"))
         views = data["views"]
-        per_mesh = {}
+        per_mesh: dict[str, list[float]] = {}
         for row in views:
             per_mesh.setdefault(row["mesh"], []).append(row["flip_covered"])
         cells = [" / ".join(f"{value:.4f}" for value in per_mesh.get(mesh, [])) or "—"
