@@ -21,6 +21,7 @@ import argparse
 import json
 import sys
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -109,7 +110,7 @@ def main() -> None:
         config = SliceConfig(theta, phi, size=args.size, exposure=exposure, ior=1.5)
         reference = ground_truth_brdf_slice(field, optics, config, args.cache_dir)
         distance, inside = slice_distance(config, scheme, slices)
-        row = {"view": [theta, phi, exposure], "t_nodes": slices,
+        row: dict[str, Any] = {"view": [theta, phi, exposure], "t_nodes": slices,
                "network": binned(reference, network_brdf_slice(model, config), distance, inside, edges)}
         if oracle is not None:
             row["oracle"] = binned(reference, oracle.brdf_slice(config), distance, inside, edges)

@@ -24,8 +24,12 @@ from __future__ import annotations
 import argparse
 import sys
 from pathlib import Path
+from typing import TYPE_CHECKING, cast
 
 from gratnet.errors import GratNetError
+
+if TYPE_CHECKING:
+    from trainer.model import FunnelMLP, GridNetwork
 
 
 def main() -> None:
@@ -61,7 +65,7 @@ def main() -> None:
         for state in states:
             model.load_state_dict(state["model"])
             average.update_parameters(model)  # the running uniform mean (the first call copies)
-        model = average.module
+        model = cast("FunnelMLP | GridNetwork", average.module)  # AveragedModel's deep copy of ``model``
     except (GratNetError, OSError, RuntimeError, KeyError, TypeError) as error:
         sys.exit(f"checkpoint_model: cannot rebuild the network of {args.checkpoints[-1]} on {args.volume}: {error}")
     history = dict(states[-1].get("history", {}))

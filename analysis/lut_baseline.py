@@ -78,13 +78,14 @@ def measure(material: str, volume_path: Path, strides: list[int], size: tuple[in
         raise SystemExit(f"lut_baseline: {model_path.parent / 'metrics.json'} lacks some of the paper's five slices")
     volume = read_volume(volume_path)
     ctx = create_headless_context()
-    rows = []
+    rows: list[dict[str, Any]] = []
     try:
         with SceneRenderer(ctx, load_model(model_path)) as scene:
+            assert scene.network is not None  # a model file's scene shades with its network
             rows.append({"what": "network", "material": material, "mb": model_path.stat().st_size / 1e6,
                          "ms_per_frame": frame_ms(scene, size, material, repeats),
                          "flip_slices": network_flip, "renderer": ctx.info.get("GL_RENDERER"),
-                         "weights_path": scene.shading.weights_path, "render_path": scene.render_path})
+                         "weights_path": scene.network.weights_path, "render_path": scene.render_path})
         for stride in strides:
             table = decimated(volume, stride) if stride > 1 else volume
             oracle, _ = oracle_rows(volume_path, slice_size, cache_dir, True, uv_stride=stride)
@@ -117,7 +118,8 @@ def figure(rows: list[dict[str, Any]], path: Path) -> None:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    axes = plt.figure(figsize=(8.0, 4.2), layout="constrained").gca()
+    drawing = plt.figure(figsize=(8.0, 4.2), layout="constrained")
+    axes = drawing.gca()
     materials = list(dict.fromkeys(row["material"] for row in rows))
     markers = {}  # the network a circle; each material's tables, largest first: square, triangles, diamond
     for material in materials:
@@ -135,8 +137,8 @@ def figure(rows: list[dict[str, Any]], path: Path) -> None:
     axes.set_xscale("log")
     axes.legend(fontsize=7, loc="center left", bbox_to_anchor=(1.01, 0.5), frameon=False)
     with atomic_path(path) as temporary:
-        axes.figure.savefig(temporary, format="png", dpi=110)
-    plt.close(axes.figure)
+        drawing.savefig(temporary, format="png", dpi=110)
+    plt.close(drawing)
 
 
 def main(argv: list[str] | None = None) -> int:

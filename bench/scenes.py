@@ -120,6 +120,8 @@ def scene_frame_times(ctx: Any, model: Any, model_path: str, view: SceneView, we
     buffers = None
     rows: list[dict[str, Any]] = []
     try:
+        network = renderer.network
+        assert network is not None  # a model file's scene shades with its network
         buffers = renderer.upload(build_mesh(view.mesh))
 
         def frame(size: tuple[int, int], count: int) -> np.ndarray:
@@ -133,18 +135,20 @@ def scene_frame_times(ctx: Any, model: Any, model_path: str, view: SceneView, we
                 coverage = _warm_up(lambda size=size, count=count: frame(size, count), ctx)[..., 3]
                 walls, gpus = _timed(lambda size=size, count=count: frame(size, count), ctx, repeats, max_seconds)
                 seconds = statistics.median(walls)
-                gpu_seconds = statistics.median(gpus) if None not in gpus else None  # type: ignore[type-var]
+                timed_gpus = [gpu for gpu in gpus if gpu is not None]
+                gpu_seconds = statistics.median(timed_gpus) if len(timed_gpus) == len(gpus) else None
                 evaluations = float(np.sum(coverage)) * count  # samples that hit the mesh, each one evaluation
                 path = str(getattr(renderer, "render_path", render_path))
                 tmacs = model.macs_per_evaluation * evaluations / (gpu_seconds or seconds) / 1e12
-                plan = renderer.deferred.tile_plan if path == "deferred" else None  # the tiled kernel's
+                deferred = renderer.deferred if path == "deferred" else None
+                plan = deferred.tile_plan if deferred is not None else None  # the tiled kernel's
                 rows.append({
                     "kind": "scene", "mesh": view.mesh, "width": size[0], "height": size[1], "spp": count,
-                    "requested_weights_path": weights_path, "weights_path": renderer.network.weights_path,
+                    "requested_weights_path": weights_path, "weights_path": network.weights_path,
                     "requested_render_path": render_path, "render_path": path,
                     "requested_deferred_weights": deferred_weights,
-                    "deferred_weights": renderer.deferred.weights if path == "deferred" else None,
-                    "tile_plan": None if plan is None else plan.describe(renderer.network.layout),
+                    "deferred_weights": deferred.weights if deferred is not None else None,
+                    "tile_plan": None if plan is None else plan.describe(network.layout),
                     "tile_pixels": None if plan is None else plan.pixels,
                     "tile_group": None if plan is None else plan.group,
                     "tile_shared_bytes": None if plan is None else plan.shared_bytes,

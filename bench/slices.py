@@ -37,6 +37,7 @@ import numpy as np
 from bench.tables import format_cell
 from gratnet.atomic import write_text_atomic
 from gratnet.brdf import STANDARD_SLICES
+from gratnet.codes import RENDER_PATHS
 from gratnet.config import config_field
 from gratnet.errors import GratNetError
 from gratnet.figures import save_figure
@@ -100,7 +101,7 @@ class BenchConfig:
         paths = [part.strip() for part in self.render_paths.split(",") if part.strip()]
         if paths == ["all"]:
             return list(available_render_paths())
-        if not paths or any(path not in ("forward", "deferred", "auto") for path in paths):
+        if not paths or any(path not in RENDER_PATHS for path in paths):
             raise GratNetError(f"--render-paths takes forward, deferred, auto or all; got {self.render_paths!r}")
         check_render_paths(paths)
         return paths
@@ -236,7 +237,8 @@ def torch_throughput(model: ModelFile, keys: np.ndarray, device: str, repeats: i
                 network.predict(inputs[start:start + batch])
             synchronize()
 
-        end_to_end(), mlp_only()  # warm-up: allocations, kernels
+        end_to_end()  # warm-up: allocations, kernels
+        mlp_only()
         times = _timed(end_to_end, repeats, max_seconds)
         mlp_times = _timed(mlp_only, repeats, max_seconds)
     return {"device": device, "threads": torch.get_num_threads() if device == "cpu" else None,

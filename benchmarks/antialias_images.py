@@ -57,7 +57,8 @@ def main() -> None:
     arguments = parser.parse_args()
     counts = [int(part) for part in arguments.spp.split(",")]
     shown = [int(part) for part in arguments.shown.split(",")]
-    crop = tuple(int(part) for part in arguments.crop.split(","))
+    crop_row, crop_column, crop_side = (int(part) for part in arguments.crop.split(","))
+    crop = (crop_row, crop_column, crop_side)
     size = (arguments.size, arguments.size)
 
     path = resolve_material(arguments.material)

@@ -30,10 +30,11 @@ from viewer.camera import Light
 from viewer.catalog import build_mesh, resolve_material
 from viewer.context import create_headless_context
 from viewer.scene import SceneRenderer
+from viewer.surface import MeshBuffers
 
 
 def _sizes(text: str) -> list[tuple[int, int]]:
-    return [tuple(int(v) for v in item.split("x")) for item in text.split(",")]  # type: ignore[misc]
+    return [(int(width), int(height)) for width, height in (item.split("x") for item in text.split(","))]
 
 
 def _random_net(like: ModelFile, hidden: list[int]) -> ModelFile:
@@ -72,7 +73,7 @@ def main() -> int:
     light = Light.directional(*(float(v) for v in arguments.light.split(","))) if arguments.light else view.light
     ctx = create_headless_context()
     renderer_name = ctx.info.get("GL_RENDERER", "?")
-    scenes: dict[str, tuple[SceneRenderer, object]] = {}
+    scenes: dict[str, tuple[SceneRenderer, MeshBuffers]] = {}
     for variant in arguments.variants.split(","):
         path, weights = variant.split(":")
         scene = SceneRenderer(ctx, model, weights_path="baked" if weights == "baked" else "texture", render_path=path,
@@ -84,7 +85,7 @@ def main() -> int:
                        size: tuple[int, int] = size) -> float:
                 scene, uploaded = scenes[variant]
                 start = time.perf_counter()
-                scene.render_rgba(uploaded, view.camera, light, size, view.exposure, view.ior,  # type: ignore[arg-type]
+                scene.render_rgba(uploaded, view.camera, light, size, view.exposure, view.ior,
                                   statistics=counts_out, samples=samples)
                 ctx.finish()
                 return time.perf_counter() - start
@@ -109,7 +110,7 @@ def main() -> int:
                     "load_average_1min": round(os.getloadavg()[0], 2),
                 }), flush=True)
     for scene, uploaded in scenes.values():
-        uploaded.release()  # type: ignore[attr-defined]
+        uploaded.release()
         scene.release()
     ctx.release()
     return 0

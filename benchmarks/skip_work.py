@@ -28,6 +28,7 @@ import json
 import statistics as stats
 import sys
 import time
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
@@ -42,10 +43,9 @@ DISC_CAMERA = (0.16, 0.0, 55.0)
 DISC_EXPOSURE = 250.0
 
 
-def _timed(function: Any, repeats: int) -> tuple[np.ndarray, float]:
-    function()  # warm-up: compile, upload
+def _timed(function: Callable[[], np.ndarray], repeats: int) -> tuple[np.ndarray, float]:
+    result = function()  # warm-up: compile, upload
     times = []
-    result = None
     for _ in range(repeats):
         start = time.perf_counter()
         result = function()
@@ -89,6 +89,7 @@ def run_model(ctx: Any, path: str, slice_size: int, disc_size: tuple[int, int], 
     rows = []
     with SceneRenderer(ctx, model, weights_path=weights_path) as scene:
         network = scene.network
+        assert network is not None  # a model file's scene shades with its network
         network.set_output_bounds(bounds)
         chosen = network.weights_path
         # The CD disc of scripts/main.sh.

@@ -92,7 +92,7 @@ def split_agreement(generator: str, resolution: int, slices: int, parts: int, wo
     try:
         started = time.perf_counter()
         whole = ray.get(ray.remote(compute_volume).options(num_cpus=1).remote(field, config, optics,
-                                                                               progress=False))
+                                                                               progress=False))  # type: ignore[call-arg]  # ray types .remote() with positional arguments only
         whole_seconds = time.perf_counter() - started
         started = time.perf_counter()
         surface = prepare_surface(field, optics)

@@ -20,6 +20,7 @@ import argparse
 import json
 import resource
 import time
+from typing import Any
 
 import torch
 
@@ -31,7 +32,7 @@ from trainer.train import build_model, make_optimizer, make_scheduler, train_ste
 from trainer.train_config import TrainConfig
 
 #: (label, TrainConfig overrides): the paper's and today's MLPs and the feature-grid candidates.
-NETWORKS: tuple[tuple[str, dict[str, object]], ...] = (
+NETWORKS: tuple[tuple[str, dict[str, Any]], ...] = (
     ("mlp small", {"preset": "small"}),
     ("mlp funnel-176", {"preset": "funnel-176"}),
     ("mlp paper", {"preset": "paper"}),
@@ -96,7 +97,7 @@ def main() -> None:
             continue
         if arguments.hidden:
             overrides = {**overrides, "hidden": arguments.hidden}
-        config = TrainConfig(batch_size=arguments.batch_size, **overrides)  # type: ignore[arg-type]
+        config = TrainConfig(batch_size=arguments.batch_size, **overrides)
         encoding = EncodingSpec.for_grid(1001, arguments.slices, config.frequencies, config.t_frequencies)
         torch.manual_seed(0)
         model = build_model(config, encoding).to(device)

@@ -22,7 +22,7 @@ bound, not a proof:
    safety margin of ``margin_bits`` (a factor 2^margin_bits) are applied.
 
 Its validity is *measured*: :func:`validate_output_bounds` evaluates the network (float64) at many
-random off-grid points and counts how often it exceeds the bound (tests/test_skip_work.py asserts zero
+random off-grid points and counts how often it exceeds the bound (tests/runtime/test_skip_work.py asserts zero
 on a shipped model; ``benchmarks/skip_work.py`` reports the counts). A network with features sharper
 than its sampling grid can exceed it between samples. Sampled at the training grid itself (where the
 encoding's top frequency sits at the Nyquist rate), the shipped blazed and sinusoidal models beat a

@@ -10,7 +10,7 @@ sets those uniforms, binds those buffers and reads those counters. Both sides re
 
 A :class:`Codes` table numbers its names 0, 1, … in order; a name's define is the table's prefix and the name in
 capitals, ``-`` as ``_`` (``simple-max`` → ``SCHEME_SIMPLE_MAX``). The light kinds' codes come from the light
-registry, :mod:`gratnet.lights`. tests/test_shared_codes.py checks that the shaders use the generated names and
+registry, :mod:`gratnet.lights`. tests/contract/test_shared_codes.py checks that the shaders use the generated names and
 type no code of their own, and that no Python module outside these two types a table again.
 
 Weight forms (``--deferred-weights``, ``--weights-path``): :class:`WeightForm`, parsed once from the flag's
@@ -87,6 +87,13 @@ class Codes:
 
     def __contains__(self, name: object) -> bool:
         return name in self.names
+
+    @property
+    def uniform_name(self) -> str:
+        """:attr:`uniform`, of a table that has one (a GratNetError for the counters')."""
+        if self.uniform is None:
+            raise GratNetError(f"code table {self.prefix} has no uniform")
+        return self.uniform
 
     def code(self, name: str) -> int:
         """The code of ``name`` (a one-line GratNetError for another name)."""

@@ -29,14 +29,18 @@ import os
 import typing
 from collections.abc import Mapping
 from pathlib import Path
-from typing import TYPE_CHECKING, Any, Literal, NamedTuple, TypeVar, get_args, get_origin
+from typing import Any, ClassVar, Literal, NamedTuple, Protocol, TypeVar, get_args, get_origin
 
 from gratnet.atomic import write_text_atomic
 
-if TYPE_CHECKING:
-    from _typeshed import DataclassInstance
 
-ConfigT = TypeVar("ConfigT", bound="DataclassInstance")
+class _Dataclass(Protocol):
+    """A dataclass (the config classes): what ``dataclasses.fields`` takes."""
+
+    __dataclass_fields__: ClassVar[dict[str, dataclasses.Field[Any]]]
+
+
+ConfigT = TypeVar("ConfigT", bound=_Dataclass)
 
 #: Largest finite float32 and smallest positive normal float32.
 FLOAT32_MAX = 3.4028234663852886e38

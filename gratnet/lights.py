@@ -20,7 +20,7 @@ the viewer's sliders hold its angles).
 Adding a kind: a :class:`LightKind` at the end of :data:`LIGHT_KINDS` (its functions beside it) and its branch
 ``u_light_kind == LIGHT_<NAME>`` in shaders/lights.glsl (with any uniform of its own, set by its
 :attr:`LightKind.uniforms`). A kind chosen by a flag also names the ``SceneConfig`` field that saves the flag's
-values (:attr:`LightFlag.field`; tests/test_shared_codes.py checks that the field exists).
+values (:attr:`LightFlag.field`; tests/contract/test_shared_codes.py checks that the field exists).
 
 Standard library at import (numpy when a function runs): the flag declarations import this module.
 """
@@ -114,7 +114,8 @@ def _unit(vector: Vector) -> Vector:
         raise GratNetError("a directional light needs a non-zero direction")
     values = values / largest  # first: |v| of (1e308, 1e308, 0) overflows, of denormals loses digits
     values = values / float(np.linalg.norm(values))
-    return tuple(float(c) for c in values)  # type: ignore[return-value]
+    x, y, z = (float(c) for c in values)
+    return x, y, z
 
 
 def _directional_incidence(vector: Vector, intensity: float, point: Any) -> tuple[Any, float]:

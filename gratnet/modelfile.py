@@ -46,6 +46,7 @@ from typing import Any
 
 import array_api_compat
 import numpy as np
+import numpy.typing as npt
 
 from gratnet.atomic import atomic_path
 from gratnet.codes import SCHEME
@@ -374,7 +375,7 @@ def _check_grids(grids: object, where: str, *, from_file: bool) -> list[np.ndarr
     """Check the feature grids (module docstring); return them C-contiguous, dtype kept."""
     if not isinstance(grids, (list, tuple)):
         raise GratNetError(f"{where}: grids must be a list of arrays, got {type(grids).__name__}")
-    checked = []
+    checked: list[np.ndarray] = []
     for level, values in enumerate(grids):
         array = np.asarray(values)
         label = f"grid_{level}"
@@ -457,7 +458,7 @@ def network_inputs(model: ModelFile, coordinates: Any, grids: Sequence[Any] | No
     return xp.concat([grid_features(grids, coordinates, model.grid_interpolation), encoded], axis=-1)
 
 
-def evaluate_keys(model: ModelFile, u: np.ndarray, v: np.ndarray, w: np.ndarray) -> np.ndarray:
+def evaluate_keys(model: ModelFile, u: npt.ArrayLike, v: npt.ArrayLike, w: npt.ArrayLike) -> np.ndarray:
     """CIE XYZ predicted for key vectors ``(u, v, w)``: the whole runtime pipeline, in ``float64``.
 
     ``network_coordinates(u, v, w, scheme)`` → :func:`network_inputs` (``encode``, after the grid
@@ -473,7 +474,7 @@ def evaluate_keys(model: ModelFile, u: np.ndarray, v: np.ndarray, w: np.ndarray)
     """
     valid = validated(model)
     u, v, w = np.broadcast_arrays(*(np.asarray(c, dtype=np.float64) for c in (u, v, w)))
-    coordinates = network_coordinates(u, v, w, valid.scheme)  # type: ignore[arg-type]
+    coordinates = network_coordinates(u, v, w, valid.scheme)
     return range_inverse(_forward(valid, network_inputs(valid, coordinates)), valid.range)
 
 
@@ -483,7 +484,7 @@ def evaluate_keys(model: ModelFile, u: np.ndarray, v: np.ndarray, w: np.ndarray)
 
 
 def _header(model: ModelFile, layout: list[dict[str, int]]) -> dict[str, Any]:
-    header = {
+    header: dict[str, Any] = {
         "format": FORMAT_NAME,
         "format_version": GRID_FORMAT_VERSION if model.grids else FORMAT_VERSION,
         "layer_sizes": list(model.layer_sizes),
@@ -529,8 +530,9 @@ def save_model(path: str | os.PathLike[str], model: ModelFile) -> None:
         try:
             with temporary.open("wb") as handle:
                 # Deflated: float16 grids shrink 7–10 %, MLP weights 24 %; the tracked models must fit the
-                # working tree a lent GPU machine receives (64 MiB), and np.load reads either kind.
-                np.savez_compressed(handle, **arrays)  # type: ignore[arg-type]
+                # working tree a lent GPU machine receives (64 MiB), and np.load reads either kind. mypy
+                # checks **arrays against the stub's `allow_pickle: bool`, a keyword older supported numpy lacks.
+                np.savez_compressed(handle, **arrays)  # type: ignore[arg-type]  # **arrays vs allow_pickle
         except OSError as error:
             raise GratNetError(f"cannot write model {target}: {error.strerror or error}") from error
 

@@ -363,7 +363,8 @@ def bsdf_class(variant: str) -> type:
             valid &= density > 0.0
             value = self._value(ctx, si, wi_np, directions, valid)
             weight = np.where(valid[:, None], value / np.where(valid, density, 1.0)[:, None], 0.0)
-            sample = dr.zeros(mi.BSDFSample3f) if scalar else dr.zeros(mi.BSDFSample3f, count)
+            # The variant's BSDFSample3f: the stubs type its fields as one generic variant's (eta: Float, …).
+            sample: Any = dr.zeros(mi.BSDFSample3f) if scalar else dr.zeros(mi.BSDFSample3f, count)
             sample.wo = to_vector(directions)
             sample.pdf = to_float(np.where(valid, density, 0.0))
             sample.eta = 1.0

@@ -7,7 +7,7 @@ The flags mean what they mean for ``gratnet render`` (same names: --material, --
 --quiet) and are checked by the same functions, so the two renderers show the same scene: --light, --camera
 and --exposure left out take ``gratnet render``'s defaults for the material and mesh (viewer.defaults), and a
 picture that is 99 % black on the display draws the same warning. With one light, no environment and
-``--integrator direct`` the two agree up to Monte Carlo noise (tests/test_mitsuba.py). Added: --spp,
+``--integrator direct`` the two agree up to Monte Carlo noise (tests/runtime/test_mitsuba.py). Added: --spp,
 --environment (a constant radiance or a lat-long EXR), --light-intensity, --integrator, --max-depth, --variant,
 --seed, the sampling mixture.
 

@@ -124,7 +124,7 @@ def emitters(light: Light | None, environment: float | tuple[float, float, float
         result["environment"] = {"type": "envmap", "filename": str(environment), "scale": float(environment_scale),
                                  "to_world": mi.ScalarTransform4f().rotate([1.0, 0.0, 0.0], 90.0)}
     elif environment is not None:
-        values = [float(environment)] * 3 if np.isscalar(environment) else [float(v) for v in environment]
+        values = [float(v) for v in environment] if isinstance(environment, tuple) else [float(environment)] * 3
         result["environment"] = {"type": "constant", "radiance": {
             "type": "rgb", "value": [v * float(environment_scale) for v in values]}}
     return result

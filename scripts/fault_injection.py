@@ -25,7 +25,7 @@ With ``--signal INT`` the signal is SIGINT (Ctrl-C) instead, and each stopped co
 status 130, the seconds from the signal to its exit (the issue: 1 s) and one line on stderr after the signal.
 
 The commands run in a fresh process with one thread (OMP_NUM_THREADS=1), so that the CPU results are
-deterministic. tests/test_faults_kill.py runs 2–3 kills per command; this script's larger run is recorded in
+deterministic. tests/tools/test_faults_kill.py runs 2–3 kills per command; this script's larger run is recorded in
 docs/robustness.md.
 """
 
@@ -283,7 +283,8 @@ def load(path: Path) -> tuple[str, Any]:
 
 def _markdown_without_timings(text: str) -> list[list[str]]:
     """The lines of a markdown text, table cells split, with the columns whose header names seconds left out."""
-    lines, dropped = [], set()
+    lines: list[list[str]] = []
+    dropped: set[int] = set()
     for line in text.splitlines():
         if line.startswith("|"):
             cells = [cell.strip() for cell in line.strip("|").split("|")]

@@ -19,7 +19,7 @@
 # failures' actual/expected/diff), renders/ (EXR + config per image, renders.json), log.txt.
 # Settings: OUT (default out), TESTS (the modules), WORKERS (pytest -n, default 4), MATERIALS (default: all),
 # SIZE (640,480), WEIGHTS (texture), SKIP_TESTS=1, SKIP_RENDERS=1. Anywhere else it runs on whatever EGL gives
-# (llvmpipe here: slow; MATERIALS=blazed SIZE=160,120 TESTS=tests/test_precision.py to try it).
+# (llvmpipe here: slow; MATERIALS=blazed SIZE=160,120 TESTS=tests/contract/test_precision.py to try it).
 set -euo pipefail
 cd "$(dirname "$0")/.."
 
@@ -88,7 +88,7 @@ export PYTHONUNBUFFERED=1
 
 status=0
 if [[ -z "${SKIP_TESTS:-}" ]]; then
-    TESTS=${TESTS:-"tests/test_precision.py tests/test_deferred.py tests/test_shader_parity.py tests/test_grid.py tests/test_antialias.py tests/test_golden.py tests/test_scene.py"}
+    TESTS=${TESTS:-"tests/contract/test_precision.py tests/runtime/test_deferred.py tests/runtime/test_shader_parity.py tests/contract/test_grid.py tests/runtime/test_grid_shaders.py tests/runtime/test_antialias.py tests/runtime/test_golden.py tests/runtime/test_scene.py"}
     workers=()
     if "$python" -c "import xdist" 2>/dev/null; then workers=(-n "${WORKERS:-4}"); fi
     rm -rf tests/_failures

@@ -22,10 +22,10 @@ from gratnet.modelfile import load_model, save_model
 from gratnet.showcase import DISPLAY_KEY, with_display
 
 
-def _arrays(path: Path) -> dict[str, bytes]:
+def _arrays(path: Path) -> dict[str, tuple[str, tuple[int, ...], bytes]]:
     """Every array of the archive except the JSON header, as raw bytes with dtype and shape."""
     with np.load(path, allow_pickle=False) as archive:
-        return {name: (str(archive[name].dtype), archive[name].shape, archive[name].tobytes())  # type: ignore[misc]
+        return {name: (str(archive[name].dtype), archive[name].shape, archive[name].tobytes())
                 for name in archive.files if name != "metadata_json"}
 
 

@@ -1,7 +1,7 @@
 #!/usr/bin/env bash
-# Set up (idempotent) and run the test suite inside the project's virtual environment: lint, then
-# the tests marked `timing` (the viewer's latency targets) alone, since a second worker's GL tests on the
-# same 2 cores would measure the machine, not the viewer; then the rest on 2 workers.
+# Set up (idempotent) and run the test suite inside the project's virtual environment: lint (ruff), type check
+# (mypy, configured in pyproject.toml), then the tests marked `timing` (the viewer's latency targets) alone, since a
+# second worker's GL tests on the same 2 cores would measure the machine, not the viewer; then the rest on 2 workers.
 # Extra arguments go to both pytest runs.
 set -euo pipefail
 cd "$(dirname "$0")/.."
@@ -9,6 +9,8 @@ bash scripts/setup.sh
 venv="${GRATNET_VENV:-.venv}"
 echo "test: ruff"
 "$venv/bin/python" -m ruff check .
+echo "test: mypy"
+"$venv/bin/python" -m mypy
 echo "test: pytest, timing tests alone"
 set +e
 "$venv/bin/python" -m pytest -n 0 -q -m timing "$@"

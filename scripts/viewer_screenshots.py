@@ -39,6 +39,7 @@ def main() -> None:
             window.frame(capture=True)
             elapsed = time.perf_counter() - started
             if elapsed >= times[len(captures)]:
+                assert window.last_capture is not None  # the frame above captured
                 captures.append(window.last_capture.copy())
                 print(f"{elapsed:.1f} s: {window.app.status or 'no status'}", flush=True)
     gap = np.full((captures[0].shape[0], 8, 3), 255, np.uint8)

@@ -25,7 +25,7 @@ uniform vec4 u_frequency[MAX_FREQUENCIES];
 // docs/physics.md, "Float32 error budget": a correct float32 driver may see the key off by a few ulps and
 // compute sin/cos with an absolute error of ~2^-21. EMULATE_DRIVER moves each key component by up to
 // EMULATE_KEY_ERROR and each phase by up to EMULATE_PHASE_ERROR half-turns, by a hash of the values
-// themselves (deterministic, uncorrelated between pixels and lanes): tests/test_precision.py checks that
+// themselves (deterministic, uncorrelated between pixels and lanes): tests/contract/test_precision.py checks that
 // gratnet.precision's bound covers the difference on the shipped models.
 #ifdef EMULATE_DRIVER
 float emulation_hash(float x) {  // in [-1, 1]: a PCG step on the float's bits

@@ -244,7 +244,7 @@ def _detach_node(ray: Any) -> Any:
     after another (1–3 s measured); killing the instance under a connected driver instead makes the driver print
     Ray's errors (task_manager.cc: "Failed to push error to driver", "(raylet) A worker died …"). Returns the
     node, or None (stopped inside ray.init, or a Ray other than the one measured, 2.60: its own shutdown then)."""
-    worker = getattr(getattr(ray, "_private", None), "worker", None)
+    worker: Any = getattr(getattr(ray, "_private", None), "worker", None)  # Ray's private module, or None
     node = getattr(worker, "_global_node", None)
     if node is not None:
         worker._global_node = None

@@ -371,17 +371,18 @@ def _dataset(entry: Any, index: int, shared: GroundTruth, base: Path) -> Dataset
         build_config(GENERATORS[generator][0], params, table.inner("params"))
         if "load" in entry:
             raise GratNetError(f"{table.key('load')}: load options apply to files only")
+        default_name = generator
     else:
-        _check_value(table.key("file"), file, str)
+        given: str = _check_value(table.key("file"), file, str)
         if params:
             raise GratNetError(f"{table.key('params')}: params apply to generators only (a file has no parameters)")
-        path = (base / file).resolve()
+        path = (base / given).resolve()
         if not path.is_file():
             raise GratNetError(f"{table.key('file')}: height-field file {path} does not exist")
         file = str(path)
+        default_name = path.stem
     load = build_config(LoadOptions, _table(entry, "load", table), table.inner("load"))
-    name = entry.get("name", generator if generator is not None else Path(file).stem)
-    _check_value(table.key("name"), name, str)
+    name: str = _check_value(table.key("name"), entry.get("name", default_name), str)
     if not _NAME.fullmatch(name):
         raise GratNetError(f"{table.key('name')} {name!r} must be letters, digits and . _ + - (it names folders)")
     own = _ground_truth(_table(entry, "groundtruth", table), table.inner("groundtruth"), shared)

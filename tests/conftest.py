@@ -1,17 +1,19 @@
-"""Shared fixtures: small spectral sets and small windows keep the physics tests fast."""
+"""Shared fixtures: small spectral sets and small windows keep the physics tests fast. Shared helpers that are
+not fixtures (paths, random models, reference geometry): tests/helpers.py."""
 
 from __future__ import annotations
 
+import ctypes
+import shutil
 import signal
+import subprocess
+import time
 from collections.abc import Callable, Iterator
 from pathlib import Path
 
 import pytest
 
 from trainer.spectral import SpectralWeights, spectral_weights
-
-REPO = Path(__file__).resolve().parents[1]
-SHARED_DATA = REPO.parent / "shared" / "data"
 
 
 @pytest.fixture(scope="session")
@@ -32,7 +34,7 @@ def pytest_configure(config: pytest.Config) -> None:
 def pytest_addoption(parser: pytest.Parser) -> None:
     parser.addoption(
         "--regenerate-golden", action="store_true", default=False,
-        help="rewrite the golden reference images (tests/golden/*.png) from the current renderer",
+        help="rewrite the golden reference images (tests/runtime/golden/*.png) from the current renderer",
     )
 
 
@@ -79,3 +81,78 @@ def stop_in_epoch_two() -> Callable[[object], dict]:
         return {}
 
     return hook
+
+
+# --------------------------------------------------------------------------------------------------
+# A virtual X server for the viewer's window tests (runtime/test_viewer.py, runtime/test_viewer_window.py)
+
+
+def _free_display_numbers() -> Iterator[int]:
+    for number in range(90, 400):
+        if not (Path(f"/tmp/.X{number}-lock").exists() or Path(f"/tmp/.X11-unix/X{number}").exists()):
+            yield number
+
+
+def _connect(libx11: ctypes.CDLL, display: str, process: subprocess.Popen, timeout: float) -> int | None:
+    """An X connection to ``display`` once the server accepts one (None if it exited or timed out)."""
+    deadline = time.monotonic() + timeout
+    while time.monotonic() < deadline and process.poll() is None:
+        connection = libx11.XOpenDisplay(display.encode())
+        if connection:
+            return connection
+        time.sleep(0.05)
+    return None
+
+
+@pytest.fixture(scope="module")
+def xvfb(tmp_path_factory) -> Iterator[str]:
+    """``:N`` of a virtual X server started for this module on a free display number, and always stopped.
+
+    Xvfb runs with ``-terminate`` (it exits when its last client disconnects) and this fixture holds one
+    connection open: should the test process die without running this teardown (Xlib exits the process
+    on some X errors), its connection closes and Xvfb still goes away.
+    """
+    executable = shutil.which("Xvfb")
+    if executable is None:
+        pytest.skip("Xvfb is not installed (apt-get install xvfb; scripts/setup.sh installs it)")
+    try:
+        libx11 = ctypes.CDLL("libX11.so.6")
+    except OSError as error:
+        pytest.skip(f"libX11 is not installed: {error}")
+    libx11.XOpenDisplay.restype = ctypes.c_void_p
+    libx11.XOpenDisplay.argtypes = [ctypes.c_char_p]
+    libx11.XCloseDisplay.argtypes = [ctypes.c_void_p]
+    log = tmp_path_factory.mktemp("xvfb") / "xvfb.log"
+    process = connection = None
+    for attempt, number in enumerate(_free_display_numbers()):
+        if attempt == 5:
+            break
+        with open(log, "wb") as output:
+            process = subprocess.Popen(
+                [executable, f":{number}", "-screen", "0", "1024x768x24", "-nolisten", "tcp", "-terminate"],
+                stdout=output, stderr=subprocess.STDOUT)
+        connection = _connect(libx11, f":{number}", process, timeout=10.0)
+        if connection:
+            break
+        process.kill()  # the number was taken meanwhile, or Xvfb failed: try the next one
+        process.wait()
+        process = None
+    if process is None:
+        pytest.fail(f"Xvfb did not start: {log.read_text(errors='replace')[-500:]}")
+    try:
+        yield f":{number}"
+    finally:
+        libx11.XCloseDisplay(connection)
+        process.terminate()
+        try:
+            process.wait(timeout=10)
+        except subprocess.TimeoutExpired:
+            process.kill()
+            process.wait()
+
+
+@pytest.fixture
+def display(xvfb, monkeypatch) -> str:
+    monkeypatch.setenv("DISPLAY", xvfb)
+    monkeypatch.delenv("WAYLAND_DISPLAY", raising=False)
+    return xvfb

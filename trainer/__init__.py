@@ -1,9 +1,9 @@
 """GratNet's offline stage: height fields, the Fourier-optics ground truth, training (torch only there).
 
-Of the project, trainer/ imports gratnet/ only (tests/test_architecture.py). Inside it the layers below point one
-way: a module uses its own layer and those listed before it, never one after. Training and evaluation stand side
-by side: neither imports the other (a model file, gratnet/modelfile.py, is what passes between them; ``train_cli``
-joins them). One exception: ``groundtruth``'s ``ComputeConfig`` borrows training's ``--device`` rule
+Of the project, trainer/ imports gratnet/ only (tests/contract/test_architecture.py). Inside it the layers below
+point one way: a module uses its own layer and those listed before it, never one after. Training and evaluation
+stand side by side: neither imports the other (a model file, gratnet/modelfile.py, is what passes between them;
+``train_cli`` joins them). One exception: ``groundtruth``'s ``ComputeConfig`` borrows training's ``--device`` rule
 (``train.pick_device``), imported lazily and only where torch is installed.
 
 Ground truth (numpy; torch only to run the F-term on CUDA):

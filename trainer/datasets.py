@@ -20,6 +20,7 @@ import dataclasses
 from collections.abc import Mapping
 from pathlib import Path
 from types import MappingProxyType
+from typing import Any
 
 from gratnet.errors import GratNetError
 from trainer.fourier import OpticsConfig
@@ -97,9 +98,9 @@ class DatasetPreset:
         return HeightField(scan.heights_um, scan.dx_um, SOURCE_PREFIX + self.name)
 
 
-def _preset(**values: object) -> DatasetPreset:
+def _preset(**values: Any) -> DatasetPreset:
     parameters = values.pop("parameters", {})
-    return DatasetPreset(parameters=MappingProxyType(dict(parameters)), **values)  # type: ignore[arg-type]
+    return DatasetPreset(parameters=MappingProxyType(dict(parameters)), **values)
 
 
 PRESETS: dict[str, DatasetPreset] = {

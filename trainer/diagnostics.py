@@ -29,6 +29,7 @@ from typing import Any
 
 import numpy as np
 
+from gratnet.codes import SCHEME
 from gratnet.encoding import network_coordinates
 from gratnet.errors import GratNetError
 from gratnet.volume import Volume
@@ -55,7 +56,7 @@ class VolumeOracle:
         from scipy.interpolate import RegularGridInterpolator
 
         scheme = volume.metadata.get("scheme")
-        if scheme not in ("regular", "simple", "simple-max"):
+        if scheme not in SCHEME.names:
             raise GratNetError(f"volume has no known sampling scheme in its metadata (got {scheme!r})")
         self.scheme = scheme
         self.one_slice = volume.slices == 1

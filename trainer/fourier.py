@@ -209,7 +209,7 @@ class FTerm:
     ) -> None:
         """``device`` None runs :meth:`xyz_grid` in numpy (the reference); a torch device name ("cuda",
         "cpu") runs its matrix products in torch there: the same complex64 products and float64 sums,
-        agreeing with numpy to float32 rounding (tests/test_fourier.py ties them)."""
+        agreeing with numpy to float32 rounding (tests/trainer/test_fourier.py ties them)."""
         self.surface = surface
         self.spectral = spectral or spectral_weights()
         self.heights = surface.heights_um
@@ -381,8 +381,9 @@ class _ChebyshevPlan:
         assert self.w is not None
         ops = ops or _NumpyOps()
         if self.count == 1:
-            power = ops.power(transform(self.centre))
-            return power.expand(self.w.shape).clone() if ops.is_torch else np.broadcast_to(power, self.w.shape).copy()
+            if isinstance(ops, _TorchOps):
+                return ops.power(transform(self.centre)).expand(self.w.shape).clone()
+            return np.broadcast_to(ops.power(transform(self.centre)), self.w.shape).copy()
         total = ops.zeros(self.w.shape, complex_=True)
         for j in range(self.count):
             total += ops.put_basis(self, j) * transform(float(self.node_w[j]))
@@ -391,8 +392,6 @@ class _ChebyshevPlan:
 
 class _NumpyOps:
     """The array operations of :meth:`FTerm.xyz_grid` in numpy (the reference implementation)."""
-
-    is_torch = False
 
     def put(self, array: np.ndarray) -> np.ndarray:
         return array
@@ -423,8 +422,6 @@ class _NumpyOps:
 
 class _TorchOps:
     """The same operations in torch on ``device``: complex64 products, float64 sums (as numpy's)."""
-
-    is_torch = True
 
     def __init__(self, device: str) -> None:
         try:

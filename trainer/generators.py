@@ -77,10 +77,13 @@ _CHECKS: dict[str, tuple[Callable[[float], bool], str]] = {
 class _Parameters:
     """Type and range checks shared by every parameter set (a mixin: it adds no fields)."""
 
+    if typing.TYPE_CHECKING:  # every parameter set is a dataclass
+        __dataclass_fields__: typing.ClassVar[dict[str, dataclasses.Field[Any]]]
+
     def __post_init__(self) -> None:
         hints = typing.get_type_hints(type(self))
         name = getattr(type(self), "generator_name", type(self).__name__)
-        for field in dataclasses.fields(self):  # type: ignore[arg-type]
+        for field in dataclasses.fields(self):
             value = getattr(self, field.name)
             kind = hints[field.name]
             where = f"{name} parameter {field.name}"
@@ -296,7 +299,9 @@ def _periodic_soft_box(coordinate: np.ndarray, start: float, end: float, blur: f
     """``_soft_box`` repeated with ``period`` (the interval may straddle the patch edge)."""
     length = min(end - start, period)
     start %= period
-    return sum(_soft_box(coordinate, start + shift, start + length + shift, blur) for shift in (-period, 0.0, period))
+    before, here, after = (_soft_box(coordinate, start + shift, start + length + shift, blur)
+                           for shift in (-period, 0.0, period))
+    return before + here + after
 
 
 # ---------------------------------------------------------------------------------------------------
@@ -341,8 +346,8 @@ def _track_runs(rng: np.random.Generator, length: float, low: int, high: int) ->
         else:
             failures += 1
     lowest, highest = max(low, math.ceil(length - high)), min(high, math.floor(length - low))
-    pit = float(rng.integers(lowest, highest + 1)) if lowest <= highest else length / 2
-    return runs + [pit, length - pit]
+    last_pit = float(rng.integers(lowest, highest + 1)) if lowest <= highest else length / 2
+    return runs + [last_pit, length - last_pit]
 
 
 def cd(params: CDParams) -> HeightField:

@@ -54,7 +54,7 @@ class HeightField:
     @property
     def shape(self) -> tuple[int, int]:
         """(rows, columns) = (ny, nx)."""
-        return self.heights_um.shape  # type: ignore[return-value]
+        return self.heights_um.shape
 
     @property
     def size_um(self) -> tuple[float, float]:

@@ -214,10 +214,13 @@ def _read_gsf(path: Path, options: LoadOptions) -> HeightField:
     lateral = _gsf_unit(path, header, "XYUnits")
     x_real = _gsf_number(path, header, "XReal", float)
     y_real = _gsf_number(path, header, "YReal", float)
-    if x_real is None and y_real is None:
-        _needs_dx(path, options, " (the header gives no XReal/YReal)")
     # A single given extent is taken to imply square pixels.
-    dx = x_real * lateral / columns if x_real is not None else y_real * lateral / rows  # type: ignore[operator]
+    if x_real is not None:
+        dx = x_real * lateral / columns
+    elif y_real is not None:
+        dx = y_real * lateral / rows
+    else:
+        dx = _needs_dx(path, options, " (the header gives no XReal/YReal)")
     dy = y_real * lateral / rows if y_real is not None else dx
     if abs(dx - dy) > SQUARE_TOLERANCE * max(dx, dy):
         heights, source = _square_pixels(heights, dx, dy, source)
@@ -268,12 +271,12 @@ def write_gsf(path: str | os.PathLike[str], field: HeightField) -> None:
 
 def _image_scale(path: Path, options: LoadOptions) -> tuple[float, float]:
     """(dx in µm, height in µm of value 1.0), both required for images."""
-    missing = [flag for flag, value in (("--dx-um", options.dx_um), ("--height-scale-um", options.height_scale_um))
-               if value is None]
-    if missing:
+    dx, scale = options.dx_um, options.height_scale_um
+    if dx is None or scale is None:
+        missing = [flag for flag, value in (("--dx-um", dx), ("--height-scale-um", scale)) if value is None]
         raise GratNetError(f"{path}: an image has no physical scale; give {' and '.join(missing)} "
                            f"(sample spacing in µm; height in µm of value 1.0 / white)")
-    return options.dx_um, options.height_scale_um  # type: ignore[return-value]
+    return dx, scale
 
 
 def _pick_channel(path: Path, channels: dict[str, np.ndarray], wanted: str) -> np.ndarray:
@@ -283,7 +286,8 @@ def _pick_channel(path: Path, channels: dict[str, np.ndarray], wanted: str) -> n
             if name in channels:
                 return channels[name]
         if all(name in channels for name in "RGB"):
-            return sum(weight * channels[name] for weight, name in zip(LUMINANCE_WEIGHTS, "RGB", strict=True))
+            red, green, blue = (weight * channels[name] for weight, name in zip(LUMINANCE_WEIGHTS, "RGB", strict=True))
+            return red + green + blue
         if len(channels) == 1:
             return next(iter(channels.values()))
         raise GratNetError(f"{path}: cannot form a luminance from channels {sorted(channels)}; "

@@ -10,6 +10,7 @@ from __future__ import annotations
 import os
 import re
 from pathlib import Path
+from typing import Any
 
 from gratnet.errors import GratNetError
 from trainer.heightfield import HeightField
@@ -60,7 +61,13 @@ def generator_from_source(source: str) -> HeightField:
         raise GratNetError(f"not a generator source string: {source!r} (expected generator:NAME(key=value, ...))")
     try:
         call = ast.parse(f"f({match.group(2)})", mode="eval").body
-        overrides = {keyword.arg: ast.literal_eval(keyword.value) for keyword in call.keywords}  # type: ignore[attr-defined]
+        if not isinstance(call, ast.Call):  # a ')' inside the parentheses closed the call early
+            raise ValueError("not one call")
+        overrides: dict[str, Any] = {}
+        for keyword in call.keywords:
+            if keyword.arg is None:
+                raise ValueError("'**' names no parameter")
+            overrides[keyword.arg] = ast.literal_eval(keyword.value)
     except (SyntaxError, ValueError) as error:
         raise GratNetError(f"cannot parse the parameters of {source!r}: {error}") from error
     return generators.generate(match.group(1), **overrides)

@@ -7,11 +7,13 @@ rounded to a multiple of 4 (which also fills the shader's vec4 blocks exactly).
 from __future__ import annotations
 
 import math
+from typing import Any
 
 import numpy as np
 import torch
 from torch import nn
 
+from gratnet.codes import HIDDEN, OUTPUT
 from gratnet.encoding import EncodingSpec, encode
 from gratnet.errors import GratNetError
 from gratnet.featuregrid import check_interpolation, smoothstep_coordinates
@@ -61,8 +63,8 @@ def parse_hidden(preset: str, hidden: str = "") -> list[int]:
 
 
 #: The hidden activations the trainer builds, and the output activations (what the runtime applies last).
-ACTIVATIONS = ("silu", "relu", "leaky_relu")
-OUTPUT_ACTIVATIONS = ("clamp", "sigmoid", "none")
+ACTIVATIONS = tuple(sorted(HIDDEN.names, key=lambda name: name != "silu"))  # gratnet.codes; the measured best first
+OUTPUT_ACTIVATIONS = OUTPUT.names
 
 
 def check_network(preset: str, hidden: str, activation: str, output_activation: str) -> list[int]:
@@ -130,7 +132,7 @@ class FunnelMLP(nn.Module):
         """The Linear layers in order."""
         return [layer for layer in self.network if isinstance(layer, nn.Linear)]
 
-    def to_model_file(self, **fields: object) -> ModelFile:
+    def to_model_file(self, **fields: Any) -> ModelFile:
         """A runtime model file of these weights; ``fields`` gives encoding, range, scheme, metadata."""
         layers = self.linear_layers()
         return ModelFile(
@@ -139,7 +141,7 @@ class FunnelMLP(nn.Module):
             biases=[layer.bias.detach().cpu().numpy().astype(np.float32) for layer in layers],
             activation=self.activation,
             output_activation=self.output_activation,
-            **fields,  # type: ignore[arg-type]
+            **fields,
         )
 
 
@@ -203,7 +205,7 @@ class GridNetwork(nn.Module):
         """Bytes of the grids as stored in the model file (``grid_dtype``)."""
         return sum(grid.numel() for grid in self.grids) * np.dtype(self.grid_dtype).itemsize
 
-    def to_model_file(self, **fields: object) -> ModelFile:
+    def to_model_file(self, **fields: Any) -> ModelFile:
         """A runtime model file: the MLP's weights and the grids, ``(T, R, R, C)`` in ``grid_dtype``."""
         model_file = self.mlp.to_model_file(**fields)
         model_file.grids = [grid.detach().cpu().permute(1, 2, 3, 0).contiguous().numpy().astype(self.grid_dtype)

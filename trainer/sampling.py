@@ -12,15 +12,16 @@ Samples with u² + v² > 4 are physically impossible (|ωi + ωo| ≤ 2) and hol
 
 from __future__ import annotations
 
-from typing import Literal
+from typing import Literal, cast
 
 import numpy as np
 
+from gratnet.codes import SCHEME
 from gratnet.errors import GratNetError
 from gratnet.volume import volume_axes
 
-Scheme = Literal["regular", "simple", "simple-max"]
-SCHEMES: tuple[str, ...] = ("regular", "simple", "simple-max")
+Scheme = Literal["regular", "simple", "simple-max"]  # for type checkers; tests/contract/test_shared_codes ties it
+SCHEMES: tuple[str, ...] = SCHEME.names  # gratnet.codes
 
 
 def grid_axis(resolution: int) -> np.ndarray:
@@ -39,7 +40,7 @@ def check_scheme(scheme: str) -> Scheme:
     """Return ``scheme`` if known, else raise a clear error."""
     if scheme not in SCHEMES:
         raise GratNetError(f"unknown sampling scheme {scheme!r}; choose one of {', '.join(SCHEMES)}")
-    return scheme  # type: ignore[return-value]
+    return cast(Scheme, scheme)  # one of SCHEMES, checked above
 
 
 def grid_to_key(grid: np.ndarray, scheme: Scheme) -> np.ndarray:

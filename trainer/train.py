@@ -291,7 +291,8 @@ class _Run:
     def learning_rate(self) -> float:
         if self.graph is not None:
             return self.graph.learning_rate()
-        return self.scheduler.get_last_lr()[0]  # type: ignore[union-attr]
+        assert self.scheduler is not None  # an eager run has its torch scheduler
+        return float(self.scheduler.get_last_lr()[0])
 
 
 def _set_up(volume: Volume, config: TrainConfig, out_dir: str | os.PathLike[str]) -> _Run:
@@ -390,7 +391,8 @@ def _train_epoch(run: _Run, epoch: int, progress: bool) -> tuple[dict[str, Any],
         if run.graph is not None:
             run.graph.step(batch)  # updates graph.running, which ``running`` is
         else:
-            value = train_step(run.model, run.optimizer, run.scheduler, coordinates[batch],  # type: ignore[arg-type]
+            assert run.scheduler is not None  # an eager run has its torch scheduler
+            value = train_step(run.model, run.optimizer, run.scheduler, coordinates[batch],
                                targets[batch], run.encoding, run.weighting).double()
             running = 0.98 * running + 0.02 * value if step else value
             run.done += 1

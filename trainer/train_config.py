@@ -236,4 +236,4 @@ class TrainConfig:
 
     def range_spec(self) -> RangeSpec:
         """The range transform of the targets."""
-        return RangeSpec(self.range_kind, self.range_bits, self.range_power)  # type: ignore[arg-type]
+        return RangeSpec(self.range_kind, self.range_bits, self.range_power)

@@ -1,6 +1,6 @@
 """GratNet's runtime: the GL renderer, the commands that use it and the interactive viewer (never imports torch).
 
-Layers inside the wing point one way (tests/test_architecture.py checks that no import circles):
+Layers inside the wing point one way (tests/contract/test_architecture.py checks that no import circles):
 
 Rendering (no glfw, no imgui; ``gratnet render``, ``gratnet bench`` and the tests use it):
 - ``context``: the one GL-context factory (headless EGL, or a window's current context).

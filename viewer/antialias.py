@@ -44,7 +44,7 @@ def sample_offsets(samples: int) -> np.ndarray:
 def _radical_inverse(count: int, base: int) -> np.ndarray:
     """The first ``count`` points of the van der Corput sequence in ``base`` (index 0 → 0), ``float64``.
 
-    The same numbers as ``scipy.stats.qmc.Halton(scramble=False)`` (tests/test_antialias.py checks it);
+    The same numbers as ``scipy.stats.qmc.Halton(scramble=False)`` (tests/runtime/test_antialias.py checks it);
     written out because importing scipy.stats takes 1.2–1.4 s on this machine, which the viewer (it must
     never block) and every ``gratnet render`` would pay on first use.
     """

@@ -55,7 +55,7 @@ feature-grid network costs 30–75 µs, so a 512² disc holds ~9 s of work):
   faster program for the view still compiles in the background: that compile gets the CPU); any change
   of the view starts again from the 1-sample preview. Previews and refinement bands are 1 sample (the pixel
   centre), so interaction costs what it did. The mean of k samples equals ``SceneRenderer.render(...,
-  samples=k)`` (tests/test_viewer.py). BRDF-slice mode stays at 1 sample.
+  samples=k)`` (tests/runtime/test_viewer.py). BRDF-slice mode stays at 1 sample.
 - When the picture is complete (and has its samples) and nothing changes, nothing is rendered, and the
   window sleeps in ``glfw.wait_events_timeout`` instead of spinning.
 
@@ -496,7 +496,7 @@ class ViewerApp:
         seconds = time.perf_counter() - started
         scene = self._scene_key(state)
         effective = effective_pixels(coverage)
-        sample = seconds / max(1.0, effective)
+        per_pixel = seconds / max(1.0, effective)
         previous = self._seconds_per_pixel.get(scene)
         # Quick to grow, slow to shrink: a render slower than predicted (a busy CPU) shrinks the next band
         # at once, so that one misprediction does not make several long frames. A render mostly of background
@@ -504,11 +504,11 @@ class ViewerApp:
         # deferred path skips it), and the rows of background at a picture's top once pulled the rate down to
         # a fifth, so that the first band across the mesh took 0.8–0.9 s (issue 35).
         if previous is None:
-            self._seconds_per_pixel[scene] = sample
+            self._seconds_per_pixel[scene] = per_pixel
         elif np.count_nonzero(coverage > 0.5) >= 0.5 * effective:
-            self._seconds_per_pixel[scene] = max(sample, 0.5 * (previous + sample))
+            self._seconds_per_pixel[scene] = max(per_pixel, 0.5 * (previous + per_pixel))
         else:
-            self._seconds_per_pixel[scene] = max(sample, previous)
+            self._seconds_per_pixel[scene] = max(per_pixel, previous)
         self.stats.renders += 1
         self.stats.weights_path = renderer.network.weights_path
         self.stats.last_render_s = seconds
@@ -685,8 +685,9 @@ class ViewerApp:
             raise GratNetError(f"a screenshot is a .png file, got {path}")
         pixels = self.render_full()
         samples = self.samples
-        if samples > 1:  # the complete samples only (a sample being added band by band is left out)
-            pixels = self._display(self.accumulated_xyz())
+        accumulated = self.accumulated_xyz() if samples > 1 else None
+        if accumulated is not None:  # the complete samples only (a sample being added band by band is left out)
+            pixels = self._display(accumulated)
         with atomic_path(path) as temporary:
             Image.fromarray(pixels).save(temporary, format="PNG")
         width, height = self.full_size()

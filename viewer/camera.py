@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
+from typing import Protocol
 
 import numpy as np
 import pyrr
@@ -21,7 +22,7 @@ from gratnet.brdf import direction
 from gratnet.errors import GratNetError
 from gratnet.lights import DIRECTIONAL, POINT, chosen_kind, light_kind
 
-__all__ = ["Camera", "Light", "world_direction"]
+__all__ = ["Camera", "Light", "LightConfig", "world_direction"]
 
 
 def world_direction(theta_deg: float, phi_deg: float) -> np.ndarray:
@@ -30,9 +31,9 @@ def world_direction(theta_deg: float, phi_deg: float) -> np.ndarray:
     return direction(theta_deg, phi_deg)
 
 
-def _finite(name: str, value: object) -> float:
+def _finite(name: str, value: float) -> float:
     try:
-        number = float(value)  # type: ignore[arg-type]
+        number = float(value)
     except (TypeError, ValueError):
         raise GratNetError(f"{name} must be a number, got {value!r}") from None
     if not math.isfinite(number):
@@ -141,6 +142,17 @@ class Camera:
         return self.eye(), ray / np.linalg.norm(ray)
 
 
+class LightConfig(Protocol):
+    """What :meth:`Light.from_config` reads of a scene config (``viewer.scene_config.SceneConfig``): the
+    directional light's angles, and the field of another kind's flag (``point_light``) by name."""
+
+    @property
+    def light_theta_degrees(self) -> float: ...
+
+    @property
+    def light_phi_degrees(self) -> float: ...
+
+
 @dataclasses.dataclass(frozen=True)
 class Light:
     """A light of one of the kinds of :data:`gratnet.lights.LIGHT_KINDS` (world space): a directional or point light.
@@ -170,7 +182,7 @@ class Light:
     @classmethod
     def directional(cls, theta_deg: float, phi_deg: float, intensity: float = 1.0) -> Light:
         """A light in the world direction at polar angle θ from +z and azimuth φ (degrees)."""
-        return cls(DIRECTIONAL.name, tuple(world_direction(_finite("light θ", theta_deg),  # type: ignore[arg-type]
+        return cls(DIRECTIONAL.name, tuple(world_direction(_finite("light θ", theta_deg),
                                                            _finite("light φ", phi_deg))), intensity)
 
     @classmethod
@@ -179,13 +191,12 @@ class Light:
         return cls(POINT.name, _vector("light position", position), intensity)
 
     @classmethod
-    def from_config(cls, config: object, intensity: float = 1.0) -> Light:
+    def from_config(cls, config: LightConfig, intensity: float = 1.0) -> Light:
         """The light a scene config (``viewer.scene_config.SceneConfig``) describes: the kind whose flag's field is
         set (``point_light``), else the directional light at its ``light_theta_degrees``, ``light_phi_degrees``."""
         kind = chosen_kind(config)
         if kind.flag is None:
-            return cls.directional(config.light_theta_degrees, config.light_phi_degrees,  # type: ignore[attr-defined]
-                                   intensity)
+            return cls.directional(config.light_theta_degrees, config.light_phi_degrees, intensity)
         return cls(kind.name, getattr(config, kind.flag.field), intensity)
 
     def towards(self, point: object) -> tuple[np.ndarray, float]:

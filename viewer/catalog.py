@@ -13,6 +13,7 @@ default-view algorithm all resolve names here. Imports nothing heavy until a mes
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from pathlib import Path
 from typing import TYPE_CHECKING
 
@@ -64,7 +65,8 @@ def build_mesh(spec: str) -> Mesh:
     from viewer import meshes
 
     check_mesh_spec(spec)
-    builders = {"cd": meshes.compact_disc, "sphere": meshes.sphere, "plane": meshes.plane}
+    builders: dict[str, Callable[[], Mesh]] = {
+        "cd": meshes.compact_disc, "sphere": meshes.sphere, "plane": meshes.plane}
     if spec in builders:
         return builders[spec]()
     return meshes.load_obj(Path(spec).expanduser())

@@ -30,7 +30,7 @@ import subprocess
 import sys
 import tempfile
 import time
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -47,12 +47,12 @@ _BAKED_SOURCE = "baked-mlp.glsl"
 _REPOSITORY = Path(__file__).resolve().parents[1]
 
 
-def shader_cache_enabled(environment: dict[str, str] | None = None) -> bool:
+def shader_cache_enabled(environment: Mapping[str, str] | None = None) -> bool:
     """Whether Mesa's disk shader cache is on (``MESA_SHADER_CACHE_DISABLE`` / ``MESA_GLSL_CACHE_DISABLE``
     unset or false): without it a child's compile cannot spare the window its own."""
-    environment = os.environ if environment is None else environment
+    variables = os.environ if environment is None else environment
     for name in ("MESA_SHADER_CACHE_DISABLE", "MESA_GLSL_CACHE_DISABLE"):
-        if environment.get(name, "").strip().lower() in ("1", "true", "yes", "y"):
+        if variables.get(name, "").strip().lower() in ("1", "true", "yes", "y"):
             return False
     return True
 
@@ -245,7 +245,7 @@ def _warm(model_path: Path, paths: Sequence[str], groups: Sequence[str], folder:
             scene = SceneRenderer(ctx, model, weights_path=path, baked_source=source,
                                   render_path=window_render_path(render_path, software),
                                   measure_render_path=False)
-            if source is None and scene.network.baked_source is not None:
+            if source is None and scene.network is not None and scene.network.baked_source is not None:
                 source = scene.network.baked_source
                 with atomic_path(folder / _BAKED_SOURCE) as temporary:
                     Path(temporary).write_text(source, encoding="utf-8")
@@ -258,7 +258,8 @@ def _warm(model_path: Path, paths: Sequence[str], groups: Sequence[str], folder:
             release_headless_context(ctx)
             ctx = None
             print(f"ready {path} {group} {time.perf_counter() - started:.3f}", flush=True)
-    if render_path == "auto" and "surface" in groups and not software:  # on a CPU the window's auto is deferred, no probe
+    # On a CPU the window's auto is deferred: no probe.
+    if render_path == "auto" and "surface" in groups and not software:
         with contextlib.suppress(OSError):
             os.nice(_BAKED_NICENESS)  # the window is up by now: the probe must not slow it
         for path in done:

@@ -34,7 +34,9 @@ def create_headless_context() -> moderngl.Context:
         GratNetError: EGL or the Mesa libraries are missing, or the driver offers less than GL 4.3.
     """
     try:
-        return moderngl.create_context(standalone=True, backend="egl", require=GL_REQUIRE)
+        # moderngl passes backend="egl" on to glcontext as is.
+        return moderngl.create_context(standalone=True, require=GL_REQUIRE,
+                                       backend="egl")  # type: ignore[arg-type]  # stubs: each **settings a dict
     except Exception as error:  # glcontext raises plain Exception (library not found, no display, …)
         raise GratNetError(
             f"cannot create a headless OpenGL 4.3 context through EGL ({_one_line(error)}); "

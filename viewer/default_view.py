@@ -259,9 +259,11 @@ def _warm_imports(niceness: int, exact: bool) -> None:
     import viewer.defaults  # noqa: F401
 
     if exact:
+        import numpy as np
+
         import gratnet.display
 
-        gratnet.display.xyz_to_linear_srgb([[0.0, 0.0, 0.0]])  # colour-science's import
+        gratnet.display.xyz_to_linear_srgb(np.zeros((1, 3)))  # colour-science's import
 
 
 def _pool(niceness: int, exact: bool) -> Any:

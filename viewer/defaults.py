@@ -411,7 +411,7 @@ def _resolve_cached(model_path: str, stamp: tuple[int, int], mesh_spec: str, sli
         return slice_defaults(model, ior=ior)
     from viewer.catalog import build_mesh
 
-    return scene_defaults(model, build_mesh(mesh_spec), fov_degrees, ior)  # type: ignore[arg-type]
+    return scene_defaults(model, build_mesh(mesh_spec), fov_degrees, ior)
 
 
 def resolve_defaults(material: str, mesh: str, slice_mode: bool = False, fov_degrees: float = FOV_DEGREES,

@@ -90,7 +90,7 @@ _LOG = logging.getLogger("gratnet.deferred")  # the gratnet command shows its IN
 FP16_MAX = 65504.0
 #: The documented error of the fp16 weight sources against fp32: relative, per XYZ channel, on pixels at
 #: least 1e-3 of the image's peak. Measured ≤ 0.41 % on the shipped cd and blazed nets
-#: (docs/benchmarks.md); tests/test_deferred.py holds it for a random net.
+#: (docs/benchmarks.md); tests/runtime/test_deferred.py holds it for a random net.
 FP16_RELATIVE_ERROR = 0.01
 _HALF_AS_FLOAT = "float"  # tiled-half's code path in float types (half_as_float)
 _HALF_DEFINES = {**HALF_EXTENSIONS, _HALF_AS_FLOAT: "TILED_HALF_AS_FLOAT"}  # deferred.glsl enables the extension
@@ -123,7 +123,7 @@ class DeferredRenderer:
         weights: one of :data:`DEFERRED_WEIGHTS`, or its :class:`~gratnet.codes.WeightForm`.
         half_as_float: with ``tiled-half``, compile its half-precision code path with float types
             (``TILED_HALF_AS_FLOAT``): the kernel's structure checked where no driver has half arithmetic
-            (llvmpipe; tests/test_tiled.py). Not faster than ``tiled``.
+            (llvmpipe; tests/runtime/test_tiled.py). Not faster than ``tiled``.
 
     Attributes:
         form: the weight form chosen (never ``auto``); ``weights``: its name, as configs save it.
@@ -164,7 +164,8 @@ class DeferredRenderer:
             self.tile_plan = plan_for_context(network.ctx, network.layout,
                                               half=self._half_extension not in (None, _HALF_AS_FLOAT))
             _LOG.debug("deferred weights %s: %s", form.name, self.tile_plan.describe(network.layout))
-        self._programs: dict[str, moderngl.Program | moderngl.ComputeShader] = {}
+        self._gbuffer_compiled: moderngl.Program | None = None
+        self._programs: dict[str, moderngl.ComputeShader] = {}
         self._weight_buffer: moderngl.Buffer | None = None
         self._list: moderngl.Buffer | None = None
         self._targets: tuple[tuple[int, int], moderngl.Texture, moderngl.Renderbuffer, moderngl.Framebuffer] | None
@@ -186,10 +187,10 @@ class DeferredRenderer:
         return {**self.network.defines, "SHADE_GROUP": _SHADE_GROUP}
 
     def _gbuffer_program(self) -> moderngl.Program:
-        if "gbuffer" not in self._programs:
+        if self._gbuffer_compiled is None:
             defines = {**self.network.defines, "GBUFFER": 1}
-            self._programs["gbuffer"] = compile_program(self.ctx, SURFACE_PROGRAM, defines, self.network.shader_root)
-        return self._programs["gbuffer"]  # type: ignore[return-value]
+            self._gbuffer_compiled = compile_program(self.ctx, SURFACE_PROGRAM, defines, self.network.shader_root)
+        return self._gbuffer_compiled
 
     def _compute(self, kernel: str, counting: bool = False) -> moderngl.ComputeShader:
         key = kernel + ("#count" if counting else "")
@@ -232,7 +233,7 @@ class DeferredRenderer:
             if kernel == "SHADE":
                 self.network.model_uniforms(program, form.source)
             self._programs[key] = program
-        return self._programs[key]  # type: ignore[return-value]
+        return self._programs[key]
 
     def _bind_weights(self) -> None:
         if self.form.source is WeightSource.TEXTURE or self.network.model.grids:
@@ -346,9 +347,11 @@ class DeferredRenderer:
                     self._bind_weights()
                     texture.bind_to_image(_GBUFFER_IMAGE, read=True, write=True)
                     share = (1.0 - _GBUFFER_SHARE) / max(entries, 1)
-                    for first, end in self.shade_pacer.pieces(
-                            entries, multiple=_PIECE_ENTRIES,
-                            done=lambda end, share=share: report(_GBUFFER_SHARE + share * end)):
+
+                    def shaded(end: int, share: float = share) -> None:
+                        report(_GBUFFER_SHARE + share * end)
+
+                    for first, end in self.shade_pacer.pieces(entries, multiple=_PIECE_ENTRIES, done=shaded):
                         self._shade(shade, list_buffer, first, end)
                     self.ctx.memory_barrier()
                     if output is not None:
@@ -425,14 +428,14 @@ class DeferredRenderer:
                     list_buffer.write(listed)  # and pieces' headers overwrote entries
                     self.ctx.memory_barrier()
                     self.ctx.finish()
-                if query is not None:
+                if query is not None and timings is not None:  # both or neither
                     start = time.perf_counter()
                     with query:
                         for first in range(0, max(count, 1), max(piece, 1)):
                             self._shade(shade, list_buffer, first, min(count, first + piece))
                         self.ctx.finish()
                     wall = time.perf_counter() - start
-                    timings.append((query.elapsed * 1e-9, wall))  # type: ignore[union-attr]  # waits for the result
+                    timings.append((query.elapsed * 1e-9, wall))  # reading elapsed waits for the result
                 else:
                     for first in range(0, max(count, 1), max(piece, 1)):
                         self._shade(shade, list_buffer, first, min(count, first + piece))
@@ -461,9 +464,10 @@ class DeferredRenderer:
                     matrix = np.ascontiguousarray(view_projection @ jitter_matrix(offset, width, height))
                 set_uniform(program, "u_view_projection", matrix.astype(np.float32))
                 self.ctx.viewport = (0, k * height, width, height)
-                for first, end in self.gbuffer_pacer.pieces(
-                        height, row_costs, multiple=BLOCK[1],
-                        done=lambda end, k=k: done((k + end / height) / len(chunk))):
+                def drawn(end: int, k: int = k) -> None:
+                    done((k + end / height) / len(chunk))
+
+                for first, end in self.gbuffer_pacer.pieces(height, row_costs, multiple=BLOCK[1], done=drawn):
                     # The scissor box also clips what the viewport does not on every implementation (guard bands).
                     self.ctx.scissor = (0, k * height + first, width, end - first)
                     vertex_array.render(moderngl.TRIANGLES)
@@ -472,6 +476,9 @@ class DeferredRenderer:
 
     def release(self) -> None:
         """Free the GL objects (the programs, buffers and targets of this path)."""
+        if self._gbuffer_compiled is not None:
+            self._gbuffer_compiled.release()
+            self._gbuffer_compiled = None
         for program in self._programs.values():
             program.release()
         self._programs.clear()

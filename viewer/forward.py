@@ -33,7 +33,7 @@ from viewer.antialias import jitter_matrix
 from viewer.camera import Camera, Light
 from viewer.glsl import compile_program
 from viewer.pacing import BLOCK, Blocks, Pacer, Progress, covered_block_costs, projected_row_costs, read_rows
-from viewer.shading import ShadingPrograms, set_uniform
+from viewer.shading import MaterialTexture, ShadingPrograms, set_uniform
 from viewer.surface import MeshBuffers, set_surface_uniforms
 
 __all__ = ["SURFACE_PROGRAM", "ForwardRenderer"]
@@ -51,10 +51,20 @@ def _bound_to(vertex_array: moderngl.VertexArray, program: moderngl.Program) -> 
     return vertex_array.program.glo == program.glo
 
 
-def _color_masks(enabled: bool, attachments: int) -> object:
-    """moderngl 5's ``Framebuffer.color_mask`` value: one RGBA tuple, or a list of them for several attachments."""
+# moderngl-stubs 5.x type Framebuffer.scissor and .color_mask narrower than moderngl 5 takes them: these two
+# helpers hold the ignores.
+
+
+def _set_color_masks(framebuffer: moderngl.Framebuffer, enabled: bool, attachments: int) -> None:
+    """Set moderngl 5's ``Framebuffer.color_mask``: one RGBA tuple, or a list of them for several attachments."""
     mask = (enabled,) * 4
-    return mask if attachments == 1 else [mask] * attachments
+    masks = mask if attachments == 1 else [mask] * attachments
+    framebuffer.color_mask = masks  # type: ignore[assignment]  # the stubs omit the list form
+
+
+def _scissor_off(framebuffer: moderngl.Framebuffer) -> None:
+    """No scissor test on ``framebuffer``: moderngl documents ``scissor = None`` for it."""
+    framebuffer.scissor = None  # type: ignore[assignment]  # the stubs omit None
 
 
 class ForwardRenderer:
@@ -120,9 +130,11 @@ class ForwardRenderer:
                         row_costs = projected_row_costs(uploaded.mesh.positions, uploaded.mesh.indices,
                                                         camera.view_projection(width / height), size)
                 for number, offset in enumerate(offsets):
+                    def sampled(fraction: float, number: int = number) -> None:
+                        self._report((number + fraction) / count)
+
                     self._draw_sample(framebuffer, targets, vertex_array, depth_array, program, bound, unit,
-                                      camera, offset, depth_prepass, row_costs, sum_framebuffers,
-                                      lambda fraction, number=number: self._report((number + fraction) / count))
+                                      camera, offset, depth_prepass, row_costs, sum_framebuffers, sampled)
                 if statistics is not None:
                     self.shading.read_counters(statistics)
                 readable = sum_framebuffers if count > 1 else [framebuffer] * layers
@@ -131,8 +143,10 @@ class ForwardRenderer:
         finally:
             scope.release()
             for target in (framebuffer, *sum_framebuffers):
-                target.scissor = None
-            for owned in (framebuffer, depth, *targets, *sum_framebuffers, *sums):
+                _scissor_off(target)
+            resources: list[moderngl.Framebuffer | moderngl.Renderbuffer | moderngl.Texture] = [
+                framebuffer, depth, *targets, *sum_framebuffers, *sums]
+            for owned in resources:
                 owned.release()
             if vertex_array is not None and vertex_array is not uploaded.vertex_array:
                 vertex_array.release()
@@ -161,7 +175,7 @@ class ForwardRenderer:
 
     def _draw_sample(self, framebuffer: moderngl.Framebuffer, targets: list[moderngl.Texture],
                      vertex_array: moderngl.VertexArray | None, depth_array: moderngl.VertexArray | None,
-                     program: moderngl.Program, bound: moderngl.Texture, unit: int, camera: Camera, offset: np.ndarray,
+                     program: moderngl.Program, bound: MaterialTexture, unit: int, camera: Camera, offset: np.ndarray,
                      depth_prepass: bool, row_costs: np.ndarray, sums: list[moderngl.Framebuffer],
                      done: Callable[[float], None]) -> None:
         """One sample into ``framebuffer`` (colour ``targets``, cleared first), added into ``sums`` when given:
@@ -183,7 +197,7 @@ class ForwardRenderer:
             view_projection = view_projection @ jitter_matrix(offset, width, height)
         view_projection = np.ascontiguousarray(view_projection, dtype=np.float32)
         set_uniform(program, "u_view_projection", view_projection)
-        framebuffer.scissor = None
+        _scissor_off(framebuffer)
         framebuffer.use()  # the scope binds the framebuffer but leaves the viewport as it was
         framebuffer.clear(0.0, 0.0, 0.0, 0.0, depth=1.0)
         if vertex_array is None or depth_array is None:
@@ -194,15 +208,15 @@ class ForwardRenderer:
         one_piece = self.shade_pacer.fits(width * height)  # even if every pixel is covered: no coverage needed
         if depth_prepass or not one_piece:
             set_uniform(self.shading.depth_only_program(SURFACE_PROGRAM), "u_view_projection", view_projection)
-            framebuffer.color_mask = _color_masks(False, layers)
+            _set_color_masks(framebuffer, False, layers)
             try:
                 for first, end in self.depth_pacer.pieces(height, row_costs, multiple=BLOCK[1]):
                     framebuffer.scissor = (0, first, width, end - first)
                     framebuffer.use()
                     depth_array.render(moderngl.TRIANGLES)
             finally:
-                framebuffer.color_mask = _color_masks(True, layers)
-                framebuffer.scissor = None
+                _set_color_masks(framebuffer, True, layers)
+                _scissor_off(framebuffer)
         costs = np.full(blocks.count, float(BLOCK[0] * BLOCK[1])) if one_piece else covered_block_costs(
             framebuffer, blocks)
         if depth_prepass:
@@ -223,7 +237,7 @@ class ForwardRenderer:
                     self._accumulate(framebuffer, targets, sums, box)
         finally:
             self.ctx.depth_func = "<"  # moderngl's default
-            framebuffer.scissor = None
+            _scissor_off(framebuffer)
 
     def _accumulate(self, framebuffer: moderngl.Framebuffer, samples: list[moderngl.Texture],
                     sums: list[moderngl.Framebuffer], box: tuple[int, int, int, int]) -> None:
@@ -232,10 +246,11 @@ class ForwardRenderer:
         ``framebuffer`` is bound again afterwards."""
         if not sums:
             return
-        if self._accumulate_program is None:
-            self._accumulate_program = compile_program(self.ctx, _ACCUMULATE, {}, self.shading.shader_root)
-            self._accumulate_array = self.ctx.vertex_array(self._accumulate_program, [])
         program, array = self._accumulate_program, self._accumulate_array
+        if program is None or array is None:
+            program = compile_program(self.ctx, _ACCUMULATE, {}, self.shading.shader_root)
+            array = self.ctx.vertex_array(program, [])
+            self._accumulate_program, self._accumulate_array = program, array
         set_uniform(program, "u_sample", _SAMPLE_UNIT)
         self.ctx.enable_only(moderngl.BLEND)
         self.ctx.blend_func = moderngl.ONE, moderngl.ONE
@@ -247,8 +262,8 @@ class ForwardRenderer:
                 array.render(moderngl.TRIANGLES, vertices=3)
         finally:
             for target in sums:
-                target.scissor = None
-            self.ctx.blend_func = moderngl.DEFAULT_BLENDING
+                _scissor_off(target)
+            self.ctx.blend_func = moderngl.SRC_ALPHA, moderngl.ONE_MINUS_SRC_ALPHA  # DEFAULT_BLENDING (stubs: int)
             self.ctx.enable_only(moderngl.DEPTH_TEST)
             framebuffer.use()
 

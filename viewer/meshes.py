@@ -62,7 +62,7 @@ class Mesh:
     indices: np.ndarray
 
     def __post_init__(self) -> None:
-        count = None
+        count: int | None = None
         for name, width in (("positions", 3), ("normals", 3), ("tangents", 3), ("uvs", 2)):
             array = np.ascontiguousarray(getattr(self, name), dtype=np.float32)
             if array.ndim != 2 or array.shape[1] != width:
@@ -74,6 +74,7 @@ class Mesh:
             if not np.all(np.isfinite(array)):
                 raise GratNetError(f"mesh {name} contain NaN or inf")
             object.__setattr__(self, name, array)
+        assert count is not None  # set by the loop's first array (positions)
         indices = np.asarray(self.indices)
         if indices.size == 0:
             indices = indices.reshape(0, 3)
@@ -146,9 +147,9 @@ def _checked_count(name: str, value: object, minimum: int) -> int:
     return int(value)
 
 
-def _checked_length(name: str, value: object, allow_zero: bool = False) -> float:
+def _checked_length(name: str, value: float, allow_zero: bool = False) -> float:
     try:
-        number = float(value)  # type: ignore[arg-type]
+        number = float(value)
     except (TypeError, ValueError):
         raise GratNetError(f"{name} must be a number, got {value!r}") from None
     if not math.isfinite(number) or number < 0.0 or (number == 0.0 and not allow_zero):
@@ -203,7 +204,7 @@ def compact_disc(inner_radius: float = 0.0075, outer_radius: float = 0.06, segme
     uvs = np.stack([u, v], -1)
     # Column step: +φ (tangent); row step: +r (= −bitangent). tangent × radial = −z, so the grid's
     # (a, b, e) order is clockwise from +z: flip each triangle.
-    indices = _grid_indices(segments, rings)[:, [0, 2, 1]].reshape(2, rings * segments, 3)
+    indices: np.ndarray = _grid_indices(segments, rings)[:, [0, 2, 1]].reshape(2, rings * segments, 3)
     if inner == 0.0:  # a full disc: the innermost ring is the centre; drop the (a, e, b) triangles there
         indices = np.concatenate([indices[0, segments:], indices[1]])
     indices = indices.reshape(-1, 3)

@@ -6,7 +6,7 @@ network (``surface``, ``brdf_slice``) with ``REFERENCE`` defined: shaders/refere
 the volume's network coordinates (eq. 6, its own scheme) and interpolates trilinearly (eq. 6g), with the network's
 A-term, Fresnel, irradiance and exposure around it. So a mesh render, a BRDF slice and every render option (anti-
 aliasing, depth pre-pass, counters) mean the same thing for both materials; ``gratnet.reference.reference_xyz``
-is the numpy twin (tests/test_reference.py).
+is the numpy twin (tests/runtime/test_reference.py).
 
 Limits, checked by :func:`check_reference_limits` before any GL work: each side at most the context's
 ``GL_MAX_3D_TEXTURE_SIZE`` (2048 on llvmpipe and on NVIDIA GPUs), and the texture's bytes at most
@@ -29,7 +29,7 @@ from gratnet.codes import SCHEME
 from gratnet.errors import GratNetError
 from gratnet.reference import FLOAT16_SCALE, check_precision, check_uniform_slices, stored_values, texture_bytes
 from gratnet.volume import Volume
-from viewer.shading import ShadingPrograms, set_uniform, skip_threshold_value
+from viewer.shading import MaterialTexture, ShadingPrograms, set_uniform, skip_threshold_value
 
 __all__ = ["MAX_TEXTURE_BYTES", "REFERENCE_UNIT", "ReferenceRenderer", "check_reference_limits"]
 
@@ -107,13 +107,13 @@ class ReferenceRenderer(ShadingPrograms):
         """The look-up's uniforms: the texture's unit, the storage scale and the volume's scheme."""
         set_uniform(program, "u_reference", REFERENCE_UNIT)
         set_uniform(program, "u_reference_scale", float(self._scale))
-        set_uniform(program, SCHEME.uniform, SCHEME.code(self.scheme))
+        set_uniform(program, SCHEME.uniform_name, SCHEME.code(self.scheme))
 
-    def material_textures(self) -> tuple[tuple[moderngl.Texture, int], ...]:
+    def material_textures(self) -> tuple[tuple[MaterialTexture, int], ...]:
         return ((self._texture, REFERENCE_UNIT),)
 
     def skip_uniforms(self, program: moderngl.Program | moderngl.ComputeShader, skip_threshold: float | None
-                      ) -> tuple[moderngl.Texture, int]:
+                      ) -> tuple[MaterialTexture, int]:
         """Nothing to set (reference programs never skip); returns the volume's own binding."""
         if skip_threshold_value(skip_threshold) > 0.0 and not self._warned_skip:
             _LOG.info("reference renders look up every pixel: skipping dark pixels is the network's (its output "

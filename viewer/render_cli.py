@@ -104,7 +104,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     actions = add_arguments(parser, RenderConfig)
     # None when left out: --reference without --material renders the volume alone (no network, no model).
     actions["material"].default = None
-    actions["material"].help = (f"{actions['material'].help.rsplit(' (default', 1)[0]} (default: "
+    actions["material"].help = (f"{(actions['material'].help or '').rsplit(' (default', 1)[0]} (default: "
                                 f"{DEFAULT_MATERIAL}; none with --reference)")
     parser.set_defaults(handler=run)
 
@@ -204,7 +204,11 @@ def _render(arguments: argparse.Namespace, out: Path) -> int:
     model_path = None if reference_only else resolve_material(config.material)
     volume = (load_reference(config.reference, config.reference_precision,
                              None if reference_only else config.material) if config.reference else None)
-    model = volume if volume is not None else load_model(model_path)
+    if volume is not None:
+        model = volume
+    else:
+        assert model_path is not None  # None only for --reference alone, whose volume was loaded
+        model = load_model(model_path)
     mesh = None if config.slice else build_mesh(config.mesh)
 
     from gratnet.bounds import DISPLAY_SKIP_THRESHOLD
@@ -227,7 +231,7 @@ def _render(arguments: argparse.Namespace, out: Path) -> int:
             deferred_weights = (renderer.deferred.weights if resolved["path"] == "deferred"
                                 and renderer.deferred is not None else None)
             with _progress_bar(arguments.quiet) as progress:
-                if config.slice:
+                if mesh is None:  # --slice
                     xyz = renderer.shading.render_brdf_slice(config.light_theta_degrees, config.light_phi_degrees,
                                                              config.width, config.exposure, config.effective_ior,
                                                              skip_threshold=skip_threshold, progress=progress)
@@ -376,9 +380,11 @@ def _allocates(ctx: moderngl.Context, width: int, height: int) -> bool:
 
     owned: list[moderngl.Texture | moderngl.Renderbuffer | moderngl.Framebuffer] = []
     try:
-        owned.append(ctx.texture((width, height), 4, dtype="f4"))
-        owned.append(ctx.depth_renderbuffer((width, height)))
-        owned.append(ctx.framebuffer(color_attachments=[owned[0]], depth_attachment=owned[1]))
+        texture = ctx.texture((width, height), 4, dtype="f4")
+        owned.append(texture)
+        depth = ctx.depth_renderbuffer((width, height))
+        owned.append(depth)
+        owned.append(ctx.framebuffer(color_attachments=[texture], depth_attachment=depth))
     except moderngl.Error:
         return False
     finally:

@@ -5,7 +5,7 @@
 with the model's array capacities as defines (``MAX_BLOCKS``, ``MAX_LAYERS``, ``MAX_FREQUENCIES``) and
 sets everything else — layer layout, activations, encoding frequencies, range transform, scheme — as
 uniforms. The shaders implement docs/physics.md eq. 5–7 and mirror ``gratnet.encoding``,
-``gratnet.modelfile.evaluate_keys`` and ``gratnet.brdf.a_term``; tests/test_shader_parity.py ties them.
+``gratnet.modelfile.evaluate_keys`` and ``gratnet.brdf.a_term``; tests/runtime/test_shader_parity.py ties them.
 
 Rendering only: no glfw, no imgui, no torch. Programs are compiled on first use.
 """
@@ -27,7 +27,14 @@ from gratnet.featuregrid import CHUNK_FEATURES, grid_chunks
 from gratnet.modelfile import LEAKY_RELU_SLOPE, ModelFile, pack_texture, texture_layout
 from viewer.baked import baked_mlp_source
 from viewer.glsl import GeneratedSource, compile_program
-from viewer.shading import STATISTICS_KEYS, ShadingPrograms, ior_uniform, set_uniform, skip_threshold_value
+from viewer.shading import (
+    STATISTICS_KEYS,
+    MaterialTexture,
+    ShadingPrograms,
+    ior_uniform,
+    set_uniform,
+    skip_threshold_value,
+)
 
 __all__ = [
     "BAKED_MAX_MACS",
@@ -181,7 +188,7 @@ class NetworkRenderer(ShadingPrograms):
             weights are literals in a generated mlp.glsl, :mod:`viewer.baked`: no weight texture and no
             ``u_weights``/``u_layers``/activation uniforms) or ``auto`` (:func:`choose_weights_path`: baked
             for nets up to :data:`BAKED_MAX_MACS` multiply-adds on a software rasterizer, else texture).
-            Both paths compute the same sums in float32; tests/test_baked.py ties them.
+            Both paths compute the same sums in float32; tests/runtime/test_baked.py ties them.
         baked_source: the baked ``mlp.glsl`` text of ``model`` made earlier (:attr:`baked_source` of another
             renderer of the same model, e.g. in another process): spares generating it again (~0.3 s for a
             shipped model) and keeps the program text, hence Mesa's shader-cache key, identical.
@@ -218,7 +225,7 @@ class NetworkRenderer(ShadingPrograms):
         # holding features 4k … 4k + 3 in float channels; a last partial chunk has only the C − 4k channels it
         # needs (no padding bytes; the shader reads no lane beyond C, the baked MLP weighs them 0). With C ≤ 4:
         # one texture per level, exactly as before chunks. Units: _GRID_UNIT + level * chunks + k.
-        self._grids: list[moderngl.Texture] = []
+        self._grids: list[moderngl.Texture3D] = []
         if model.grids:
             check_grid_texture_units(ctx.info, len(model.grids) * grid_chunks(model.grids[0].shape[-1]))
         for grid in model.grids:
@@ -233,7 +240,7 @@ class NetworkRenderer(ShadingPrograms):
         # Skipping work (gratnet/bounds.py, shaders/skip.glsl): the bound table and the counters are made on
         # first use; the 1-texel placeholder is bound when skipping is off (the sampler must read something).
         self._output_bounds: OutputBounds | None = None
-        self._skip_texture: moderngl.Texture | None = None
+        self._skip_texture: moderngl.Texture3D | None = None
         self._skip_placeholder = ctx.texture3d((1, 1, 1), 4, np.zeros(4, dtype=np.float32).tobytes(), dtype="f4")
         self._skip_placeholder.filter = (moderngl.NEAREST, moderngl.NEAREST)
 
@@ -257,20 +264,20 @@ class NetworkRenderer(ShadingPrograms):
                 set_uniform(program, "u_weights_width", int(self.packed_weights.shape[1]))
             set_uniform(program, "u_layer_count", len(self.layout))
             set_uniform(program, "u_layers", layers)
-            set_uniform(program, HIDDEN.uniform, HIDDEN.code(model.activation))
-            set_uniform(program, OUTPUT.uniform, OUTPUT.code(model.output_activation))
+            set_uniform(program, HIDDEN.uniform_name, HIDDEN.code(model.activation))
+            set_uniform(program, OUTPUT.uniform_name, OUTPUT.code(model.output_activation))
         if self._grids:
             set_uniform(program, "u_grid", np.arange(_GRID_UNIT, _GRID_UNIT + len(self._grids), dtype=np.int32))
             set_uniform(program, "u_grid_hardware_filter", int(self.grid_filter == "hardware"))
             set_uniform(program, "u_grid_smoothstep", int(model.grid_interpolation == "smoothstep"))
-        set_uniform(program, SCHEME.uniform, SCHEME.code(model.scheme))
+        set_uniform(program, SCHEME.uniform_name, SCHEME.code(model.scheme))
         # encoded_feature (encoding.glsl) reads the counts; the baked MLP has them in its code, so baked
         # programs that do not call encoded_feature (all but encode_keys) lack these uniforms.
         if source is not WeightSource.BAKED or "u_frequencies" in program:
             set_uniform(program, "u_frequencies", model.encoding.frequencies)
             set_uniform(program, "u_t_frequencies", model.encoding.t_frequencies)
         set_uniform(program, "u_frequency", _frequency_table(model, int(self.defines["MAX_FREQUENCIES"])))
-        set_uniform(program, RANGE.uniform, RANGE.code(model.range.kind))
+        set_uniform(program, RANGE.uniform_name, RANGE.code(model.range.kind))
         set_uniform(program, "u_range_bits", float(model.range.bits))
         set_uniform(program, "u_range_power", float(model.range.power))
         set_uniform(program, "u_range_white", tuple(float(c) for c in model.range.white))
@@ -282,7 +289,7 @@ class NetworkRenderer(ShadingPrograms):
             set_uniform(program, "u_inputs", 1)
             set_uniform(program, "u_inputs2", 2)
 
-    def material_textures(self) -> tuple[tuple[moderngl.Texture, int], ...]:
+    def material_textures(self) -> tuple[tuple[MaterialTexture, int], ...]:
         """The weight texture on unit 0 (none on the baked path) and a feature-grid model's grids on theirs."""
         weights = ((self._weights, 0),) if self.weights_path == "texture" else ()
         return weights + tuple((grid, _GRID_UNIT + index) for index, grid in enumerate(self._grids))
@@ -334,7 +341,7 @@ class NetworkRenderer(ShadingPrograms):
             self._output_bounds = output_bounds(self.model)
         return self._output_bounds
 
-    def _skip_bound_texture(self, threshold: float) -> moderngl.Texture:
+    def _skip_bound_texture(self, threshold: float) -> moderngl.Texture3D:
         """The bound as an RGBA32F 3D texture (Cu, Cv, Ct); a 1-texel placeholder when skipping is off."""
         if threshold <= 0.0:
             return self._skip_placeholder
@@ -348,7 +355,7 @@ class NetworkRenderer(ShadingPrograms):
         return self._skip_texture
 
     def skip_uniforms(self, program: moderngl.Program | moderngl.ComputeShader, skip_threshold: float | None
-                       ) -> tuple[moderngl.Texture, int]:
+                       ) -> tuple[MaterialTexture, int]:
         """Set skip.glsl's uniforms on ``program``; returns ``(texture, unit)`` of the bound to bind."""
         threshold = skip_threshold_value(skip_threshold)
         if threshold > 0.0 and self.model.grids:  # gratnet/bounds.py builds no bound for grid models
@@ -369,7 +376,7 @@ class NetworkRenderer(ShadingPrograms):
                   ior: float = 0.0) -> np.ndarray:
         """Run evaluate_keys in ``mode`` on ``(N, 3)`` inputs; returns ``(N, 4)`` float32."""
         program = self.program("evaluate_keys")
-        set_uniform(program, MODE.uniform, mode)
+        set_uniform(program, MODE.uniform_name, mode)
         set_uniform(program, "u_block", block)
         set_uniform(program, "u_ior", ior)
         count = first.shape[0]

@@ -31,7 +31,7 @@ Display: :meth:`SceneRenderer.display_srgb8` and :meth:`SceneRenderer.linear_srg
 (colour-science, float64), the path that the trainer's PNGs (``gratnet brdfslice``, evaluation reports)
 take, so a render and a ground-truth image of the same XYZ are byte-identical. The GLSL ``display``
 program that an interactive window would use agrees with it to 2e-6 before the 8-bit rounding
-(tests/test_shader_parity.py), i.e. at most one level where a value sits on a rounding boundary.
+(tests/runtime/test_shader_parity.py), i.e. at most one level where a value sits on a rounding boundary.
 
 Rendering only: no glfw, no imgui, no torch.
 """

@@ -25,13 +25,16 @@ import dataclasses
 import math
 from collections.abc import Callable
 from pathlib import Path
-from typing import Any, TypeVar
+from typing import TYPE_CHECKING, Any, TypeVar
 
 from gratnet.codes import DEFERRED_WEIGHTS, RENDER_PATHS, SCHEME, WEIGHTS_PATHS, WeightForm
 from gratnet.config import config_field, parse_float, parse_numbers
 from gratnet.errors import GratNetError
 from gratnet.lights import DISTANCE_RANGE_METRES, LIGHT_KINDS, LightFlag, light_kind
 from viewer.defaults import FALLBACK, FOV_DEGREES, SceneDefaults, resolve_defaults
+
+if TYPE_CHECKING:
+    import numpy as np
 
 ConfigT = TypeVar("ConfigT")
 
@@ -118,7 +121,8 @@ class RenderConfig(SceneConfig):
         "", "a ground-truth volume (gratnet groundtruth's EXR) to render instead of the network: the volume looked "
         "up per pixel (trilinear, exact at its samples) with the same A-term, Fresnel and exposure; with --material "
         "the volume must come from the material's surface; without it, an unset --exposure puts the 99th percentile "
-        "of the lit pixels at white (raised until 3 %% of the picture shows; gratnet.showcase.suggest_exposure)", metavar="VOLUME.exr")
+        "of the lit pixels at white (raised until 3 %% of the picture shows)",
+        metavar="VOLUME.exr")
     reference_precision: str = config_field(
         "float16", "storage of the --reference texture: float16 (XYZ·2^15: 11 significant bits for values down to "
         "2e-9 of a mirror's peak; 66 MB for 11 slices of 1001²) or float32 (exact, twice the memory)",
@@ -159,9 +163,9 @@ def check_scene_numbers(light: tuple[float, float] | None, camera: tuple[float, 
         raise GratNetError(f"--camera distance must be from {low:g} to {high:g} metres (typical: 0.1 to 1), "
                            f"got {camera[0]:g}")
     for name, values in (lights or {}).items():
-        flag = light_kind(name).flag
-        if flag is not None:
-            flag.check(values, flag.flag)
+        light_flag = light_kind(name).flag
+        if light_flag is not None:
+            light_flag.check(values, light_flag.flag)
 
 
 def parse_size(text: str) -> tuple[int, int]:
@@ -372,13 +376,13 @@ def _exposure_scale(other_light: tuple[LightFlag, str] | None) -> float | None:
     return flag.exposure_scale(values) if len(values) == flag.count else None
 
 
-def warn_if_black(xyz: object, exposure: float) -> None:
+def warn_if_black(xyz: np.ndarray, exposure: float) -> None:
     """The black-picture hint (gratnet.showcase.black_image_hint) on stderr; the exit status is unchanged."""
     import sys
 
     from gratnet.showcase import black_image_hint
 
-    hint = black_image_hint(xyz, exposure)  # type: ignore[arg-type]
+    hint = black_image_hint(xyz, exposure)
     if hint is not None:
         print(f"warning: {hint}", file=sys.stderr)
 

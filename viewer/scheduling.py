@@ -184,7 +184,8 @@ def padded_size(size: tuple[int, int]) -> tuple[int, int]:
     warmed (issue 35). The padding shows the scene beyond the picture, rendered too where the mesh reaches
     into it: the viewer's deferred bands take power-of-two heights (:meth:`ResolutionPolicy.band_rows`), so that
     a band of a picture of power-of-two width needs none."""
-    return tuple(1 << max(0, int(side) - 1).bit_length() for side in size)  # type: ignore[return-value]
+    width, height = (1 << max(0, int(side) - 1).bit_length() for side in size)
+    return width, height
 
 
 @dataclasses.dataclass

@@ -14,7 +14,7 @@ from __future__ import annotations
 import math
 from collections.abc import Mapping
 from pathlib import Path
-from typing import TypeVar
+from typing import TypeAlias, TypeVar, cast
 
 import moderngl
 import numpy as np
@@ -26,9 +26,12 @@ from gratnet.errors import GratNetError
 from viewer.glsl import GeneratedSource, compile_program
 from viewer.pacing import Blocks, Pacer, Progress, disc_block_costs, read_rows
 
-__all__ = ["SKIP_COUNTER_BINDING", "STATISTICS_KEYS", "ShadingPrograms", "ior_uniform", "set_uniform",
-           "skip_threshold_value"]
+__all__ = ["SKIP_COUNTER_BINDING", "STATISTICS_KEYS", "MaterialTexture", "ShadingPrograms", "ior_uniform",
+           "set_uniform", "skip_threshold_value"]
 
+#: A texture a material binds (with its unit): the network's weights (2D); a feature-grid model's grids, the skip
+#: bound and the reference volume (3D).
+MaterialTexture: TypeAlias = "moderngl.Texture | moderngl.Texture3D"
 #: The work counters' names (gratnet.codes.COUNTER, in slot order), the keys of a render's ``statistics``.
 STATISTICS_KEYS = COUNTER.names
 #: SSBO binding of the work counters (shaders/counters.glsl; gratnet.codes.BINDINGS).
@@ -42,11 +45,12 @@ def set_uniform(program: moderngl.Program | moderngl.ComputeShader, name: str, v
     """Set a uniform that the program must have (a missing one means shader and renderer disagree)."""
     if name not in program:
         raise GratNetError(f"GLSL program lacks uniform {name!r}; the shaders and the renderer disagree")
-    member = program[name]
+    # A plain uniform: the stubs' union also has blocks, attributes and varyings, which no caller names.
+    member = cast(moderngl.Uniform, program[name])
     if isinstance(value, np.ndarray):
-        member.write(value.tobytes())  # type: ignore[union-attr]
+        member.write(value.tobytes())
     else:
-        member.value = value  # type: ignore[union-attr]
+        member.value = value
 
 
 def ior_uniform(ior: float | None) -> float:
@@ -102,12 +106,12 @@ class ShadingPrograms:
     def configure_program(self, program: moderngl.Program, name: str) -> None:
         """Set the material's uniforms on a freshly compiled ``program`` (``name`` without variant suffix)."""
 
-    def material_textures(self) -> tuple[tuple[moderngl.Texture, int], ...]:
+    def material_textures(self) -> tuple[tuple[MaterialTexture, int], ...]:
         """``(texture, unit)`` pairs the material's programs read."""
         return ()
 
     def skip_uniforms(self, program: moderngl.Program | moderngl.ComputeShader, skip_threshold: float | None
-                      ) -> tuple[moderngl.Texture, int]:
+                      ) -> tuple[MaterialTexture, int]:
         """Set the skipping uniforms on ``program``; returns ``(texture, unit)`` to bind."""
         raise NotImplementedError
 
@@ -153,7 +157,8 @@ class ShadingPrograms:
         for texture, unit in self.material_textures():
             texture.use(location=unit)
 
-    def draw(self, key: str, framebuffer: moderngl.Framebuffer, textures: tuple[tuple[moderngl.Texture, int], ...] = (),
+    def draw(self, key: str, framebuffer: moderngl.Framebuffer,
+             textures: tuple[tuple[MaterialTexture, int], ...] = (),
              scissor: tuple[int, int, int, int] | None = None) -> None:
         """One full-screen triangle of program ``key`` into ``framebuffer`` (only inside ``scissor`` = x, y,
         width, height in GL pixels when given), with blending/depth test off and the caller's framebuffer and

@@ -5,7 +5,7 @@
 here instead, with the very operations colour-science performs for ``XYZ_to_RGB(xyz, "sRGB")`` and the sRGB
 ``cctf_encoding`` (its chromatic adaptation from the sRGB white point to itself, a matrix within 3e-17 of the
 identity, then ``matrix_XYZ_to_RGB``, each applied as ``np.matmul``; then clipping, the sRGB transfer function
-and rounding), so the bytes are the same as ``gratnet render``'s: tests/test_viewer_display.py compares them
+and rounding), so the bytes are the same as ``gratnet render``'s: tests/runtime/test_viewer_display.py compares them
 bit for bit. No GL, no colour-science.
 """
 

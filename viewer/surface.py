@@ -31,10 +31,10 @@ MAX_IMAGE_SIZE = 16384
 ATTRIBUTES = (("in_position", "positions"), ("in_normal", "normals"), ("in_tangent", "tangents"))
 
 
-def check_size(size: object) -> tuple[int, int]:
+def check_size(size: tuple[int, int]) -> tuple[int, int]:
     """``(width, height)`` from a pair of positive integers ≤ :data:`MAX_IMAGE_SIZE`, else GratNetError."""
     try:
-        width, height = size  # type: ignore[misc]
+        width, height = size
     except (TypeError, ValueError):
         raise GratNetError(f"image size must be (width, height), got {size!r}") from None
     for value in (width, height):

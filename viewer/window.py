@@ -356,7 +356,7 @@ class ViewerWindow:
 
     def _panel(self) -> None:
         """The panel: the status region, then every control at a fixed place; it fits a 512-pixel-high window
-        (tests/test_viewer_window.py)."""
+        (tests/runtime/test_viewer_window.py)."""
         imgui, app = self._imgui, self.app
         state = app.state
         display = imgui.get_io().display_size

@@ -7,6 +7,9 @@
 # fast_models_table.py.
 # Usage: bash docs/experiments/probes/fast_models_screen.sh [CANDIDATE ...]   (default: every candidate below)
 #   OUT=out/fast (volume, runs, slice cache), EPOCHS=3, GRATNET=.venv/bin/gratnet
+# The band (--first-frequency) and line (--grid-lines) candidates need fast_models_screen.patch, which is not
+# part of GratNet: `git checkout 54c7d34 && git apply docs/experiments/probes/fast_models_screen.patch`, then
+# run this script from that tree (docs/experiments/2026-11-27-fast-models-screen.md).
 set -euo pipefail
 cd "$(dirname "$0")/../../.."
 gratnet=${GRATNET:-.venv/bin/gratnet}
@@ -35,10 +38,15 @@ declare -A candidates=(
     [ln4-L4-h56]="--hidden 56,32,16 --grid-levels 3 --grid-resolution 251 --grid-t-resolution 6 --grid-features 4 --frequencies 4 --t-frequencies 2 --grid-lines 1001"
     [ln4-L8-h40]="--hidden 40,24,12 --grid-levels 3 --grid-resolution 251 --grid-t-resolution 6 --grid-features 4 --frequencies 8 --t-frequencies 2 --grid-lines 1001"
     [ln4-L2-h48]="--hidden 48,24 --grid-levels 3 --grid-resolution 251 --grid-t-resolution 6 --grid-features 4 --frequencies 2 --t-frequencies 1 --grid-lines 1001"
+    # Lines and a band together.
+    [ln4-b12-h48]="--hidden 48,24,12 --grid-levels 3 --grid-resolution 251 --grid-t-resolution 6 --grid-features 4 --first-frequency 12 --grid-lines 1001"
+    # Narrower funnels on fewer frequencies, the grid as shipped.
+    [g4-L19-h28]="--hidden 28,16 --grid-levels 3 --grid-resolution 251 --grid-t-resolution 6 --grid-features 4"
+    [g4-L12-h40]="--hidden 40,24 --grid-levels 3 --grid-resolution 251 --grid-t-resolution 6 --grid-features 4 --frequencies 12"
     [ln8-L4-h48]="--hidden 48,32,16 --grid-levels 3 --grid-resolution 251 --grid-t-resolution 5 --grid-features 8 --frequencies 4 --t-frequencies 2 --grid-lines 1001"
 )
-order=(base g4-b12-h48 g8-b12-h40 ln4-L4-h56 g4-L4-h56 ln4-L8-h40 ln4-L2-h48 ln8-L4-h48 g4-L19-h24 g4-b14-h32 g8-L4-h56
-       g8-L8-h44 g4x4-501-L4-h56 g8-L2-h40)
+order=(base g4-b12-h48 g8-b12-h40 ln4-L4-h56 g4-L4-h56 ln4-b12-h48 g4-L19-h28 g4-L12-h40 g8-L8-h44 ln4-L8-h40 g4-L19-h24 ln4-L2-h48
+       ln8-L4-h48 g4-b14-h32 g8-L4-h56 g4x4-501-L4-h56 g8-L2-h40)
 names=("$@")
 [ ${#names[@]} -gt 0 ] || names=("${order[@]}")
 for name in "${names[@]}"; do

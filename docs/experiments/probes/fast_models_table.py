@@ -48,7 +48,8 @@ def main() -> None:
     rows = [row for folder in sorted(arguments.runs.iterdir()) if folder.is_dir()
             if (row := read_run(folder)) is not None]
     base = next((row for row in rows if row["name"] == "base"), None)
-    print("| run | layers | MACs | grid values | file MB | train s | FLIP (0°, 0°) | mean of 8 | ×base (0°,0°) | ×base mean |")
+    print("| run | layers | MACs | grid values | file MB | train s | FLIP (0°, 0°) | mean of 8 | ×base (0°,0°) "
+          "| ×base mean |")
     print("|---|---|---|---|---|---|---|---|---|---|")
     for row in sorted(rows, key=lambda r: r["macs"]):
         ratio = (f"{row['flip_0_0'] / base['flip_0_0']:.2f} | {row['flip_mean'] / base['flip_mean']:.2f}"

@@ -1,0 +1,250 @@
+"""What several test modules share: the repository's paths, random models and key sets, the plane's numpy
+reference, small meshes and the viewer's fake clock. Test modules import from here (and take fixtures from
+conftest.py), never from one another: tests/contract/test_architecture.py checks that.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import TYPE_CHECKING
+
+import numpy as np
+
+from gratnet.brdf import a_term, direction
+from gratnet.encoding import EncodingSpec, RangeSpec
+from gratnet.modelfile import ModelFile
+from gratnet.precision import OWN_KEYS, UNIT_ROUNDOFF, DriverErrors, assert_within, driver_bound, raster_key_error
+from viewer.state import ViewerState
+
+if TYPE_CHECKING:
+    from viewer.camera import Camera, Light
+
+#: The repository's root (tests/ is one below it).
+REPO = Path(__file__).resolve().parents[1]
+#: The shipped models and their files.
+ASSETS = REPO / "assets"
+#: Data shared between checkouts (height-field scans), beside the repository; tests skip without it.
+SHARED_DATA = REPO.parent / "shared" / "data"
+
+
+# --------------------------------------------------------------------------------------------------
+# Random models and keys (the GLSL parity tests, the deferred and tiled paths, the precision bound)
+
+
+#: random_model's encoding.
+SPEC = EncodingSpec.for_grid(101, 5)  # 163 features, s ≈ 1.24, top frequency 50π
+#: The GLSL parity tests' relative tolerance (assert_relative).
+RELATIVE = 1e-4
+
+
+def random_model(
+    sizes: list[int],
+    activation: str = "silu",
+    output_activation: str = "clamp",
+    scheme: str = "regular",
+    range_kind: str = "power-log",
+    spec: EncodingSpec = SPEC,
+    seed: int = 0,
+) -> ModelFile:
+    """A random funnel whose outputs mostly land inside (0, 1), where eq. 7 is well conditioned."""
+    rng = np.random.default_rng(seed)
+    weights, biases = [], []
+    for inputs, outputs in zip(sizes[:-1], sizes[1:], strict=False):
+        weights.append((rng.standard_normal((outputs, inputs)) / np.sqrt(inputs)).astype(np.float32))
+        biases.append((0.1 * rng.standard_normal(outputs)).astype(np.float32))
+    weights[-1] = (0.3 * weights[-1]).astype(np.float32)
+    biases[-1] = np.array([0.55, 0.6, 0.65], dtype=np.float32)
+    return ModelFile(list(sizes), weights, biases, activation, output_activation, spec, RangeSpec(kind=range_kind),
+                     scheme)
+
+
+def parity_keys() -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """~270 key vectors: random direction pairs plus normal incidence, |w| → 0 and u² + v² → 4."""
+    rng = np.random.default_rng(7)
+    count = 220
+    theta = np.degrees(np.arccos(rng.uniform(0.0, 1.0, (2, count))))  # uniform over the hemisphere
+    phi = rng.uniform(0.0, 360.0, (2, count))
+    light = np.stack([direction(t, p) for t, p in zip(theta[0], phi[0], strict=True)])
+    view = np.stack([direction(t, p) for t, p in zip(theta[1], phi[1], strict=True)])
+    keys = [-(light + view)]
+    keys.append(np.array([[0.0, 0.0, w] for w in (0.0, -1e-7, -1e-3, -0.5, -1.0, -1.999, -2.0)]))
+    angles = np.radians(np.arange(0.0, 360.0, 30.0))
+    for gap in (1e-2, 1e-3, 1e-5):  # u² + v² = 4 − gap, with w inside the physical ball and just at its edge
+        radius = np.sqrt(4.0 - gap)
+        for w in (0.0, -0.5 * np.sqrt(gap), -np.sqrt(gap)):
+            keys.append(np.stack([radius * np.cos(angles), radius * np.sin(angles), np.full_like(angles, w)], -1))
+    keys.append(np.array([[2.0, 0.0, 0.0], [0.0, -2.0, 0.0], [1.0, 1.0, -1e-6], [-0.3, 0.2, -2.0]]))
+    stacked = np.concatenate(keys)
+    # The GPU receives float32 keys; the reference is evaluated at exactly those values.
+    stacked = stacked.astype(np.float32).astype(np.float64)
+    return stacked[:, 0], stacked[:, 1], stacked[:, 2]
+
+
+def assert_relative(actual: np.ndarray, expected: np.ndarray, relative: float, floor: float) -> None:
+    error = np.abs(np.asarray(actual, dtype=np.float64) - expected)
+    allowed = relative * np.maximum(np.abs(expected), floor)
+    worst = int(np.argmax(error / allowed))
+    assert np.all(error <= allowed), (
+        f"max error {error.flat[worst]:.3g} at {np.unravel_index(worst, error.shape)} "
+        f"(value {expected.flat[worst]:.6g}), allowed {allowed.flat[worst]:.3g}"
+    )
+
+
+# --------------------------------------------------------------------------------------------------
+# GLSL sources written to a folder (the preprocessor's error messages: the parity and the baked path's tests)
+
+
+def write_shaders(root: Path, files: dict[str, str]) -> Path:
+    for name, text in files.items():
+        (root / name).write_text(text, encoding="utf-8")
+    return root
+
+
+PROGRAM = """// a test program
+#include "fullscreen_test.glsl"
+#ifdef FRAGMENT_SHADER
+#include "broken.glsl"
+layout(location = 0) out vec4 colour;
+void main() { colour = vec4(helper()); }
+#endif
+"""
+FULLSCREEN = """#ifdef VERTEX_SHADER
+void main() { gl_Position = vec4(0.0, 0.0, 0.0, 1.0); }
+#endif
+"""
+
+
+# --------------------------------------------------------------------------------------------------
+# Model files
+
+
+def flip_in_member(path: Path, name: str, offset: int | None = None, mask: int = 0x40) -> bytes:
+    """The bytes of the archive at ``path`` with one byte of member ``name``'s stored (deflated or not) data XORed
+    with ``mask``: ``offset`` bytes into that data (its middle by default), never in a zip header, whose spare
+    fields (times, extras) no reader checks."""
+    import zipfile
+
+    data = bytearray(path.read_bytes())
+    with zipfile.ZipFile(path) as archive:
+        member = archive.getinfo(name)
+    header = member.header_offset  # local header: 30 bytes, then the name and the extra field (lengths at 26, 28)
+    start = header + 30 + int.from_bytes(data[header + 26:header + 28], "little") + int.from_bytes(
+        data[header + 28:header + 30], "little")
+    offset = member.compress_size // 2 if offset is None else offset
+    assert 0 <= offset < member.compress_size
+    data[start + offset] ^= mask
+    return bytes(data)
+
+
+# --------------------------------------------------------------------------------------------------
+# The plane render's numpy reference (the forward and deferred paths, the precision bound)
+
+
+def plane_geometry(camera: Camera, light: Light, size: tuple[int, int]) -> dict[str, np.ndarray]:
+    """Each pixel's ray hitting the infinite plane z = 0 (float64, ``(H, W, …)``): the surface ``point``, the
+    ``key`` −(ωi + ωo), ``a`` = A(ωi, ωo) (ior 1.5) and the point light's ``irradiance`` there (1/d²)."""
+    width, height = size
+    points, views = [], []
+    for row in range(height):
+        for column in range(width):
+            eye, ray = camera.pixel_ray(row, column, width, height)
+            points.append(eye - eye[2] / ray[2] * ray)
+            views.append(-ray)
+    points, views = np.array(points), np.array(views)
+    offsets = np.asarray(light.vector) - points
+    distances = np.linalg.norm(offsets, axis=1, keepdims=True)
+    lights = offsets / distances
+    return {"point": points.reshape(height, width, 3), "key": (-(lights + views)).reshape(height, width, 3),
+            "a": a_term(lights, views, 1.5).reshape(height, width),
+            "irradiance": (light.intensity / distances[:, 0] ** 2).reshape(height, width)}
+
+
+def point_of_key(points: np.ndarray, key: np.ndarray, eye: np.ndarray, light: np.ndarray) -> np.ndarray:
+    """The points of z = 0 (float64, ``(…, 3)``) whose key −(ωi + ωo) for a point light at ``light`` and the eye
+    at ``eye`` is ``key``, by Gauss–Newton from ``points`` (the rays' points: within a sub-pixel step)."""
+
+    def key_at(p: np.ndarray) -> np.ndarray:
+        to_light, to_eye = light - p, eye - p
+        return -(to_light / np.linalg.norm(to_light, axis=-1, keepdims=True)
+                 + to_eye / np.linalg.norm(to_eye, axis=-1, keepdims=True))
+
+    p = np.array(points, dtype=np.float64)
+    step = 1e-6  # metres: the finite-difference Jacobian's step (the key is smooth at this scale)
+    for _ in range(4):
+        residual = key_at(p) - key
+        columns = []
+        for axis in (0, 1):
+            moved = p.copy()
+            moved[..., axis] += step
+            columns.append((key_at(moved) - key_at(p)) / step)
+        jacobian = np.stack(columns, axis=-1)  # (…, 3, 2)
+        normal = np.swapaxes(jacobian, -1, -2) @ jacobian
+        delta = np.linalg.solve(normal, (np.swapaxes(jacobian, -1, -2) @ residual[..., None]))[..., 0]
+        p[..., :2] -= delta
+    return p
+
+
+def check_plane_against_numpy(image: np.ndarray, key_a: np.ndarray, model, camera: Camera, light: Light,
+                              size: tuple[int, int], exposure: float, errors: DriverErrors = OWN_KEYS) -> None:
+    """A plane render against numpy in two well-conditioned steps (docs/physics.md, "Float32 error budget").
+
+    1. Geometry: the key layer against float64 rays, within what a rasterizer's sub-pixel snapping moves
+       (``raster_key_error``); A likewise.
+    2. Shading: ``image`` against exposure · irradiance · A · XYZ(key) at the key and A the shader used
+       (``key_a``: the forward path's key layer), within ``driver_bound``; the irradiance at the surface point
+       whose key is the shader's (``point_of_key``: the sub-pixel move taken out, so a 0.1 % error in the
+       value is not hidden behind the 1/d² of a point 2⁻⁸ pixel away).
+    Comparing the values through the float64 key instead would let a key error of 1e-5 move this model's
+    specular peak (pixel (10, 13): 716.6, v = 0.004, on eq. 6's sqrt) by 3 %: ill-conditioned.
+    """
+    geometry = plane_geometry(camera, light, size)
+    covered = np.ones(image.shape[:2], dtype=bool)
+    assert np.all(image[..., 3] == 1.0)
+    key_error = raster_key_error(geometry["key"], covered)
+    assert_within(key_a[..., :3], geometry["key"], key_error[..., None], "key components")
+    a_error = raster_key_error(geometry["a"][..., None], covered) - 16.0 * UNIT_ROUNDOFF + 1e-5 * geometry["a"]
+    assert_within(key_a[..., 3], geometry["a"], a_error, "A values")
+    key = key_a[..., :3].astype(np.float64)
+    bound = driver_bound(model, key[..., 0], key[..., 1], key[..., 2], errors)
+    point = point_of_key(geometry["point"], key, camera.eye(), np.asarray(light.vector))
+    irradiance = light.intensity / np.sum((np.asarray(light.vector) - point) ** 2, axis=-1)
+    factor = exposure * irradiance * key_a[..., 3].astype(np.float64)
+    expected = factor[..., None] * bound.xyz
+    # The float32 products exposure · irradiance · A · XYZ and the key's own rounding through the 1/d² fit.
+    tolerance = factor[..., None] * bound.bound + 64.0 * UNIT_ROUNDOFF * expected
+    assert expected.max() > 1e-3
+    assert_within(image[..., :3], expected, tolerance, "exposed XYZ values")
+
+
+# --------------------------------------------------------------------------------------------------
+# Meshes and the viewer
+
+
+def two_planes():
+    """Two overlapping squares facing +z, the far one (z = 0) drawn first: overdraw without a pre-pass."""
+    from viewer.meshes import Mesh, plane
+
+    far, near = plane(0.1), plane(0.06)
+    positions = np.concatenate([far.positions, near.positions + np.float32([0.0, 0.0, 0.01])])
+    indices = np.concatenate([far.indices, near.indices + np.uint32(far.positions.shape[0])])
+    return Mesh(positions, np.concatenate([far.normals, near.normals]),
+                np.concatenate([far.tangents, near.tangents]), np.concatenate([far.uvs, near.uvs]),
+                indices.astype(np.uint32))
+
+
+#: A view of the plane that shows the blazed grating's diffraction streak (the viewer's tests).
+PLANE = ViewerState(mesh="plane", camera_distance=0.15, camera_elevation=50.0, light_theta=30.0, light_phi=90.0,
+                    exposure=5000.0)
+
+
+class FakeClock:
+    """A clock the test advances by hand."""
+
+    def __init__(self) -> None:
+        self.now = 1000.0
+
+    def __call__(self) -> float:
+        return self.now
+
+    def advance(self, seconds: float) -> None:
+        self.now += seconds
