@@ -1,7 +1,8 @@
 #!/usr/bin/env bash
 # Set up (idempotent) and run the test suite inside the project's virtual environment: lint (ruff), type check
-# (mypy, configured in pyproject.toml), then the tests marked `timing` (the viewer's latency targets) alone, since a
-# second worker's GL tests on the same 2 cores would measure the machine, not the viewer; then the rest on 2 workers.
+# (mypy, configured in pyproject.toml), then the tests marked `timing` (wall-clock targets: the viewer's latency,
+# Ctrl-C within a second) alone, since a second worker's GL tests on the same 2 cores would measure the machine,
+# not the code; then the rest on 2 workers.
 # Extra arguments go to both pytest runs.
 set -euo pipefail
 cd "$(dirname "$0")/.."
