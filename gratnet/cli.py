@@ -29,7 +29,7 @@ COMMAND_GROUP = "gratnet.commands"
 #: The order of ``gratnet --help``'s list, the order of the work (height field → ground truth → training →
 #: rendering → tools); the metadata lists entry points alphabetically. A subcommand not named here follows.
 HELP_ORDER = ("heightfield", "groundtruth", "brdfslice", "train", "evaluate", "render", "view", "bench",
-              "compare", "mitsuba-render", "sweep")
+              "compare", "mitsuba-render", "sweep", "export")
 
 #: Why no subcommand is found, and the fix: the entry points live in the installed package's metadata.
 NOT_INSTALLED = (f"no gratnet subcommands are registered (entry points {COMMAND_GROUP!r}): the gratnet package "

@@ -11,7 +11,10 @@ cd "$(dirname "$0")/.."
 
 # libllvm19: Dr.Jit (Mitsuba 3's llvm variants) aborts on Debian 12's default LLVM 14/15 ("Cannot select: fmaximum").
 # libxtst6: the viewer's latency test moves the real X pointer (XTest).
-debian_packages=(libegl1 libegl-mesa0 libgbm1 libgl1 libgl1-mesa-dri xvfb libxtst6 libllvm19)
+# glslang-tools, spirv-cross: gratnet export writes HLSL with them, and its tests validate the exported modules.
+# chromium: gratnet export --format web's page is tested in it, headless (Playwright drives it; docs/export.md).
+debian_packages=(libegl1 libegl-mesa0 libgbm1 libgl1 libgl1-mesa-dri xvfb libxtst6 libllvm19 glslang-tools spirv-cross
+                 chromium)
 if command -v apt-get >/dev/null 2>&1 && [ "$(id -u)" = 0 ]; then
     missing=()
     for package in "${debian_packages[@]}"; do

@@ -36,8 +36,8 @@ else:  # pragma: no cover - Python 3.10
 
 
 #: The folders whose .py files are the project's own modules.
-FOLDERS = ("gratnet", "viewer", "trainer", "bench", "sweep", "mitsuba_plugin", "analysis", "shaders", "benchmarks",
-           "tests", "scripts")
+FOLDERS = ("gratnet", "viewer", "trainer", "bench", "sweep", "mitsuba_plugin", "analysis", "export", "shaders",
+           "benchmarks", "tests", "scripts")
 
 #: The longest a source file may be (lines).
 MAX_LINES = 800
@@ -51,9 +51,10 @@ TEST_SHARED = frozenset({"tests.helpers", "tests.conftest"})
 #: stand on it side by side; shaders/ holds the GLSL the viewer loads. The tools stand on top: bench/ times the
 #: runtime against the trainer's torch reference; sweep/ runs trainer/ on Ray and bench/'s measurement and tables;
 #: mitsuba_plugin/ shares the viewer's scene setup; analysis/ reads runs, models and volumes (trainer/'s checkpoints
-#: and slices, viewer/'s renders) into the tables, records and figures the docs, scripts and probes share.
+#: and slices, viewer/'s renders) into the tables, records and figures the docs, scripts and probes share; export/
+#: writes materials for other engines from the model files and the runtime's GLSL (viewer/'s preprocessor).
 #: benchmarks/ and scripts/ may use any package, tests/ anything.
-PACKAGES = ("gratnet", "viewer", "trainer", "shaders", "bench", "sweep", "mitsuba_plugin", "analysis")
+PACKAGES = ("gratnet", "viewer", "trainer", "shaders", "bench", "sweep", "mitsuba_plugin", "analysis", "export")
 ALLOWED_IMPORTS: dict[str, frozenset[str]] = {
     "gratnet": frozenset(),
     "shaders": frozenset(),
@@ -63,6 +64,7 @@ ALLOWED_IMPORTS: dict[str, frozenset[str]] = {
     "sweep": frozenset({"gratnet", "viewer", "trainer", "shaders", "bench"}),
     "mitsuba_plugin": frozenset({"gratnet", "viewer", "trainer", "shaders"}),
     "analysis": frozenset({"gratnet", "viewer", "trainer", "shaders"}),
+    "export": frozenset({"gratnet", "viewer", "shaders"}),
     "benchmarks": frozenset(PACKAGES),
     "scripts": frozenset(PACKAGES),
     "tests": frozenset(FOLDERS),

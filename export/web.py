@@ -1,0 +1,116 @@
+"""``gratnet export --format web``: a self-contained WebGL2 viewer folder (docs/export.md, "The web page").
+
+Files: ``index.html`` and ``gratnet.js`` (export/web/, copied; the JavaScript gets the export's data prepended as
+one ``const EXPORT = {…};`` line), ``meshes.bin`` (the CD disc, sphere and plane of viewer/meshes.py, as
+``gratnet render`` draws them) and per material ``NAME.weights.bin`` (export/glsl.py's packed weights).
+
+The page's network is the GLSL module of ``--format glsl`` as GLSL ES 3.00: a header of precision statements and
+``#define precise`` (empty: WebGL2's GLSL ES 3.00 has no ``precise``; what that costs is measured in
+tests/tools/test_export_web.py), then the module unchanged. The defaults of every view (light, camera, exposure
+per mesh, and the BRDF slice's) are viewer.defaults' own, computed here at export time, so that a URL without
+parameters shows what ``gratnet render`` would.
+
+Feature-grid models are refused: their ``u_grid[chunk]`` is indexed by a loop variable, which GLSL ES 3.00 does not
+allow for sampler arrays (only constant integral expressions).
+"""
+
+from __future__ import annotations
+
+import json
+import shutil
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from export.glsl import GlslModule, glsl_module
+from gratnet.errors import GratNetError
+from gratnet.modelfile import ModelFile
+from viewer.defaults import FOV_DEGREES as _FOV_DEGREES
+
+__all__ = ["ES_HEADER", "MESH_NAMES", "PAGE_FILES", "check_web_model", "es_module", "write_web"]
+
+#: The page's static files (export/web/).
+PAGE_FILES = ("index.html", "gratnet.js")
+#: The meshes the page offers, as ``gratnet render --mesh`` names them.
+MESH_NAMES = ("cd", "sphere", "plane")
+#: What turns the GLSL module into GLSL ES 3.00 for WebGL2 (the page's shaders start with ``#version 300 es``).
+ES_HEADER = ("precision highp float;\nprecision highp int;\nprecision highp sampler2D;\nprecision highp sampler3D;\n"
+             "#define precise\n")
+_PAGE_ROOT = Path(__file__).resolve().parent / "web"
+#: gratnet render's defaults that are not the material's: size (pixels), field of view (degrees), refractive index.
+_SIZE = (512, 512)
+_IOR = 1.5
+
+
+def check_web_model(model: ModelFile, where: str) -> None:
+    """Refuse (one GratNetError) a model the web page cannot show: feature-grid models (module docstring)."""
+    if model.grids:
+        raise GratNetError(f"{where} is a feature-grid model: --format web cannot export it (WebGL2's GLSL ES 3.00 "
+                           f"indexes sampler arrays only by constants; use --format glsl or hlsl)")
+
+
+def es_module(module: GlslModule) -> str:
+    """The module as the page compiles it after ``#version 300 es``."""
+    return ES_HEADER + module.text
+
+
+def _defaults(material: str, fov: float, ior: float) -> dict[str, dict[str, object]]:
+    """viewer.defaults' light, camera and exposure for each mesh and for the BRDF slice."""
+    from viewer.defaults import resolve_defaults
+
+    views: dict[str, dict[str, object]] = {}
+    for view in (*MESH_NAMES, "slice"):
+        found = resolve_defaults(material, "cd" if view == "slice" else view, slice_mode=view == "slice",
+                                 fov_degrees=fov, ior=ior)
+        views[view] = {"light": [found.light_theta_degrees, found.light_phi_degrees],
+                       "camera": [found.camera_distance, found.camera_azimuth_degrees, found.camera_elevation_degrees],
+                       "exposure": found.exposure}
+    return views
+
+
+def _meshes(folder: Path) -> dict[str, dict[str, int]]:
+    """Write meshes.bin (per mesh: positions, normals, tangents as float32 xyz, then uint32 indices); the offsets."""
+    from viewer.catalog import build_mesh
+
+    table: dict[str, dict[str, int]] = {}
+    chunks: list[bytes] = []
+    offset = 0
+    for name in MESH_NAMES:
+        mesh = build_mesh(name)
+        vertices = np.concatenate([mesh.positions, mesh.normals, mesh.tangents], axis=1).astype("<f4").tobytes()
+        indices = mesh.indices.astype("<u4").tobytes()
+        table[name] = {"vertex_offset": offset, "vertex_count": mesh.vertex_count,
+                       "index_offset": offset + len(vertices), "index_count": 3 * mesh.triangle_count}
+        chunks += [vertices, indices]
+        offset += len(vertices) + len(indices)
+    (folder / "meshes.bin").write_bytes(b"".join(chunks))
+    return table
+
+
+def write_web(materials: list[tuple[str, str, ModelFile]], folder: Path) -> dict[str, dict[str, object]]:
+    """Write the page for ``materials`` (file-name stem, the name or path the user gave, model) into ``folder``;
+    the manifest entry of each material."""
+    from viewer.renderer import xyz_to_linear_srgb_matrix
+
+    entries: dict[str, dict[str, object]] = {}
+    page_materials: dict[str, Any] = {}
+    for name, given, model in materials:
+        check_web_model(model, given)
+        module = glsl_module(model, name)
+        (folder / f"{name}.weights.bin").write_bytes(module.weights.astype("<f4").tobytes())
+        width, height = module.weights_size
+        page_materials[name] = {"shader": es_module(module), "weights": f"{name}.weights.bin",
+                                "texels": [width, height],
+                                "defaults": _defaults(given, _FOV_DEGREES, _IOR)}
+        entries[name] = {"weights": f"{name}.weights.bin", "weights_texels": [width, height],
+                         "weights_format": "RGBA32F little-endian", "grids": [], "defaults": page_materials[name][
+                             "defaults"]}
+    data = {"materials": page_materials, "meshes": _meshes(folder),
+            "render": {"size": list(_SIZE), "fov": _FOV_DEGREES, "ior": _IOR},
+            # The EXR of gratnet render is linear sRGB: the page's read-back is too (rows of the matrix).
+            "xyz_to_linear_srgb": np.asarray(xyz_to_linear_srgb_matrix(), dtype=np.float64).tolist()}
+    shutil.copyfile(_PAGE_ROOT / "index.html", folder / "index.html")
+    script = (_PAGE_ROOT / "gratnet.js").read_text(encoding="utf-8")
+    (folder / "gratnet.js").write_text(f"const EXPORT = {json.dumps(data)};\n{script}", encoding="utf-8")
+    return entries

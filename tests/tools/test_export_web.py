@@ -1,0 +1,284 @@
+"""``gratnet export --format web`` (export/web.py, export/web/; docs/export.md, "The web page") in a real browser.
+
+Debian's chromium, headless, driven by Playwright (PyPI ``playwright``, no browser download: the system chromium by
+``executable_path``); the page is served from 127.0.0.1 (a page from file:// cannot fetch its binaries). WebGL2 on
+two backends: Mesa llvmpipe through ANGLE (``--use-angle=gl-egl``) and SwiftShader. Frames are 64 px a side.
+
+- a BRDF slice (``slice=1``) read back with ``window.gratnetReadPixels()`` equals the numpy evaluation of the model
+  file (exposure · A · XYZ, as linear sRGB) within gratnet/precision.py's float32 driver bound: the default bound
+  on llvmpipe, and on SwiftShader the bound with its sin/cos taken as accurate to 2⁻¹⁰ (measured: its 2⁻¹² bound
+  is exceeded);
+- a page without parameters takes gratnet render's defaults (viewer.defaults), on every mesh and the slice;
+- a mesh render (the CD disc, the sphere) at the default view equals ``gratnet render``'s EXR of the same view, and
+  the canvas its PNG within LDR-FLIP 0.005 (llvmpipe; SwiftShader is held to its measured, looser level);
+- a mesh render is drawn (finite, lit pixels, black background); ``ui=0`` shows the picture alone, ``ui=1`` the
+  panel;
+- a bad URL parameter shows one line and no picture; a feature-grid model is refused by the command (exit 2).
+
+Skipped, with the reason, where chromium or Playwright is missing (scripts/setup.sh installs both).
+"""
+
+from __future__ import annotations
+
+import contextlib
+import functools
+import http.server
+import json
+import os
+import shutil
+import threading
+from collections.abc import Iterator
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from gratnet.brdf import a_term, slice_view_directions
+from gratnet.cli import main
+from gratnet.modelfile import evaluate_keys, load_model, save_model
+from gratnet.precision import OWN_KEYS, DriverErrors, assert_within, driver_bound
+from tests.helpers import RELATIVE, random_model
+
+CHROMIUM = shutil.which("chromium") or ("/usr/bin/chromium" if Path("/usr/bin/chromium").exists() else None)
+try:
+    import playwright.sync_api as playwright_api
+except ImportError:  # pragma: no cover - the dev extra installs it
+    playwright_api = None  # type: ignore[assignment]
+
+needs_browser = pytest.mark.skipif(
+    CHROMIUM is None or playwright_api is None,
+    reason="needs Debian's chromium and the playwright package (scripts/setup.sh installs both)")
+
+#: chromium's flags per WebGL2 backend (shared/notes/browsers-and-shader-tools-here.md).
+BACKENDS = {
+    "llvmpipe": ["--use-angle=gl-egl", "--ignore-gpu-blocklist"],
+    "swiftshader": ["--use-angle=swiftshader", "--enable-unsafe-swiftshader"],
+}
+#: The float32 error each backend is held to: llvmpipe the default; SwiftShader's sin/cos are less exact.
+BACKEND_ERRORS = {"llvmpipe": OWN_KEYS, "swiftshader": DriverErrors(key_error=0.0, sinusoid_error=2.0**-10)}
+SIZE = 64
+#: A mesh render against gratnet render's, per backend: the share of pixels allowed beyond 10⁻³ of the peak, and the
+#: largest LDR-FLIP of the canvas against its PNG (test_a_mesh_render_equals_gratnet_renders_exr_and_its_png…).
+MESH_TOLERANCE = {"llvmpipe": (0.0, 0.005), "swiftshader": (0.06, 0.02)}
+
+
+class _QuietHandler(http.server.SimpleHTTPRequestHandler):
+    def log_message(self, format: str, *args: object) -> None:  # noqa: A002 - the base class's name
+        pass
+
+
+@pytest.fixture(scope="module")
+def site(tmp_path_factory) -> Iterator[tuple[str, Path]]:
+    """cd and a random model (simple scheme, log range) exported once, served on 127.0.0.1."""
+    folder = tmp_path_factory.mktemp("web")
+    model_path = folder / "random-simple.npz"
+    save_model(model_path, random_model([163, 21, 13, 3], "relu", "sigmoid", "simple", "log", seed=3))
+    out = folder / "site"
+    assert main(["export", "cd", str(model_path), "--format", "web", "--out", str(out), "--quiet"]) == 0
+    server = http.server.ThreadingHTTPServer(("127.0.0.1", 0), functools.partial(_QuietHandler, directory=str(out)))
+    thread = threading.Thread(target=server.serve_forever, daemon=True)
+    thread.start()
+    try:
+        yield f"http://127.0.0.1:{server.server_port}/index.html", out
+    finally:
+        server.shutdown()
+        server.server_close()
+
+
+@pytest.fixture(scope="module", params=sorted(BACKENDS))
+def browser(request, tmp_path_factory) -> Iterator[tuple[str, object]]:
+    """One headless chromium per backend, its profile and caches in a temporary folder."""
+    home = tmp_path_factory.mktemp("chromium-home")
+    environment = {"HOME": str(home), "XDG_CONFIG_HOME": str(home / "config"), "XDG_CACHE_HOME": str(home / "cache")}
+    with playwright_api.sync_playwright() as playwright:
+        launched = playwright.chromium.launch(executable_path=CHROMIUM, headless=True, args=BACKENDS[request.param],
+                                              env={**os.environ, **environment})
+        try:
+            yield request.param, launched
+        finally:
+            launched.close()
+
+
+@contextlib.contextmanager
+def _page(browser, url: str) -> Iterator[object]:
+    page = browser[1].new_page()
+    try:
+        page.goto(url)
+        page.wait_for_function("window.gratnetReady === true || window.gratnetError !== undefined", timeout=240_000)
+        yield page
+    finally:
+        page.close()
+
+
+def _read(page) -> np.ndarray:
+    result = page.evaluate("window.gratnetReadPixels()")
+    return np.asarray(result["data"], dtype=np.float64).reshape(result["height"], result["width"], 3)
+
+
+@needs_browser
+@pytest.mark.parametrize("material", ["cd", "random-simple"])
+def test_brdf_slice_equals_numpy_within_the_float32_bound(site, browser, material):
+    from viewer.renderer import xyz_to_linear_srgb_matrix
+
+    url, out = site
+    exposure, ior = 2.0, 1.5
+    with _page(browser, f"{url}?material={material}&slice=1&ui=0&size={SIZE}&light=30,20&exposure={exposure}"
+                        f"&ior={ior}") as page:
+        assert page.evaluate("window.gratnetError") is None
+        actual = _read(page)
+        config = page.evaluate("window.gratnetConfig")
+    config_file = json.loads((out / "export.config.json").read_text(encoding="utf-8"))
+    model = load_model(config_file["materials"][material]["model"])
+    light = np.asarray(config["light_vector"], dtype=np.float32)  # the float32 uniform the page set
+    view, inside = slice_view_directions(SIZE)
+    view = view.astype(np.float32)
+    key = -(light + view)  # float32, as the shader forms it
+    u, v, w = (key[..., i].astype(np.float64) for i in range(3))
+    a = a_term(np.broadcast_to(light.astype(np.float64), view.shape), view.astype(np.float64), ior)
+    factor = np.where(inside, exposure * a, 0.0)[..., None]
+    xyz = evaluate_keys(model, u, v, w)
+    matrix = xyz_to_linear_srgb_matrix()
+    expected = (factor * xyz) @ matrix.T
+    assert np.count_nonzero(inside & (a > 0)) > SIZE * SIZE // 2 and np.abs(expected).max() > 0
+    bound_xyz = factor * (driver_bound(model, u, v, w, BACKEND_ERRORS[browser[0]]).bound + RELATIVE * np.abs(xyz))
+    bound = bound_xyz @ np.abs(matrix).T  # |M d| ≤ |M| |d| per channel
+    assert np.all(actual[~inside] == 0.0)
+    assert_within(actual, expected, bound, f"{material} slice on {browser[0]} (linear sRGB)", floor=1e-30)
+
+
+@needs_browser
+def test_without_parameters_the_page_takes_gratnet_renders_defaults(site, browser):
+    from viewer.defaults import resolve_defaults
+
+    url, _ = site
+    for query, mesh, slice_mode in (("", "cd", False), ("?mesh=sphere", "sphere", False),
+                                    ("?mesh=plane", "plane", False), ("?slice=1&size=8", "cd", True)):
+        suffix = "&" if query else "?"
+        small = "" if "size" in query else f"{suffix}size=8"  # keep the frame cheap; the size is not a default here
+        with _page(browser, url + query + small) as page:
+            config = page.evaluate("window.gratnetConfig")
+        expected = resolve_defaults("cd", mesh, slice_mode=slice_mode)
+        assert config["material"] == "cd" and config["slice"] is slice_mode
+        assert config["light"] == [expected.light_theta_degrees, expected.light_phi_degrees]
+        assert config["exposure"] == expected.exposure and config["ior"] == 1.5
+        if not slice_mode:
+            assert config["mesh"] == mesh
+            assert config["camera"] == [expected.camera_distance, expected.camera_azimuth_degrees,
+                                        expected.camera_elevation_degrees]
+
+
+@needs_browser
+def test_a_mesh_render_is_drawn_and_ui_0_hides_the_panel(site, browser):
+    url, _ = site
+    with _page(browser, f"{url}?material=cd&mesh=cd&ui=0&size={SIZE},48") as page:
+        image = _read(page)
+        assert page.evaluate("document.getElementById('panel').hidden") is True
+        frame_ms = page.evaluate("window.gratnetFrameMs")
+    assert image.shape == (48, SIZE, 3) and np.all(np.isfinite(image))
+    assert np.count_nonzero(image.max(axis=-1) > 0) > 50  # the disc is lit: not a black frame
+    assert np.all(image[0, 0] == 0.0)  # the corner is background
+    assert frame_ms > 0
+    with _page(browser, f"{url}?mesh=sphere&size=16") as page:
+        assert page.evaluate("document.getElementById('panel').hidden") is False
+        assert page.evaluate("document.getElementById('frame-time').textContent").startswith("frame: ")
+
+
+@needs_browser
+def test_sliders_drag_wheel_and_mesh_picker_redraw(site, browser):
+    url, _ = site
+    with _page(browser, f"{url}?material=cd&mesh=plane&size=24") as page:
+        before = page.evaluate("window.gratnetConfig")
+
+        def change(selector: str, value: str) -> None:
+            page.evaluate("([s, v]) => { const e = document.querySelector(s); e.value = v; "
+                          "e.dispatchEvent(new Event('input')); }", [selector, value])
+
+        change("#theta", "45")
+        change("#phi", "-30")
+        change("#exposure", "1")  # log10: exposure 10
+        change("#ior", "2")
+        page.wait_for_function("window.gratnetConfig.light[0] === 45 && window.gratnetConfig.ior === 2")
+        after = page.evaluate("window.gratnetConfig")
+        assert after["light"] == [45, -30] and abs(after["exposure"] - 10.0) < 1e-9
+        box = page.locator("#view").bounding_box()
+        page.mouse.move(box["x"] + 12, box["y"] + 12)
+        page.mouse.down()
+        page.mouse.move(box["x"] + 22, box["y"] + 2)
+        page.mouse.up()
+        page.mouse.wheel(0, 200)
+        page.wait_for_function(f"window.gratnetConfig.camera[0] > {before['camera'][0]}")
+        camera = page.evaluate("window.gratnetConfig.camera")
+        assert camera[1] != before["camera"][1] and camera[2] != before["camera"][2]
+        change("#mesh", "slice")
+        page.wait_for_function("window.gratnetConfig.slice === true")
+        assert "frame: " in page.evaluate("document.getElementById('frame-time').textContent")
+        assert page.evaluate("window.gratnetError") is None
+
+
+def _exr_rgb(path: Path) -> np.ndarray:
+    import OpenEXR
+
+    with OpenEXR.File(str(path)) as file:
+        return np.asarray(file.parts[0].channels["RGB"].pixels, dtype=np.float64)
+
+
+@needs_browser
+@pytest.mark.parametrize("mesh", ["cd", "sphere"])
+def test_a_mesh_render_equals_gratnet_renders_exr_and_its_png_within_flip(site, browser, mesh, tmp_path):
+    """The page's default view of a mesh against ``gratnet render`` of the same material and mesh (its defaults too):
+    the linear floats against the EXR, the canvas against the PNG (LDR-FLIP ≤ 0.005, issue 44's target)."""
+    import io
+
+    from PIL import Image
+
+    from gratnet.display import ldr_flip
+
+    url, _ = site
+    size = 64
+    for suffix in ("exr", "png"):
+        assert main(["render", "--material", "cd", "--mesh", mesh, "--size", f"{size},{size}", "--out",
+                     str(tmp_path / f"render.{suffix}"), "--quiet"]) == 0
+    with _page(browser, f"{url}?material=cd&mesh={mesh}&size={size}&ui=0") as page:
+        linear = _read(page)
+        shot = np.asarray(Image.open(io.BytesIO(page.locator("#view").screenshot())).convert("RGB"), np.float64)
+    reference = _exr_rgb(tmp_path / "render.exr")
+    peak = float(np.abs(reference).max())
+    covered = reference.max(axis=-1) > 0, linear.max(axis=-1) > 0
+    # The edges of the mesh may rasterize differently on another driver: at most 1 % of the covered pixels.
+    assert np.count_nonzero(covered[0] ^ covered[1]) <= 0.01 * np.count_nonzero(covered[0])
+    both = covered[0] & covered[1]
+    over = np.abs(linear - reference)[both].max(axis=-1) > 1e-3 * peak
+    # llvmpipe rasterizes as gratnet render's llvmpipe does: every pixel agrees, and FLIP meets issue 44's 0.005.
+    # SwiftShader does not at this size: its interpolated and normalised directions differ, and on sharp diffraction
+    # lines a slightly different key is a visibly different value (docs/export.md: 3.3 % of the sphere's pixels
+    # beyond 10⁻³ of the peak, FLIP 0.010 on the CD at 64²; FLIP 0.002–0.004 at 256² and 512²). There the test holds
+    # the measured level with a margin, a guard against getting worse, not the issue's target.
+    outliers, flip_target = MESH_TOLERANCE[browser[0]]
+    assert np.count_nonzero(over) <= outliers * np.count_nonzero(both), (
+        f"{mesh}: {np.count_nonzero(over)} of {np.count_nonzero(both)} pixels beyond 1e-3 of the peak")
+    png = np.asarray(Image.open(tmp_path / "render.png").convert("RGB"), np.float64)
+    assert shot.shape == png.shape
+    flip, _ = ldr_flip(png / 255.0, shot / 255.0)
+    assert flip <= flip_target, f"{mesh}: LDR-FLIP {flip:.4f}"
+
+
+@needs_browser
+@pytest.mark.parametrize(("query", "words"), [
+    ("exposure=abc", "exposure=abc"), ("mesh=teapot", "mesh=teapot"), ("material=nothing", "material=nothing"),
+    ("slice=1&size=64,32", "square"), ("camera=0,0,30", "camera distance"), ("colour=red", "unknown parameter"),
+])
+def test_a_bad_url_parameter_shows_one_line_and_no_picture(site, browser, query, words):
+    url, _ = site
+    with _page(browser, f"{url}?{query}") as page:
+        error = page.evaluate("window.gratnetError")
+        line = page.evaluate("document.getElementById('error').textContent")
+        assert page.evaluate("document.getElementById('view').hidden") is True
+        assert page.evaluate("window.gratnetReady") is None
+    assert words in error and "\n" not in line and line.startswith("gratnet: ")
+
+
+def test_a_feature_grid_model_is_refused_for_the_web_in_one_line(tmp_path, capsys):
+    assert main(["export", "paper-cd", "--format", "web", "--out", str(tmp_path / "site")]) == 2
+    err = capsys.readouterr().err.strip()
+    assert "feature-grid" in err and "\n" not in err
+    assert list(tmp_path.iterdir()) == []
