@@ -1,5 +1,7 @@
 """Build docs/results.md from data alone: assets/*/ (metrics, histories, model files), docs/data/*.json and the
 presets of trainer/datasets.py, with fixed template text here (no hand-typed figures, no hand-written section).
+Each material's cost comes from its model file (gratnet.cost), its 1080p CD frame time from
+docs/data/frame_times_1080p.json (benchmarks/frame_time_1080p.py) when that record exists.
 
 python -m analysis.results_table [--out docs/results.md]
 
@@ -13,8 +15,10 @@ import json
 import re
 from pathlib import Path
 
-from analysis import oracle_table, seed_summary
+from analysis import oracle_table, pareto, seed_summary
 from gratnet.atomic import write_text_atomic
+from gratnet.cost import ModelCost, megabytes
+from gratnet.quality import ACCURATE
 from trainer.datasets import PRESETS
 from trainer.evaluate import STANDARD_SLICE_LABELS
 
@@ -207,13 +211,63 @@ def paper_oracle(folder: Path, normal: dict, slices: int | None) -> float | None
     return None
 
 
+#: benchmarks/frame_time_1080p.py's record: each shipped material's 1080p CD frame on the machine that ran it.
+FRAME_TIMES_JSON = Path("docs/data/frame_times_1080p.json")
+
+
+def frame_times(path: Path = FRAME_TIMES_JSON) -> dict | None:
+    """The frame-time record, or None when there is none."""
+    return json.loads(path.read_text(encoding="utf-8")) if path.exists() else None
+
+
+def _renderer(record: dict) -> str:
+    """A short name of the record's GL renderer: 'llvmpipe', else its name up to the first '(' or '/'."""
+    name = str(record.get("machine", {}).get("gl_renderer") or "?")
+    return "llvmpipe" if "llvmpipe" in name else name.split("(")[0].split("/")[0].strip()
+
+
+def cost_header(record: dict | None) -> tuple[str, str]:
+    """The cost columns' header cells and their separator cells (the frame column only with a record)."""
+    cells = ["MACs/pixel", "grid values read", "MB on disk", "MB on GPU"]
+    if record is not None:
+        width, height = record["width"], record["height"]
+        size = "1080p" if (width, height) == (1920, 1080) else f"{width}×{height}"
+        cells.append(f"{size} CD frame (ms, {_renderer(record)})")
+    return " | ".join(cells), "---|" * len(cells)
+
+
+def _frame_note(record: dict | None) -> list[str]:
+    """How the frame column was measured (the record's command, date, machine and load), or how to add one."""
+    if record is None:
+        return ["No frame times are recorded yet: `python benchmarks/frame_time_1080p.py` on an idle machine adds",
+                "a column of them (docs/data/frame_times_1080p.json)."]
+    machine = record["machine"]
+    return [f"The frame column: `{record['command']}` on {record['date'][:10]} ({machine['cpu']}, {machine['cores']}",
+            f"cores, {machine['gl_renderer']}, load average {record['load_average_before'][0]:g} before): the CD disc",
+            "as `gratnet render --mesh cd` draws it, 1 sample per pixel, median wall time of each model's frames."]
+
+
+def cost_cells(folder: Path, record: dict | None) -> str:
+    """A material's cost cells (gratnet.cost, from its model file) and its frame from the record ('—' if none)."""
+    cost = ModelCost.of_file(folder / "model.npz")
+    cells = [f"{cost.macs_per_pixel:,}", f"{cost.grid_values_read:,}", megabytes(cost.bytes_on_disk or 0),
+             megabytes(cost.bytes_gpu)]
+    if record is not None:
+        frame = next((row for row in record["models"] if row.get("material") == folder.name and "ms" in row
+                      and row.get("quality") in (None, ACCURATE)), None)  # the material's own (accurate) point
+        cells.append("—" if frame is None else f"{frame['ms']:.4g}")
+    return " | ".join(cells)
+
+
 def paper_datasets_table(assets: Path) -> list[str]:
     """The shipped models of the paper's datasets (assets/paper-*) against the paper, like for like."""
+    record = frame_times()
+    header, separator = cost_header(record)
     lines = [
         "| dataset | volume (u*, v* × w) | network | parameters | grid (MB; share of the volume) | epochs "
         "× batch (device) | FLIP (0°, 0°) | oracle | paper's column | paper | beats paper "
-        "| other 4 slices: worst / (0°, 0°) | further 3 views: worst / (0°, 0°) | PSNR (dB) |",
-        "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|",
+        f"| other 4 slices: worst / (0°, 0°) | further 3 views: worst / (0°, 0°) | PSNR (dB) | {header} |",
+        "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|" + separator,
     ]
     shipped = set()
     for folder in sorted(assets.glob("paper-*")):
@@ -249,7 +303,7 @@ def paper_datasets_table(assets: Path) -> list[str]:
             f"{len(history.get('epochs', []))} × {config.get('batch_size', '?')} ({history.get('device', '?')}) | "
             f"{_number(flip)} | {_number(oracle)} | {column} | "
             f"{_number(paper)} | {met} | {_ratio(others, flip)} | {_ratio(views, flip)} | "
-            f"{_number(normal.get('psnr_xyz'), 3)} |"
+            f"{_number(normal.get('psnr_xyz'), 3)} | {cost_cells(folder, record)} |"
         )
     missing = [f"{column} ({figure})" for name, (column, figure) in PAPER_COLUMNS.items() if name not in shipped]
     if missing:
@@ -508,6 +562,9 @@ def main() -> None:
     parser.add_argument("--assets", default="assets")
     parser.add_argument("--out", default="docs/results.md")
     arguments = parser.parse_args()
+    record = frame_times()
+    points = pareto.collect(Path(arguments.assets))
+    pareto.write_figures(points, Path(arguments.out).parent / "images")  # the figures the page shows, redrawn
     lines = [
         "# Results: shipped materials",
         "",
@@ -532,8 +589,14 @@ def main() -> None:
         "for corner cubes and pits), a grid ≤ 1/20 of the volume, every other slice within 1.5×.",
         "`bash scripts/reproduce_paper_models.sh [NAME …]` rebuilds them from those recorded commands.",
         "",
+        "Cost (both tables; gratnet.cost, docs/formats.md \"Cost of a model\"): multiply-adds per pixel (MLP and",
+        "grid interpolation), grid values read per pixel, the model file's size and the bytes the renderer uploads",
+        "(MB = 10⁶ bytes).",
+        *_frame_note(record),
+        "",
         *paper_datasets_table(Path(arguments.assets)),
         "",
+        *pareto.pareto_section(points),
         *_seeds_section(),
         *_meshes_section(),
         "## Earlier materials: 20 µm tiles (not the paper's datasets)",
@@ -543,8 +606,8 @@ def main() -> None:
         "figure is not like for like.",
         "",
         "| material | parameters | split | epochs | training (s, CPU) | FLIP (ours) | FLIP (paper) | target met "
-        "| PSNR XYZ (dB) | SSIM YCbCr |",
-        "|---|---|---|---|---|---|---|---|---|---|",
+        f"| PSNR XYZ (dB) | SSIM YCbCr | {cost_header(record)[0]} |",
+        "|---|---|---|---|---|---|---|---|---|---|" + cost_header(record)[1],
     ]
     details = []
     for folder in sorted(Path(arguments.assets).iterdir()):
@@ -566,7 +629,7 @@ def main() -> None:
             f"| {folder.name} | {metrics['model']['parameters']} | {_split(folder)} | {len(_history(folder))} | "
             f"{_number(training.get('train_seconds'))} | "
             f"{_number(flip)} | {_number(paper)} | {met} | {_number(normal.get('psnr_xyz'))} | "
-            f"{_number(normal.get('ssim_ycbcr'))} |"
+            f"{_number(normal.get('ssim_ycbcr'))} | {cost_cells(folder, record)} |"
         )
         details += _slice_details(folder, metrics, slices, views)
     lines += [

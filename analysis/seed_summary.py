@@ -2,7 +2,8 @@
 
     python -m analysis.seed_summary RUNS_DIR [--json OUT.json] [--markdown OUT.md]
 
-RUNS_DIR holds NAME/seed-K/metrics.json (``SEEDS="0 1 2" bash scripts/reproduce_paper_models.sh``). Per dataset:
+RUNS_DIR holds NAME/seed-K/metrics.json and, for a material's quality points, NAME/POINT/seed-K/metrics.json
+(``SEEDS="0 1 2" bash scripts/reproduce_paper_models.sh``; a point's row is named NAME/POINT). Per dataset:
 the seeds found, the mean, standard deviation (ddof 1), lowest and highest FLIP at (0°, 0°) 2000 RU, the paper's
 column for it (its preset's ``paper_flip``, trainer/datasets.py) and whether the mean beats it (the rule for shipping a
 recipe), and the mean over the seeds of the worst other paper slice and the worst further view, each over the
@@ -24,9 +25,14 @@ from trainer.evaluate import STANDARD_SLICE_LABELS as SLICE_ORDER
 
 
 def summarise(runs: Path) -> list[dict[str, Any]]:
-    """One row per dataset folder with at least one finished seed."""
+    """One row per dataset folder (and per quality point folder inside one) with at least one finished seed."""
     rows = []
+    folders = []
     for folder in sorted(path for path in runs.iterdir() if path.is_dir()):
+        folders.append((folder.name, folder))
+        folders += [(f"{folder.name}/{point.name}", point) for point in sorted(folder.iterdir())
+                    if point.is_dir() and not point.name.startswith("seed-")]
+    for name, folder in folders:
         seeds = sorted(folder.glob("seed-*/metrics.json"))
         flips, slice_ratios, view_ratios = [], [], []
         for path in seeds:
@@ -40,11 +46,11 @@ def summarise(runs: Path) -> list[dict[str, Any]]:
                 view_ratios.append(max(views) / normal)
         if not flips:
             continue
-        preset = PRESETS.get(folder.name)
+        preset = PRESETS.get(name.split("/")[0])  # a quality point has its material's paper target
         column, target = (preset.paper_column or "—", preset.paper_flip) if preset is not None else ("—", None)
         mean = statistics.fmean(flips)
         rows.append({
-            "dataset": folder.name, "seeds": [path.parent.name for path in seeds], "flip_0_0": flips,
+            "dataset": name, "seeds": [path.parent.name for path in seeds], "flip_0_0": flips,
             "mean": mean, "std": statistics.stdev(flips) if len(flips) > 1 else 0.0, "min": min(flips),
             "max": max(flips), "paper_column": column, "paper": target,
             "mean_beats_paper": None if target is None else mean <= target,

@@ -4,11 +4,14 @@ not a test).
     gratnet bench assets/*/model.npz out/sweep/*/model.npz --out out/bench
     gratnet bench cd --no-slices --scene-sizes 1920x1080 --spp 1,4 --out out/bench-scenes
     gratnet bench cd --no-slices --render-paths deferred --deferred-weights auto,tiled --out out/bench-tiled
+    gratnet bench MODEL --no-slices --scene-sizes 1920x1080 --spp 1 --weights-paths auto --render-paths auto \
+        --out DIR    # the 1080p CD frame as one row of DIR/scenes.jsonl (gratnet evaluate --frame-time's call)
 
 Each MATERIAL is a shipped material name (``assets/NAME/model.npz``) or a model-file path; the error
 figures come from the ``metrics.json`` beside each model file. Writes OUT/bench.json, OUT/bench.md and
 OUT/pareto.png (BRDF slices), OUT/scenes.jsonl and OUT/scenes.md (mesh scenes), and OUT/bench.config.json.
-See :mod:`bench.slices` and :mod:`bench.scenes` for what is measured.
+Every row and table states the model's cost (gratnet.cost: MACs and grid values read per pixel, bytes on disk
+and on the GPU). See :mod:`bench.slices` and :mod:`bench.scenes` for what is measured.
 """
 
 from __future__ import annotations

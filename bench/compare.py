@@ -11,6 +11,10 @@ Views (:func:`views`): for each mesh, the default view ``gratnet render`` takes 
 exposure of viewer.defaults) and two more that no default aims: the light turned 90° in azimuth about the normal,
 and the camera 60° further round and 25° lower (light kept). Every view keeps the default's exposure.
 
+``--quality fast|accurate`` chooses which of a shipped material's points is scored (gratnet.quality; default: the
+accurate one); the views are the material's either way (worked out from its accurate point), so the two points are
+scored on the same scenes. compare.config.json records the point (``compare.quality``) and its ``model_file``.
+
 The mean FLIP is over the pixels the mesh covers (in the reference render); over the whole frame it would count
 the black background as agreement. Writes OUT/compare.md (the table), OUT/compare.json (every figure and the views),
 OUT/compare.png (reference | network | FLIP per view) and OUT/compare.config.json, together (nothing half-written).
@@ -29,7 +33,9 @@ import numpy as np
 
 from gratnet.config import add_arguments, add_quiet_flag, config_field, from_arguments
 from gratnet.errors import GratNetError
+from gratnet.quality import QUALITIES, QUALITY_HELP
 from viewer.defaults import SceneDefaults
+from viewer.scene_config import quality_help
 
 __all__ = ["CompareConfig", "View", "register", "run", "views"]
 
@@ -54,6 +60,8 @@ class CompareConfig:
                                             choices=("float16", "float32"))
     weights_path: str = config_field("auto", "where the network's shader reads its weights: texture, baked or auto "
                                      "(as gratnet render)", choices=("auto", "texture", "baked"))
+    # None when not given (the accurate point); in the saved config the point scored (None for a model file).
+    quality: str | None = config_field(None, QUALITY_HELP, choices=QUALITIES)
 
 
 @dataclasses.dataclass(frozen=True)
@@ -94,14 +102,15 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     parser.add_argument("--out", required=True, metavar="DIR",
                         help="output folder (compare.md, compare.json, compare.png)")
     add_quiet_flag(parser)
-    add_arguments(parser, CompareConfig)
+    quality_help(add_arguments(parser, CompareConfig))
     parser.set_defaults(handler=run)
 
 
-def _check(config: CompareConfig, material: str) -> tuple[Path, list[str]]:
-    """The flags checked before any reading or rendering: sizes, samples, precision, meshes; the material's path."""
+def _check(config: CompareConfig, material: str) -> tuple[Path, CompareConfig, list[str]]:
+    """The flags checked before any reading or rendering: sizes, samples, precision, meshes; the material's model
+    file at its ``--quality`` point, and the config with the point resolved."""
     from gratnet.reference import check_precision
-    from viewer.catalog import check_mesh_spec, resolve_material
+    from viewer.catalog import check_mesh_spec, material_point
     from viewer.surface import check_size
 
     if not config.reference:
@@ -115,7 +124,8 @@ def _check(config: CompareConfig, material: str) -> tuple[Path, list[str]]:
         raise GratNetError("--meshes names no mesh")
     for mesh in meshes:
         check_mesh_spec(mesh)
-    return resolve_material(material), meshes
+    model_path, quality = material_point(material, config.quality)
+    return model_path, dataclasses.replace(config, quality=quality), meshes
 
 
 def run(arguments: argparse.Namespace) -> int:
@@ -132,7 +142,7 @@ def run(arguments: argparse.Namespace) -> int:
     from viewer.scene_config import load_reference
 
     config = from_arguments(CompareConfig, arguments)
-    model_path, meshes = _check(config, arguments.material)
+    model_path, config, meshes = _check(config, arguments.material)
     out = check_output_folder(arguments.out)
     volume = load_reference(config.reference, config.reference_precision, arguments.material)
     scenes = [view for mesh in meshes for view in views(arguments.material, mesh)]

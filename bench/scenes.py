@@ -12,8 +12,10 @@ query's GPU time of the same commands (none for frames over ~3.9 s: moderngl rea
 nanoseconds). Every row records ``GL_RENDERER``. The deferred path is timed per ``--deferred-weights`` form
 (its network kernel and weights: the per-entry SHADE kernel, or the tiled one, issue 32).
 
-Throughput: ``MACs/pixel × evaluations / frame time`` in TMAC/s (the GPU timer's time where there is one, else
-the wall time; the whole frame, G-buffer and compaction included), and its share of the device's peak FP32
+Every row states the model's cost (:class:`gratnet.cost.ModelCost`: MACs and grid values read per pixel, bytes on
+disk and on the GPU). Throughput: ``MACs/pixel × evaluations / frame time`` in TMAC/s (the MACs of the MLP and a
+grid's interpolation; the GPU timer's time where there is one, else the wall time; the whole frame, G-buffer and
+compaction included), and its share of the device's peak FP32
 multiply-add rate (:mod:`bench.devices`: datasheet figures keyed by ``GL_RENDERER``; blank for llvmpipe and
 unknown devices).
 
@@ -30,7 +32,8 @@ from typing import Any
 
 import numpy as np
 
-from bench.tables import format_cell
+from bench.tables import COST_HEADER, cost_cells, format_cell
+from gratnet.cost import ModelCost
 from gratnet.errors import GratNetError
 
 __all__ = ["SceneView", "available_render_paths", "check_render_paths", "json_lines", "markdown_table",
@@ -115,6 +118,7 @@ def scene_frame_times(ctx: Any, model: Any, model_path: str, view: SceneView, we
 
     start = time.perf_counter()
     peak = fp32_tmac_per_s(str(ctx.info.get("GL_RENDERER", "")))
+    macs = ModelCost.of(model).macs_per_pixel  # per evaluation: the MLP's and a grid's interpolation
     renderer = SceneRenderer(ctx, model, weights_path=weights_path, render_path=render_path,
                              deferred_weights=deferred_weights)
     buffers = None
@@ -139,7 +143,7 @@ def scene_frame_times(ctx: Any, model: Any, model_path: str, view: SceneView, we
                 gpu_seconds = statistics.median(timed_gpus) if len(timed_gpus) == len(gpus) else None
                 evaluations = float(np.sum(coverage)) * count  # samples that hit the mesh, each one evaluation
                 path = str(getattr(renderer, "render_path", render_path))
-                tmacs = model.macs_per_evaluation * evaluations / (gpu_seconds or seconds) / 1e12
+                tmacs = macs * evaluations / (gpu_seconds or seconds) / 1e12
                 deferred = renderer.deferred if path == "deferred" else None
                 plan = deferred.tile_plan if deferred is not None else None  # the tiled kernel's
                 rows.append({
@@ -155,7 +159,7 @@ def scene_frame_times(ctx: Any, model: Any, model_path: str, view: SceneView, we
                     "setup_s": setup_seconds, "times_s": walls, "seconds": seconds, "gpu_times_s": gpus,
                     "gpu_seconds": gpu_seconds, "fps": 1.0 / seconds,
                     "covered_pixels": int(np.count_nonzero(coverage)), "evaluations": evaluations,
-                    "gmac_per_s": model.macs_per_evaluation * evaluations / seconds / 1e9,
+                    "gmac_per_s": macs * evaluations / seconds / 1e9,
                     "tmac_per_s": tmacs, "fp32_tmac_per_s": peak,
                     "fp32_share": tmacs / peak if peak else None,
                     "model_file": model_path,
@@ -176,8 +180,8 @@ def _milliseconds(seconds: float | None) -> str:
 
 def markdown_table(rows: list[dict[str, Any]]) -> str:
     """One row per (model, size, weights path, render path, samples per pixel)."""
-    header = ("| model | MACs/pixel | mesh | size | weights | render path | deferred weights | spp | frame (ms, wall) "
-              "| GPU (ms, timer) | fps | covered pixels | TMAC/s | of FP32 peak | GL_RENDERER |")
+    header = (f"| model | {COST_HEADER} | mesh | size | weights | render path | deferred weights | spp "
+              "| frame (ms, wall) | GPU (ms, timer) | fps | covered pixels | TMAC/s | of FP32 peak | GL_RENDERER |")
     lines = [header, "|" + "---|" * (header.count("|") - 1)]
     for row in rows:
         render_path = row["render_path"]
@@ -191,7 +195,7 @@ def markdown_table(rows: list[dict[str, Any]]) -> str:
                         f"{row['tile_shared_bytes'] / 1024:g} KiB)")
         share = row.get("fp32_share")
         lines.append("| " + " | ".join(format_cell(value) for value in (
-            row["model"], row["macs_per_pixel"], row["mesh"], f"{row['width']}×{row['height']}", row["weights_path"],
+            row["model"], *cost_cells(row), row["mesh"], f"{row['width']}×{row['height']}", row["weights_path"],
             render_path, deferred, row["spp"], _milliseconds(row["seconds"]), _milliseconds(row["gpu_seconds"]),
             row["fps"], row["covered_pixels"], row.get("tmac_per_s"), None if share is None else f"{100 * share:.1f} %",
             row["gl_renderer"])) + " |")
@@ -231,16 +235,15 @@ def run_scene_bench(ctx: Any, entries: list[Any], config: Any, progress: bool = 
     rows: list[dict[str, Any]] = []
     for entry in tqdm(entries, desc="bench scenes", unit="model", disable=not progress):
         view = scene_view(str(entry.path), config.scene_mesh)
-        macs = entry.model.macs_per_evaluation
         for weights_path in paths:
-            if weights_path == "baked" and macs > config.baked_max_macs:
+            if weights_path == "baked" and entry.cost.mlp_macs > config.baked_max_macs:  # the limit is on the baked MLP
                 continue
             for render_path, deferred_weights in _path_forms(render_paths, forms):
                 if deferred_weights == "baked" and weights_path != "baked":
                     continue  # the baked kernel needs the baked weights path (and is auto's choice there)
                 for row in scene_frame_times(ctx, entry.model, str(entry.path), view, weights_path, render_path, sizes,
                                              samples, config.repeats, config.max_seconds, deferred_weights):
-                    row = {"model": entry.label, "material": entry.material, "macs_per_pixel": macs,
+                    row = {"model": entry.label, "material": entry.material, **entry.cost.to_dict(),
                            "gl_renderer": gl_renderer, "gl_version": gl_version, **row}
                     rows.append(row)
                     if progress:

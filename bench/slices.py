@@ -12,8 +12,9 @@ For every model file the benchmark measures, on one BRDF-slice view (docs/physic
 - torch on the same key vectors (CPU, and CUDA where present), as the reference: end to end (encoding +
   MLP + inverse range transform, the shader's per-pixel work) and the MLP alone on pre-encoded inputs
   (the stricter reference: the shader's time always includes its encoding);
-- multiply-adds per pixel (``ModelFile.macs_per_evaluation``) and achieved GMAC/s = MACs · evaluated pixels
-  / time, for both;
+- the model's cost (:class:`gratnet.cost.ModelCost`): multiply-adds per pixel (MLP and grid interpolation),
+  grid values read per pixel, bytes on disk and on the GPU; and achieved GMAC/s = MACs · evaluated pixels / time,
+  for both;
 - the model's error from the ``metrics.json`` written beside it by ``gratnet train`` / ``gratnet evaluate``:
   mean FLIP and PSNR (CIE XYZ) over the paper's five BRDF slices, and FLIP at (0°, 0°) 2000 RU.
 
@@ -34,11 +35,12 @@ from typing import Any
 
 import numpy as np
 
-from bench.tables import format_cell
+from bench.tables import COST_HEADER, cost_cells, format_cell
 from gratnet.atomic import write_text_atomic
 from gratnet.brdf import STANDARD_SLICES
 from gratnet.codes import RENDER_PATHS
 from gratnet.config import config_field
+from gratnet.cost import ModelCost
 from gratnet.errors import GratNetError
 from gratnet.figures import save_figure
 from gratnet.modelfile import ModelFile, load_model, network_inputs
@@ -155,7 +157,7 @@ def _int_list(text: str, flag: str) -> list[int]:
 
 @dataclasses.dataclass
 class ModelEntry:
-    """One model to benchmark: its file, a label, and its error figures (from metrics.json)."""
+    """One model to benchmark: its file, a label, its error figures (from metrics.json) and its cost."""
 
     label: str
     path: Path
@@ -164,6 +166,7 @@ class ModelEntry:
     flip_mean: float | None
     flip_normal: float | None  # FLIP at (0°, 0°) 2000 RU
     psnr_mean: float | None
+    cost: ModelCost
 
     @classmethod
     def load(cls, path: Path, label: str | None = None) -> ModelEntry:
@@ -180,7 +183,8 @@ class ModelEntry:
                 flip_mean = statistics.fmean(float(entry["flip"]) for entry in slices)
                 psnr_mean = statistics.fmean(float(entry["psnr_xyz"]) for entry in slices)
                 flip_normal = float(slices[0]["flip"])
-        return cls(label or path.parent.name, path, model, material, flip_mean, flip_normal, psnr_mean)
+        return cls(label or path.parent.name, path, model, material, flip_mean, flip_normal, psnr_mean,
+                   ModelCost.of(model, path))
 
 
 def _slice_keys(config: BenchConfig, size: int) -> np.ndarray:
@@ -316,14 +320,14 @@ def run_bench(ctx: Any, entries: list[ModelEntry], config: BenchConfig, progress
     keys = {size: _slice_keys(config, size) for size in sizes}  # the same view for every model
     results: list[dict[str, Any]] = []
     for entry in tqdm(entries, desc="bench", unit="model", disable=not progress):
-        macs = entry.model.macs_per_evaluation
+        macs = entry.cost.macs_per_pixel  # what a pixel costs: the MLP's and a grid's interpolation multiply-adds
         torch_rows = {}
         for size in sizes:
             for device in devices:
                 torch_rows[size, device] = torch_throughput(entry.model, keys[size], device, config.repeats,
                                                             config.max_seconds, config.torch_threads)
         for path in paths:
-            if path == "baked" and macs > config.baked_max_macs:
+            if path == "baked" and entry.cost.mlp_macs > config.baked_max_macs:  # the limit is on the baked MLP
                 continue
             for row in shader_frame_times(ctx, entry, path, config, sizes):
                 size = row["size"]
@@ -331,7 +335,7 @@ def run_bench(ctx: Any, entries: list[ModelEntry], config: BenchConfig, progress
                 gmacs = macs * pixels / row["seconds"] / 1e9
                 result = {
                     "model": entry.label, "material": entry.material, "path": str(entry.path),
-                    "parameters": entry.model.parameter_count, "macs_per_pixel": macs,
+                    "parameters": entry.model.parameter_count, **entry.cost.to_dict(),
                     "layer_sizes": list(entry.model.layer_sizes),
                     "flip_mean": entry.flip_mean, "flip_0_0": entry.flip_normal, "psnr_mean_db": entry.psnr_mean,
                     "gl_renderer": gl_device, "requested_weights_path": path, **row,
@@ -358,14 +362,14 @@ def run_bench(ctx: Any, entries: list[ModelEntry], config: BenchConfig, progress
 
 def markdown_table(results: list[dict[str, Any]]) -> str:
     """One row per (model, size, weight path)."""
-    header = ("| model | material | parameters | MACs/pixel | size | weights | frame (ms) | shader GMAC/s "
+    header = (f"| model | material | parameters | {COST_HEADER} | size | weights | frame (ms) | shader GMAC/s "
               "| torch-CPU GMAC/s, end to end | shader / torch | torch-CPU GMAC/s, MLP only | shader / torch MLP "
               "| mean FLIP (5 slices) | FLIP (0°,0°) | mean PSNR (dB) |")
     lines = [header, "|" + "---|" * (header.count("|") - 1)]
     for row in results:
         lines.append("| " + " | ".join(format_cell(value) for value in (
-            row["model"], row["material"], row["parameters"], row["macs_per_pixel"], f"{row['size']}²",
-            row["weights_path"], row["seconds"] * 1e3, row["shader_gmac_per_s"], row.get("torch_cpu_gmac_per_s"),
+            row["model"], row["material"], row["parameters"], *cost_cells(row), f"{row['size']}²", row["weights_path"],
+            row["seconds"] * 1e3, row["shader_gmac_per_s"], row.get("torch_cpu_gmac_per_s"),
             row.get("shader_over_torch_cpu"), row.get("torch_cpu_mlp_gmac_per_s"), row.get("shader_over_torch_cpu_mlp"),
             row["flip_mean"], row["flip_0_0"], row["psnr_mean_db"])) + " |")
     return "\n".join(lines) + "\n"

@@ -2,7 +2,14 @@
 
 from __future__ import annotations
 
-__all__ = ["format_cell"]
+from typing import Any
+
+from gratnet.cost import megabytes
+
+__all__ = ["COST_HEADER", "cost_cells", "format_cell"]
+
+#: The cost columns of ``gratnet bench``'s tables (gratnet.cost; MB = 10⁶ bytes), in :func:`cost_cells`' order.
+COST_HEADER = "MACs/pixel | grid values read | MB on disk | MB on GPU"
 
 
 def format_cell(value: object, digits: int = 3) -> str:
@@ -15,3 +22,10 @@ def format_cell(value: object, digits: int = 3) -> str:
             return f"{value:.{digits}g}"
         return f"{value:.2e}"
     return str(value)
+
+
+def cost_cells(row: dict[str, Any]) -> list[str]:
+    """The :data:`COST_HEADER` cells of a bench row holding ``gratnet.cost.ModelCost.to_dict()``'s keys."""
+    disk, gpu = row.get("bytes_on_disk"), row.get("bytes_gpu")
+    return [format_cell(row["macs_per_pixel"]), format_cell(row.get("grid_values_read_per_pixel")),
+            "—" if disk is None else megabytes(int(disk)), "—" if gpu is None else megabytes(int(gpu))]

@@ -4,7 +4,7 @@
 
 The flags mean what they mean for ``gratnet render`` (same names: --material, --mesh, --light θ,φ,
 --point-light X,Y,Z, --camera DIST,AZIMUTH,ELEVATION, --fov, --exposure, --ior, --no-fresnel, --size, --out,
---quiet) and are checked by the same functions, so the two renderers show the same scene: --light, --camera
+--quiet, --quality) and are checked by the same functions, so the two renderers show the same scene: --light, --camera
 and --exposure left out take ``gratnet render``'s defaults for the material and mesh (viewer.defaults), and a
 picture that is 99 % black on the display draws the same warning. With one light, no environment and
 ``--integrator direct`` the two agree up to Monte Carlo noise (tests/runtime/test_mitsuba.py). Added: --spp,
@@ -31,7 +31,7 @@ from pathlib import Path
 from gratnet.config import add_arguments, add_quiet_flag, config_field, from_arguments
 from gratnet.errors import GratNetError
 from gratnet.lights import POINT
-from viewer.scene_config import SceneConfig, add_scene_arguments
+from viewer.scene_config import SceneConfig, add_scene_arguments, quality_help, resolve_point
 
 __all__ = ["MitsubaRenderConfig", "parse_environment", "register", "run"]
 
@@ -106,7 +106,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                         help="environment light: none (default), a constant radiance in linear sRGB (typical: "
                         "1e-5 to 1e-3 with the default exposure), or a lat-long EXR whose up is +z")
     add_quiet_flag(parser)
-    add_arguments(parser, MitsubaRenderConfig)
+    quality_help(add_arguments(parser, MitsubaRenderConfig))
     parser.set_defaults(handler=run)
 
 
@@ -118,6 +118,7 @@ def _resolve_config(arguments: argparse.Namespace) -> MitsubaRenderConfig:
     config = dataclasses.replace(from_arguments(MitsubaRenderConfig, arguments), **scene_fields(arguments),
                                  environment=str(arguments.environment))
     check_scene(config)
+    resolve_point(config)  # the material has the point asked for (gratnet render's rule)
     for name, value in (("--light-intensity", config.light_intensity),
                         ("--environment-scale", config.environment_scale)):
         if not (math.isfinite(value) and 0.0 <= value < 3e38):
@@ -141,7 +142,7 @@ def run(arguments: argparse.Namespace) -> int:
     from gratnet.modelfile import load_model
     from mitsuba_plugin.runtime import resolve_variant
     from viewer.camera import Camera, Light
-    from viewer.catalog import build_mesh, resolve_material
+    from viewer.catalog import build_mesh, model_label
     from viewer.scene_config import resolve_scene_command, warn_if_black, write_render
 
     out = Path(arguments.out)
@@ -157,7 +158,7 @@ def run(arguments: argparse.Namespace) -> int:
     light = None
     if config.light_intensity > 0.0:
         light = Light.from_config(config, config.light_intensity)
-    model_path = resolve_material(config.material)
+    model_path, config = resolve_point(config)  # the saved config records the point that renders
     load_model(model_path)  # a corrupt model file: one line now, not a Mitsuba traceback later
     mesh = build_mesh(config.mesh)
     environment = parse_environment(config.environment)
@@ -194,7 +195,7 @@ def run(arguments: argparse.Namespace) -> int:
 
     write_render(out, xyz, linear_srgb=linear, mitsuba_render=config, model_file=str(model_path), variant=variant,
                  render_seconds=round(seconds, 3))
-    print(f"wrote {out}: {Path(model_path).parent.name if model_path.name == 'model.npz' else model_path.name}, "
+    print(f"wrote {out}: {model_label(model_path)}, "
           f"mesh {config.mesh}, {config.width}×{config.height}, {config.spp} spp, {variant}, "
           f"exposure {config.exposure:g}, {seconds:.1f} s")
     warn_if_black(xyz, config.exposure)

@@ -15,7 +15,7 @@
 # REPEATS, MATERIAL.
 #
 # --tiled (issue 32: the tiled compute MLP, viewer/tiled.py, against the per-entry kernel), in this order:
-#   1. every shipped cd and paper-* model on the CD disc at 1920×1080, 1 and 4 spp, deferred path, deferred
+#   1. every shipped cd and paper-* model (and every material's fast point) on the CD disc at 1920×1080, 1 and 4 spp, deferred path, deferred
 #      weights ssbo, tiled and tiled-fp16 (texture weights path), one bench call per model: $OUT/tiled-MODEL/;
 #   2. the shading kernels alone on 699,052 keys (benchmarks/shade_kernels.py: $OUT/tiled-kernels.jsonl, the
 #      MLP's TMAC/s without the frame's other passes);
@@ -105,7 +105,8 @@ if [[ "${1:-}" == "--lut" ]]; then
     exit 0
 fi
 if [[ "${1:-}" == "--tiled" ]]; then
-    materials=${TILED_MATERIALS:-"cd $(cd assets && ls -d paper-* | tr '\n' ' ')"}
+    # Every material's fast point too (assets/NAME/fast/model.npz, docs/formats.md "Quality points"), by its path.
+    materials=${TILED_MATERIALS:-"cd $(cd assets && ls -d paper-* | tr '\n' ' ') $(ls assets/*/fast/model.npz 2>/dev/null | tr '\n' ' ')"}
     common=(--no-slices --scene-mesh cd --scene-sizes "${SIZES:-1920x1080}" --spp "${SPP:-1,4}"
             --repeats "${REPEATS:-5}" --max-seconds 20 --quiet)
     part() {  # part NAME SECONDS ARGS…: one bench call into $OUT/tiled-NAME, its table printed; a failure is logged
@@ -121,7 +122,8 @@ if [[ "${1:-}" == "--tiled" ]]; then
     {
         nvidia-smi --query-gpu=name,driver_version --format=csv,noheader 2>/dev/null || true
         for material in $materials; do  # one call per model: a call cut short keeps the models done
-            part "$material" 100 "$material" "${common[@]}" --weights-paths texture --render-paths deferred \
+            label=${material#assets/}; label=${label%/model.npz}  # assets/paper-cd/fast/model.npz: paper-cd-fast
+            part "${label//\//-}" 100 "$material" "${common[@]}" --weights-paths texture --render-paths deferred \
                 --deferred-weights "${TILED_FORMS:-ssbo,tiled,tiled-fp16}"
         done
         echo "== kernels: benchmarks/shade_kernels.py (the shading dispatches alone, 699,052 keys)"

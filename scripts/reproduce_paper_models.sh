@@ -3,7 +3,10 @@
 # a CPU (hours): the ground truth (`gratnet groundtruth NAME --device auto`, with the w-slices the model was
 # trained on), the exact training flags recorded in assets/NAME/train_command.json, and the evaluation with
 # the paper's five BRDF slices and docs/results.md's three further views.
-# Usage: bash scripts/reproduce_paper_models.sh [NAME ...]   (default: every assets/paper-*)
+# Usage: bash scripts/reproduce_paper_models.sh [NAME ...]   (default: every assets/paper-* and its quality points)
+#   NAME is a material (assets/NAME: its accurate point) or a material's point (NAME/fast: assets/NAME/fast, a
+#   material's fast model, docs/formats.md "Quality points"); a point's run goes to OUT/runs/NAME/fast and shares
+#   the material's volume.
 #   OUT=out/paper (volumes, runs, slice cache), GRATNET=.venv/bin/gratnet, DRY_RUN=1 prints the commands only.
 #   SEEDS="0 1 2": each dataset's recipe once per seed (`--seed K` appended), into OUT/runs/NAME/seed-K, then
 #   OUT/seeds.json and OUT/seeds.md: per dataset the mean and spread of the (0°, 0°) FLIP against the paper's
@@ -24,8 +27,14 @@ seeds=(${SEEDS:-})
 started=$SECONDS
 budget=${TIME_BUDGET_S:-0}
 left=0
+declare -A made=()
 if [ ${#names[@]} -eq 0 ]; then
-    for folder in assets/paper-*/; do names+=("$(basename "$folder")"); done
+    for folder in assets/paper-*/; do
+        names+=("$(basename "$folder")")
+        for point in "$folder"*/train_command.json; do  # its quality points (assets/NAME/fast/…)
+            [ -f "$point" ] && names+=("$(basename "$folder")/$(basename "$(dirname "$point")")")
+        done
+    done
 fi
 run() { echo "+ $*"; if [ -z "${DRY_RUN:-}" ]; then "$@"; fi; }
 spent() { [ "$budget" -gt 0 ] && [ $((SECONDS - started)) -ge "$budget" ]; }
@@ -53,13 +62,15 @@ PY
     read -r -a flags <<< "$(eval "printf '%s ' ${parsed#*$'\n'}")"
     trainer=("$gratnet")
     if [ "$environment" != "-" ]; then read -r -a assignments <<< "$environment"; trainer=(env "${assignments[@]}" "$gratnet"); fi
-    volume="$out/volumes/$name-s$slices.exr"
+    dataset=${name%%/*}  # a quality point trains on its material's height field and volume
+    volume="$out/volumes/$dataset-s$slices.exr"
     for seed in "${seeds[@]:-}"; do  # one pass with no seed of its own when SEEDS is unset
         runs="$out/runs/$name${seed:+/seed-$seed}"
         if [ -f "$runs/metrics.json" ]; then echo "= $runs: finished"; continue; fi
         if spent; then left=$((left + 1)); continue; fi
-        if [ ! -f "$volume" ]; then
-            run "$gratnet" groundtruth "$name" --sampling simple-max --slices "$slices" --device auto --out "$volume"
+        if [ ! -f "$volume" ] && [ -z "${made[$volume]:-}" ]; then  # once per volume (a dry run writes none)
+            made[$volume]=1
+            run "$gratnet" groundtruth "$dataset" --sampling simple-max --slices "$slices" --device auto --out "$volume"
         fi
         if [ ! -f "$runs/model.npz" ]; then  # model.npz lands at the end of a training: then only evaluate
             resume=()
@@ -67,7 +78,7 @@ PY
             run "${trainer[@]}" train "$volume" --out "$runs" "${flags[@]}" ${seed:+--seed "$seed"} \
                 ${DEVICE:+--device "$DEVICE"} "${resume[@]}"
         fi
-        run "$gratnet" evaluate "$runs/model.npz" --out "$runs" --heightfield "$name" \
+        run "$gratnet" evaluate "$runs/model.npz" --out "$runs" --heightfield "$dataset" \
             --volume "$volume" --views "$views" --cache-dir "$out/cache"
     done
 done

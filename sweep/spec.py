@@ -138,7 +138,7 @@ class RunSpec:
         from gratnet.config import config_to_dict
 
         evaluate = {key: value for key, value in config_to_dict(self.evaluate).items()
-                    if key not in ("cache_dir", "progress")}
+                    if key not in ("cache_dir", "progress", "frame_time")}
         return {"name": self.name, "dataset": self.dataset.to_dict(), "preset": self.preset,
                 "variant": self.variant, "seed": self.seed, "train": config_to_dict(self.train),
                 "evaluate": evaluate}
@@ -514,7 +514,7 @@ def _resolve(path: Path, document: dict[str, Any], out: str | Path | None) -> Sw
     variants = _variants(document, base_train)
     _check_axes(base_train, presets, seeds)
     evaluate = build_config(EvaluateConfig, _table(document, "evaluate", Table()), Table("[evaluate]"),
-                            exclude=("cache_dir",))
+                            exclude=("cache_dir", "frame_time"))  # runs share the machine: no timing
     resources = build_config(Resources, _table(document, "resources", Table()), Table("[resources]"))
     bench = _bench(document)
 

@@ -288,7 +288,7 @@ def train_run(out: Path, run: RunSpec, threads: int, *dependencies: Any) -> dict
         held_out = ([int(part) for part in run.train.test_slices.split(",") if part.strip()]
                     if run.train.split == "slices" else [])
         evaluate_model(model_file, folder, dataclasses.replace(run.evaluate, progress=False), volume=volume,
-                       field=field, optics=optics, volume_slices=held_out,
+                       field=field, optics=optics, volume_slices=held_out, model_path=folder / "model.npz",
                        extra={"training": {k: v for k, v in history.items() if k != "epochs"}})
         row = result_row(run, folder)
         row["run_seconds"] = round(time.perf_counter() - started, 2)

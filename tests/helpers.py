@@ -248,3 +248,38 @@ class FakeClock:
 
     def advance(self, seconds: float) -> None:
         self.now += seconds
+
+
+# --------------------------------------------------------------------------------------------------
+# Materials with quality points (gratnet.quality, viewer.catalog)
+
+
+def write_material(assets: Path, name: str, points: dict[str, ModelFile]) -> dict[str, Path]:
+    """A shipped material ``assets/NAME`` with one model file per quality point (``points``: quality name →
+    model, each saved where gratnet.quality's folders put it). Returns quality → model file."""
+    from gratnet.modelfile import save_model
+    from gratnet.quality import POINT_FOLDERS
+
+    paths = {}
+    for quality, model in points.items():
+        path = assets / name / POINT_FOLDERS[quality] / "model.npz"
+        path.parent.mkdir(parents=True, exist_ok=True)
+        save_model(path, model)
+        paths[quality] = path
+    return paths
+
+
+def two_point_material(assets: Path, name: str = "duo", fast: bool = True) -> dict[str, Path]:
+    """A material of random models at ``assets/NAME``: the accurate point a wider net (hidden 16) than the fast
+    one (hidden 8; left out without ``fast``), both claiming the shipped cd material's surface and display
+    analysis (its ``metadata``), so that its ground-truth volumes and default views are cd's."""
+    import dataclasses
+
+    from gratnet.modelfile import load_model
+
+    metadata = {key: value for key, value in load_model(ASSETS / "cd" / "model.npz").metadata.items()
+                if key in ("volume", "display")}
+    points = {"accurate": dataclasses.replace(random_model([SPEC.features, 16, 3], seed=1), metadata=metadata)}
+    if fast:
+        points["fast"] = dataclasses.replace(random_model([SPEC.features, 8, 3], seed=2), metadata=metadata)
+    return write_material(assets, name, points)

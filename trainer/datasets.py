@@ -75,6 +75,8 @@ class DatasetPreset:
     #: The paper's table: this dataset's own column and its mean FLIP at (0°, 0°) 2000 RU (the target), if any.
     paper_column: str = ""
     paper_flip: float | None = None
+    #: The group of like structures whose speed/error figure it shares (docs/results.md, analysis.pareto).
+    family: str = ""
 
     @property
     def sigma_s_um(self) -> float:
@@ -109,6 +111,7 @@ PRESETS: dict[str, DatasetPreset] = {
         _preset(
             paper_column="blazed grating", paper_flip=0.0021,
             name="paper-blazed", title="blazed grating, 100 µm patch", paper="§4 Datasets; Fig. 2 (crop shown: 20 µm)",
+            family="gratings",
             four_sigma_s_um=65.0, patch_um=100.0, max_height_um=0.25, generator="blazed",
             parameters={"period_um": 2.5, "max_height_um": 0.25, "size_um": 100.0},
             notes="sawtooth, period 2.5 µm, tooth height 250 nm",
@@ -116,6 +119,7 @@ PRESETS: dict[str, DatasetPreset] = {
         _preset(
             paper_column="CD", paper_flip=0.0178,
             name="paper-cd", title="synthetic compact disc, 65 µm patch", paper="§4 Datasets; Fig. 2",
+            family="gratings",
             four_sigma_s_um=40.0, patch_um=65.0, max_height_um=None, generator="cd",
             parameters={"size_um": 65.0},
             notes="tracks every 1.6 µm, pits/lands of 3T…11T (T = 0.2777 µm), 110 nm deep; the patch is "
@@ -123,6 +127,7 @@ PRESETS: dict[str, DatasetPreset] = {
         ),
         _preset(
             name="paper-gaussian", title="Gaussian random field, 65 µm patch", paper="§4 Datasets",
+            family="random and scratched surfaces",
             four_sigma_s_um=65.0, patch_um=65.0, max_height_um=1.0, generator="gaussian",
             parameters={"size_um": 65.0, "max_height_um": 1.0},
             notes="heights rescaled to [0, 1 µm]; the correlation length (1.5 µm) is this project's choice",
@@ -130,6 +135,7 @@ PRESETS: dict[str, DatasetPreset] = {
         _preset(
             paper_column="corn snake (Elaphe)", paper_flip=0.0221,
             name="paper-snake", title="corn snake skin (AFM scan)", paper="§4 Datasets; Fig. 2 (crop 12.5 µm)",
+            family="snake skins",
             four_sigma_s_um=65.0, patch_um=65.0, max_height_um=None, generator=None,
             notes="the real Elaphe guttata AFM crop in assets/data (100 × 100 px, dx ≈ 0.1 µm, white ≈ 0.375 µm, "
             "both approximate), repeated periodically under the window: the paper's full 65 µm scan is not "
@@ -138,6 +144,7 @@ PRESETS: dict[str, DatasetPreset] = {
         _preset(
             paper_column="sunbeam snake (Xenopeltis)", paper_flip=0.0318,
             name="paper-sunbeam", title="sunbeam snake skin (AFM scan)", paper="§4 Datasets (the Xenopeltis column)",
+            family="snake skins",
             four_sigma_s_um=65.0, patch_um=65.0, max_height_um=None, generator=None,
             notes="the real Xenopeltis unicolor AFM crop in assets/data (100 × 100 px, dx ≈ 0.1 µm, white ≈ "
             "0.4435 µm, both approximate), repeated periodically under the window: the paper's full 65 µm scan is "
@@ -146,6 +153,7 @@ PRESETS: dict[str, DatasetPreset] = {
         _preset(
             paper_column="scratches", paper_flip=0.0123,
             name="paper-scratches", title="ball-pen tip scratches, 80 µm patch", paper="§4 Datasets; Fig. 2",
+            family="random and scratched surfaces",
             four_sigma_s_um=65.0, patch_um=80.0, max_height_um=0.873, generator="scratches",
             parameters={"size_um": 80.0, "count": 60, "tip_radius_um": 2.0, "depth_um": 0.5, "depth_jitter": 0.3,
                         "min_length_um": 10.0, "max_length_um": 60.0, "damping_sigma_um": 80.0 / 6.0,
@@ -156,6 +164,7 @@ PRESETS: dict[str, DatasetPreset] = {
         _preset(
             paper_column="corner cubes", paper_flip=0.0751,
             name="paper-corner-cubes", title="corner cubes, 72 µm patch", paper="§4 Datasets; Fig. 2",
+            family="pits and corner cubes",
             four_sigma_s_um=40.0, patch_um=72.0, max_height_um=1.5, generator="corner_cube",
             parameters={"size_um": 72.0, "mirror_tile_um": 24.0, "max_height_um": 1.5},
             notes="a 24 µm corner-cube design mirrored to 3 × 3 tiles, 1.5 µm peak to valley",
@@ -163,6 +172,7 @@ PRESETS: dict[str, DatasetPreset] = {
         _preset(
             paper_column="pits", paper_flip=0.0878,
             name="paper-pits", title="spherical pits, 24 µm patch", paper="§4 Datasets; Fig. 2",
+            family="pits and corner cubes",
             four_sigma_s_um=15.556, patch_um=24.0, max_height_um=None, generator="pits",
             parameters={"size_um": 24.0, "spacing_um": 2.4, "radius_um": 0.8},
             notes="semi-spherical pits with mild random size (±10 %) and placement (±5 %); the 2.4 µm lattice "

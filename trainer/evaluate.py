@@ -6,6 +6,11 @@ numpy evaluator (gratnet.modelfile.evaluate_keys); both × exposure × A. Metric
 PSNR on exposed XYZ clipped to [0, 1], SSIM in display sRGB and YCbCr, mean FLIP. Beside the network:
 the interpolation oracle (the volume's own samples interpolated at the same keys) and the error split by
 region (specular peak, diffraction orders, speckle floor, dark background): trainer/diagnostics.py.
+
+The model's cost (gratnet.cost: MACs and grid values read per pixel, bytes on disk and on the GPU) goes into
+metrics.json's "cost" and report.md's model section; with ``frame_time``, so does its 1080p CD frame time on
+this machine, measured by ``gratnet bench`` in a child process (:func:`measure_frame_time`: the offline stage
+imports no runtime).
 """
 
 from __future__ import annotations
@@ -14,6 +19,12 @@ import dataclasses
 import hashlib
 import json
 import math
+import os
+import shlex
+import subprocess
+import sys
+import tempfile
+import time
 from pathlib import Path
 from typing import Any
 
@@ -22,6 +33,7 @@ import numpy as np
 from gratnet.atomic import atomic_path, make_folder
 from gratnet.brdf import STANDARD_SLICES, slice_view_directions
 from gratnet.config import config_field, config_to_dict
+from gratnet.cost import ModelCost
 from gratnet.encoding import range_forward
 from gratnet.errors import GratNetError
 from gratnet.modelfile import ModelFile, evaluate_keys
@@ -30,7 +42,7 @@ from trainer.brdfslice import SliceConfig, brdf_slice_xyz, expose_slice, slice_g
 from trainer.fourier import OpticsConfig, prepare_surface
 from trainer.heightfield import HeightField
 from trainer.metrics import image_metrics
-from trainer.report import comparison_figure, write_report
+from trainer.report import comparison_figure, model_section, write_report
 from trainer.sampling import grid_to_key, slice_w
 
 #: Largest BRDF-slice size of the evaluation (pixels; each one is a network evaluation and a ground truth).
@@ -51,6 +63,11 @@ class EvaluateConfig:
         "", "further BRDF slices scored beside the paper's five (views no training was tuned on): 'θ,φ,RU' "
         "triples separated by ';' (light polar and azimuth angles in degrees, exposure), e.g. '45,60,5000;15,200,3000'"
     )
+    # Off by default: the frame takes a minute or more per model on a CPU rasterizer (compiles, the render-path
+    # probe, full-HD frames), and a timing says something only on a machine that does nothing else meanwhile.
+    frame_time: bool = config_field(
+        False, "also measure the model's 1080p CD frame time on this machine (gratnet bench in a child process: the "
+        "CD disc at 1920x1080, 1 sample per pixel, auto weights and render paths, as gratnet render draws it)")
     progress: bool = config_field(True, "progress bars while computing ground-truth slices", cli=False)
 
     def __post_init__(self) -> None:  # checked when made: before any work
@@ -220,6 +237,85 @@ def evaluate_volume_slices(model: ModelFile, volume: Volume, slices: list[int], 
     return rows
 
 
+#: The frame of :func:`measure_frame_time`: full HD, one sample per pixel, on the CD disc (gratnet render's view).
+FRAME_TIME_SIZE = (1920, 1080)
+FRAME_TIME_MESH = "cd"
+#: Timed frames (the median is the figure) after bench's warm-up frame.
+FRAME_TIME_REPEATS = 3
+#: The child's time limit: a pure MLP's baked compile alone takes ~25 s on llvmpipe, a full-HD frame seconds.
+FRAME_TIME_TIMEOUT_S = 1800.0
+
+
+def frame_time_command(model_path: str | Path, out_dir: str | Path, size: tuple[int, int] | None = None,
+                       repeats: int | None = None) -> list[str]:
+    """The ``gratnet bench`` command line that times one frame size of ``model_path`` on the CD disc as
+    ``gratnet render`` draws it (auto weights and render paths, 1 sample per pixel) and writes
+    ``out_dir/scenes.jsonl``."""
+    width, height = size or FRAME_TIME_SIZE
+    return [sys.executable, "-m", "gratnet.cli", "bench", str(model_path), "--no-slices",
+            "--scene-mesh", FRAME_TIME_MESH, "--scene-sizes", f"{width}x{height}", "--spp", "1",
+            "--weights-paths", "auto", "--render-paths", "auto", "--deferred-weights", "auto",
+            "--repeats", str(FRAME_TIME_REPEATS if repeats is None else repeats), "--quiet", "--out", str(out_dir)]
+
+
+def measure_frame_time(model_path: str | Path, size: tuple[int, int] | None = None, repeats: int | None = None,
+                       timeout_s: float | None = None) -> dict[str, Any]:
+    """The CD frame time of the model file at ``model_path`` on this machine (default: :data:`FRAME_TIME_SIZE`),
+    measured by ``gratnet bench`` in a child process (:func:`frame_time_command`); the trainer imports no runtime.
+
+    Returns the frame in milliseconds (``ms``: median wall time, read-back included; ``gpu_ms``: the GL timer's,
+    ``None`` past ~3.9 s), the paths the renderer took, ``GL_RENDERER``, the command, the date and the load
+    average before the run. A child that fails or times out is one :class:`GratNetError` with its last words.
+    """
+    source = Path(model_path)
+    if not source.is_file():
+        raise GratNetError(f"frame time: model file {source} does not exist or is not a regular file")
+    with tempfile.TemporaryDirectory(prefix="gratnet-frame-time-") as folder:
+        command = frame_time_command(source, folder, size, repeats)
+        load_before = os.getloadavg()
+        started = time.time()
+        try:
+            done = subprocess.run(command, capture_output=True, text=True,
+                                  timeout=FRAME_TIME_TIMEOUT_S if timeout_s is None else timeout_s, check=False)
+        except subprocess.TimeoutExpired:
+            raise GratNetError(f"frame time: gratnet bench took longer than {timeout_s or FRAME_TIME_TIMEOUT_S:g} s "
+                               f"on {source}") from None
+        if done.returncode != 0:
+            last = (done.stderr.strip().splitlines() or ["no message"])[-1]
+            raise GratNetError(f"frame time: gratnet bench failed on {source} (exit status {done.returncode}): {last}")
+        rows = [json.loads(line) for line in (Path(folder) / "scenes.jsonl").read_text().splitlines() if line]
+    if len(rows) != 1:
+        raise GratNetError(f"frame time: gratnet bench gave {len(rows)} scene rows for {source}, expected one")
+    row = rows[0]
+    return {
+        "width": row["width"], "height": row["height"], "mesh": row["mesh"], "spp": row["spp"],
+        "ms": 1e3 * row["seconds"], "gpu_ms": None if row["gpu_seconds"] is None else 1e3 * row["gpu_seconds"],
+        "times_ms": [1e3 * seconds for seconds in row["times_s"]],
+        "weights_path": row["weights_path"], "render_path": row["render_path"],
+        "deferred_weights": row["deferred_weights"], "gl_renderer": row["gl_renderer"],
+        "gl_version": row["gl_version"], "setup_s": row["setup_s"],
+        "date": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime(started)),
+        "load_average_before": [round(value, 2) for value in load_before],
+        "command": shlex.join(["gratnet", *command[3:-2]]),  # as a user types it, without the temporary folder
+    }
+
+
+def _cost_section(model: ModelFile, model_path: str | Path | None, config: EvaluateConfig) -> dict[str, Any]:
+    """metrics.json's "cost": gratnet.cost's figures, its summary line and, with ``config.frame_time``, the 1080p
+    CD frame (or why there is none: a failure to time it costs the evaluation nothing)."""
+    cost = ModelCost.of(model, model_path)
+    section: dict[str, Any] = {**cost.to_dict(), "summary": cost.summary()}
+    if config.frame_time:
+        try:
+            if model_path is None:
+                raise GratNetError("frame time: the model has no file to time (evaluate_model got no model_path)")
+            section["frame_time_1080p"] = measure_frame_time(model_path)
+        except GratNetError as error:
+            print(f"gratnet evaluate: warning: {error}", file=sys.stderr)
+            section["frame_time_1080p"] = {"error": str(error)}
+    return section
+
+
 def evaluate_model(
     model: ModelFile,
     out_dir: str | Path,
@@ -230,22 +326,26 @@ def evaluate_model(
     volume_slices: list[int] | None = None,
     extra: dict[str, Any] | None = None,
     history: dict[str, Any] | None = None,
+    model_path: str | Path | None = None,
 ) -> dict[str, Any]:
     """Evaluate and write the report folder (metrics.json, report.md, PNG figures; with the training
-    ``history``, training_curves.png: loss and per-epoch slice FLIP against the epoch)."""
+    ``history``, training_curves.png: loss and per-epoch slice FLIP against the epoch). ``model_path``: the
+    model's file, for its size on disk and the frame time (``config.frame_time``)."""
     out_dir = make_folder(out_dir)
+    cost = _cost_section(model, model_path, config)
     results: dict[str, Any] = {
         "model": {
             "layer_sizes": model.layer_sizes,
             "parameters": model.parameter_count,
             "macs_per_evaluation": model.macs_per_evaluation,
         },
+        "cost": cost,
         **(extra or {}),
     }
-    if model.grids:  # a feature-grid network: its grids count in bytes, and 8 weighted taps per feature
+    if model.grids:  # a feature-grid network: its grids count in bytes, and its interpolation in MACs (gratnet.cost)
         results["model"].update({"grid_levels": [list(grid.shape) for grid in model.grids],
                                  "grid_bytes": model.grid_bytes,
-                                 "grid_interpolation_macs": 8 * model.grid_feature_count})
+                                 "grid_interpolation_macs": cost["grid_interpolation_macs_per_pixel"]})
     table: list[dict[str, Any]] = []
     if volume is not None and volume_slices:
         outside = [index for index in volume_slices if not -volume.slices <= index < volume.slices]
@@ -273,5 +373,6 @@ def evaluate_model(
         ["slice", "psnr_xyz", "ssim_ycbcr", "ssim_srgb", "flip", "oracle_flip", "psnr_transformed"],
         title=f"GratNet evaluation: {model.metadata.get('volume', {}).get('source', '?')[:80]}",
         sections=sections,
+        intro=[model_section(results["model"], cost)],
     )
     return results

@@ -136,6 +136,31 @@ def _json_ready(value: Any) -> Any:
     raise GratNetError(f"cannot write a {type(value).__name__} to metrics.json")
 
 
+def frame_time_text(frame: dict[str, Any]) -> str:
+    """One line for a measured frame (trainer.evaluate.measure_frame_time's record), or why there is none."""
+    if "error" in frame:
+        return f"not measured: {frame['error']}"
+    gpu = "" if frame.get("gpu_ms") is None else f", GPU timer {frame['gpu_ms']:.4g} ms"
+    load = ", ".join(f"{value:g}" for value in frame.get("load_average_before", []))
+    return (f"{frame['ms']:.4g} ms (median wall time of {len(frame.get('times_ms', []))} frames{gpu}; "
+            f"{frame['render_path']} path, {frame['weights_path']} weights) on {frame['gl_renderer']}, "
+            f"{frame['date']}, load average {load or '?'} before; `{frame['command']}`")
+
+
+def model_section(model: dict[str, Any], cost: dict[str, Any]) -> str:
+    """report.md's "Model" section: the network's shape and its cost (metrics.json's "model" and "cost")."""
+    lines = ["## Model\n",
+             f"- network: {'-'.join(map(str, model['layer_sizes']))}, {model['parameters']:,} parameters"
+             + (f", grid levels {' '.join('×'.join(map(str, shape)) for shape in model['grid_levels'])}"
+                if model.get("grid_levels") else ""),
+             f"- cost (gratnet.cost; MB = 10⁶ bytes): {cost['summary']}"]
+    if "frame_time_1080p" in cost:
+        frame = cost["frame_time_1080p"]
+        size = f"{frame['width']}×{frame['height']}" if "width" in frame else "1080p"
+        lines.append(f"- {size} CD frame on this machine: {frame_time_text(frame)}")
+    return "\n".join(lines) + "\n"
+
+
 def write_report(
     folder: str | os.PathLike[str],
     metrics: dict[str, Any],
@@ -143,19 +168,22 @@ def write_report(
     table_columns: list[str],
     title: str,
     sections: list[str] | None = None,
+    intro: list[str] | None = None,
 ) -> None:
     """Write ``folder/metrics.json`` and ``folder/report.md``.
 
     metrics.json is strict JSON (indent 2): numpy values become Python numbers and non-finite
-    floats become the strings "inf", "-inf", "nan". report.md holds the title, the metrics table
-    and links to the PNG files already in ``folder`` (write the figures first); ``sections`` (markdown
-    text) follow the table.
+    floats become the strings "inf", "-inf", "nan". report.md holds the title, ``intro`` (markdown text, e.g.
+    :func:`model_section`), the metrics table and links to the PNG files already in ``folder`` (write the
+    figures first); ``sections`` (markdown text) follow the table.
     """
     folder = Path(folder)
     text = json.dumps(_json_ready(metrics), indent=2, allow_nan=False, ensure_ascii=False) + "\n"
     write_text_atomic(folder / "metrics.json", text)
 
-    parts = [f"# {title}\n", metrics_table_markdown(table_rows, table_columns), *(sections or [])]
+    heading = ["## Metrics\n"] if intro else []  # the table must not read as part of the intro's last section
+    parts = [f"# {title}\n", *(intro or []), *heading, metrics_table_markdown(table_rows, table_columns),
+             *(sections or [])]
     figures = sorted(p.name for p in folder.glob("*.png") if p.is_file() and not p.name.startswith("."))
     if figures:
         parts.append("## Figures\n")

@@ -28,7 +28,7 @@ def _add_evaluation_inputs(parser: argparse.ArgumentParser) -> None:
 
 def register(subparsers: argparse._SubParsersAction) -> None:
     """Add ``train`` and ``evaluate``."""
-    from trainer.train_config import TrainConfig
+    from trainer.train_config import TrainConfig, mark_recipe_flags
 
     train = subparsers.add_parser(
         "train",
@@ -41,7 +41,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     train.add_argument("--out", required=True, metavar="DIR", help="output folder")
     train.add_argument("--resume", action="store_true", help="continue from DIR/checkpoint.pt")
     train.add_argument("--no-evaluate", action="store_true", help="skip the evaluation report")
-    add_arguments(train, TrainConfig)
+    mark_recipe_flags(add_arguments(train, TrainConfig))  # --preset fast's options: explicit values win
     _add_evaluation_inputs(train)
     train.set_defaults(handler=run_train)
 
@@ -142,9 +142,9 @@ def run_train(arguments: argparse.Namespace) -> int:
     from gratnet.volume import read_volume
     from trainer.evaluate import EvaluateConfig, evaluate_model
     from trainer.train import train
-    from trainer.train_config import TrainConfig
+    from trainer.train_config import config_from_arguments
 
-    config = from_arguments(TrainConfig, arguments)
+    config = config_from_arguments(arguments)  # a recipe preset's options filled in where not given
     evaluate_config = dataclasses.replace(from_arguments(EvaluateConfig, arguments), progress=not arguments.quiet)
     _check_before_work(arguments, evaluating=not arguments.no_evaluate)
     checkpoint = Path(arguments.out) / "checkpoint.pt"
@@ -179,6 +179,7 @@ def run_train(arguments: argparse.Namespace) -> int:
             volume_slices=held_out,
             extra={"training": {k: v for k, v in history.items() if k != "epochs"}},
             history=history,
+            model_path=out / "model.npz",
         )
         print(f"wrote {out / 'report.md'}")
     return 0
@@ -225,7 +226,7 @@ def run_evaluate(arguments: argparse.Namespace) -> int:
     history = _read_history(history_path)
     evaluate_model(
         model, arguments.out, evaluate_config, volume=volume, field=field, optics=optics, volume_slices=slices,
-        history=history,
+        history=history, model_path=arguments.model,
     )
     save_config(
         Path(arguments.out) / "metrics.json",

@@ -1,18 +1,40 @@
-"""The training run's configuration (torch-free, so that the CLI can list its flags without torch)."""
+"""The training run's configuration (torch-free, so that the CLI can list its flags without torch).
+
+``--preset`` names a network size (trainer.model.PRESETS: paper, funnel-176, medium, small, tiny: hidden widths
+only) or a recipe (:data:`RECIPES`: ``fast``, the fast point of a shipped material, gratnet.quality), which sets
+the architecture, widths, grid and encoding. Options given explicitly win over a recipe's, as ``--hidden`` wins
+over a size preset: ``gratnet train`` knows which flags were given (:func:`mark_recipe_flags`,
+:func:`config_from_arguments`), code says it with :func:`preset_config`'s keywords.
+"""
 
 from __future__ import annotations
 
+import argparse
 import dataclasses
 import math
 import re
-from typing import Literal
+from collections.abc import Mapping
+from typing import Any, Literal
 
 import numpy as np
 
-from gratnet.config import config_field, flat_keywords, nested_field
+from gratnet.config import config_field, flat_fields, flat_keywords, nested_field
 from gratnet.encoding import EncodingSpec, RangeSpec, range_forward
 from gratnet.errors import GratNetError
+from gratnet.quality import FAST
 from gratnet.volume import Volume
+
+#: Presets that are whole recipes, by flat field name (``grid_levels``: ``--grid-levels``). ``fast``: a feature-grid
+#: network of at most a fifth of the shipped paper models' multiply-adds per pixel, the recipe that the screen on
+#: paper-cd chose (docs/experiments/2026-11-27-fast-models-screen.md).
+RECIPES: dict[str, dict[str, Any]] = {
+    FAST: {"architecture": "grid", "hidden": "44,24,12", "grid_levels": 3, "grid_resolution": 251,
+           "grid_t_resolution": 5, "grid_features": 8, "frequencies": 8, "t_frequencies": 2},
+}
+#: Every field some recipe sets (their flags' defaults mean "not given" on gratnet train's command line).
+RECIPE_FIELDS = tuple(sorted({name for recipe in RECIPES.values() for name in recipe}))
+#: The fast recipe as the flags that spell it (the preset's help).
+_FAST_FLAGS = " ".join(f"--{name.replace('_', '-')} {value}" for name, value in RECIPES[FAST].items())
 
 
 @dataclasses.dataclass(frozen=True)
@@ -88,7 +110,9 @@ class TrainConfig:
         "mlp", "network: mlp (the paper's funnel MLP on the encoding) or grid (learned feature grids over "
         "(u*, v*, t) interpolated trilinearly, then the encoding, into a small funnel MLP; docs/physics.md)"
     )
-    preset: str = config_field("small", "network size preset: paper, funnel-176, medium, small, tiny")
+    preset: str = config_field("small", "network preset: a size (hidden widths) paper, funnel-176, medium, small, "
+                               "tiny, or fast: a recipe of architecture, widths, grid and encoding, a shipped "
+                               f"material's fast point ({_FAST_FLAGS}; each of those given explicitly wins)")
     hidden: str = config_field("", "explicit hidden widths, comma-separated (overrides --preset)")
     activation: str = config_field("silu", "hidden activation: silu (measured best), relu, leaky_relu")
     output_activation: str = config_field("clamp", "output activation: clamp (to [0, 1]), sigmoid, none")
@@ -169,6 +193,14 @@ class TrainConfig:
         split, the device): refused here, when the config is made, so that nothing is loaded or computed first."""
         from trainer.model import check_network  # torch: when a config is made, never to list the flags
 
+        recipe = RECIPES.get(self.preset)
+        if recipe is not None and not self.hidden:  # a recipe always sets the widths: TrainConfig(preset=...) alone
+            raise GratNetError(f"--preset {self.preset} sets several options: make its config with "
+                               "trainer.train_config.preset_config (gratnet train does)")
+        if recipe is not None and self.architecture != recipe["architecture"]:
+            raise GratNetError(f"--preset {self.preset} is a feature-grid recipe (--architecture "
+                               f"{recipe['architecture']}); leave out --architecture {self.architecture}, or take a "
+                               "size preset (paper, funnel-176, medium, small, tiny)")
         check_network(self.preset, self.hidden, self.activation, self.output_activation)
         try:
             self.range_spec()  # RangeSpec checks its kind, B and n
@@ -237,3 +269,35 @@ class TrainConfig:
     def range_spec(self) -> RangeSpec:
         """The range transform of the targets."""
         return RangeSpec(self.range_kind, self.range_bits, self.range_power)
+
+
+def recipe_values(given: Mapping[str, Any]) -> dict[str, Any]:
+    """:class:`TrainConfig` keywords (flat names) from the options given explicitly: under a recipe preset
+    (:data:`RECIPES`) its values for the options not in ``given``; otherwise ``given`` as it is."""
+    preset = given.get("preset", TrainConfig.__dataclass_fields__["preset"].default)
+    return {**RECIPES.get(preset, {}), **given}
+
+
+def preset_config(**given: Any) -> TrainConfig:
+    """The :class:`TrainConfig` of the options ``given`` (flat names), a recipe preset's values filled in
+    (:func:`recipe_values`): ``preset_config(preset="fast", frequencies=12)``."""
+    return TrainConfig(**recipe_values(given))
+
+
+def mark_recipe_flags(actions: Mapping[str, argparse.Action]) -> None:
+    """The flags of :data:`RECIPE_FIELDS` (``add_arguments``' actions for TrainConfig) default to ``None``, "not
+    given", so that :func:`config_from_arguments` tells an explicit value from a recipe's; their help gives each
+    recipe's value beside the default."""
+    for name in RECIPE_FIELDS:
+        action = actions[name]
+        action.default = None
+        values = "; ".join(f"--preset {preset}: {recipe[name]}" for preset, recipe in RECIPES.items() if name in recipe)
+        action.help = f"{(action.help or '').removesuffix(')')}; {values})"
+
+
+def config_from_arguments(arguments: argparse.Namespace) -> TrainConfig:
+    """The run's config from ``gratnet train``'s flags (:func:`mark_recipe_flags`): a recipe preset's values for
+    the recipe's options left out, every option given as given."""
+    given = {name: getattr(arguments, name) for name in flat_fields(TrainConfig) if hasattr(arguments, name)}
+    return preset_config(**{name: value for name, value in given.items()
+                            if not (name in RECIPE_FIELDS and value is None)})

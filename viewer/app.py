@@ -76,8 +76,9 @@ from typing import Any, Protocol
 import numpy as np
 
 from gratnet.errors import GratNetError
+from gratnet.quality import AUTO, FAST, VIEW_QUALITIES, check_quality
 from viewer.camera import Camera
-from viewer.catalog import MESHES, resolve_material, shipped_materials
+from viewer.catalog import MESHES, material_point, material_points, model_label, shipped_materials
 from viewer.default_view import DefaultViewRequests
 from viewer.reference_view import SHADINGS, LoadedReference, ReferenceView, flip_heat_map
 from viewer.scheduling import (
@@ -129,6 +130,7 @@ class ViewerApp:
         refine_view: fields of ``state`` (:data:`viewer.default_view.VIEW_FIELDS` names) that are a first guess at
             the default view (``gratnet view`` without ``--light``, ``--camera`` or ``--exposure``): the exact
             defaults replace them once worked out, unless the user moves the view first.
+        quality: ``gratnet view --quality`` (gratnet.quality): which of a material's points renders it (:meth:`point`).
 
     Raises:
         GratNetError: the initial material or mesh cannot be loaded.
@@ -138,7 +140,8 @@ class ViewerApp:
                  policy: ResolutionPolicy | None = None, clock: Callable[[], float] = time.perf_counter,
                  extra_meshes: Iterable[str] = (), weights_path: str = "auto", background: bool = False,
                  worker: Any = None, max_samples: int = 1, render_path: str = "auto",
-                 reference: LoadedReference | None = None, refine_view: Iterable[str] = ()) -> None:
+                 reference: LoadedReference | None = None, refine_view: Iterable[str] = (),
+                 quality: str = AUTO) -> None:
         from viewer.antialias import check_samples
         from viewer.scene_supply import SceneSupply
         from viewer.surface import check_size
@@ -153,6 +156,8 @@ class ViewerApp:
         self.message = ""  # the last problem (a material or mesh that failed to load), shown in the panel
         self.meshes = list(MESHES) + [spec for spec in extra_meshes if spec not in MESHES]
         self.weights_path = weights_path
+        self.quality = check_quality(quality, VIEW_QUALITIES)
+        self._points: dict[str, tuple[Path, str | None]] = {}  # material -> its point on show (see point())
         self.supply = SceneSupply(ctx, weights_path, background, worker, render_path)
         # A switch of material, mesh or mode brings that pair's default view (viewer.default_view): remembered, or
         # a quick guess at once and the exact one from a worker process (started now in the background mode).
@@ -194,6 +199,38 @@ class ViewerApp:
         """Shipped materials (``assets/*/model.npz``)."""
         return shipped_materials()
 
+    def point(self, material: str | None = None) -> tuple[Path, str | None]:
+        """The model file that renders ``material`` (default: the one on show) and its point (``None``: a model
+        file): under ``quality`` fast the fast point where the material has one, else the accurate one. ``auto`` is
+        the accurate point: the supply holds one model's programs at a time (a switch releases them and starts a
+        compile child: viewer.scene_supply), so switching points on every drag would recompile. GratNetError for
+        an unknown material."""
+        material = self.state.material if material is None else material
+        if material not in self._points:
+            try:
+                fast = self.quality == FAST and FAST in material_points(material)
+            except GratNetError:  # a model file: its own point
+                fast = False
+            self._points[material] = material_point(material, FAST if fast else None)
+        return self._points[material]
+
+    def _supplied(self, state: ViewerState) -> ViewerState:
+        """``state`` as the scene supply takes it: a fast point as its model file's path (the supply renders model
+        files); the state on show keeps the material's name (panel, default view, screenshot)."""
+        path, quality = self.point(state.material)
+        if quality != FAST:
+            return state
+        return dataclasses.replace(state, material=str(path))
+
+    def set_quality(self, quality: str) -> bool:
+        """Change ``quality``; the picture on show stays until the new point's is ready. Whether it changed."""
+        quality = check_quality(quality, VIEW_QUALITIES)
+        if quality == self.quality:
+            return False
+        self.quality, self._points = quality, {}
+        self.supply.check(self._supplied(self.state))
+        return True
+
     # -- state changes ----------------------------------------------------------------------------
 
     def set(self, **changes: Any) -> bool:
@@ -226,7 +263,7 @@ class ViewerApp:
             new.camera()
             new.light()
             check_ior(new.effective_ior, "ior")
-            self.supply.check(new)  # cheap checks (and, when not in the background, the loading itself)
+            self.supply.check(self._supplied(new))  # cheap checks (and, when not in the background, the loading itself)
         except GratNetError as error:
             self.message = str(error)
             return False
@@ -303,8 +340,8 @@ class ViewerApp:
         the CPU from that compile (and each costs several times more on the slower path)."""
         accumulation = self._current_accumulation()
         return (accumulation is not None and accumulation.samples < self.max_samples and not self.moving
-                and not self.state.slice_mode and self.supply.scene_ready(self.state, preview=False)
-                and not self.supply.pending(self.state))
+                and not self.state.slice_mode and self.supply.scene_ready(self._supplied(self.state), preview=False)
+                and not self.supply.pending(self._supplied(self.state)))
 
     def orbit(self, dx_pixels: float, dy_pixels: float, degrees_per_pixel: float = 0.4) -> bool:
         """A mouse drag over the picture: the camera orbits (in BRDF-slice mode the light moves)."""
@@ -346,7 +383,7 @@ class ViewerApp:
         return display_srgb8(xyz)
 
     def render_key(self) -> tuple[Any, ...]:
-        return (*self.state.key(), *self.full_size())
+        return (*self.state.key(), *self.full_size(), self.point()[1])  # another point: another picture
 
     def full_size(self) -> tuple[int, int]:
         """The full-resolution picture's size: the render size, or its largest square in slice mode."""
@@ -359,20 +396,20 @@ class ViewerApp:
         """Seconds until :meth:`frame` has rendering to do: 0 now, the rest of the idle time while a
         preview waits for the state to settle, ``None`` when the picture is complete and current (the
         window then sleeps until input arrives)."""
-        image, key = self.image, self.render_key()
+        image, key, supplied = self.image, self.render_key(), self._supplied(self.state)
         if image is not None and image.key == key and image.complete:
-            if self.supply.step_due(self.state, self._idle()) or self._accumulation_due():
+            if self.supply.step_due(supplied, self._idle()) or self._accumulation_due():
                 return 0.0
-            return self.POLL_SECONDS if self.supply.pending(self.state) or self._defaults.pending else None
-        if self.supply.step_due(self.state, self._idle()):
+            return self.POLL_SECONDS if self.supply.pending(supplied) or self._defaults.pending else None
+        if self.supply.step_due(supplied, self._idle()):
             return 0.0  # a warm program to link or draw: the next frame does it
-        if not self.supply.scene_ready(self.state):
+        if not self.supply.scene_ready(supplied):
             return self.POLL_SECONDS  # waiting for a shader or a mesh: look again soon
         if image is None or image.key != key or key != self._seen_key:
             # A picture held back for the quick guess (frame): look again soon, not in a busy loop that takes
             # the CPU from the guess's worker and the compile child.
             return self.GUESS_POLL_SECONDS if self.default_view_stage == "guessing" else 0.0
-        if not self.supply.scene_ready(self.state, preview=False):
+        if not self.supply.scene_ready(supplied, preview=False):
             return self.POLL_SECONDS  # the refinement waits for the full-resolution mesh
         now = self.clock() if now is None else float(now)
         return max(0.0, self._changed_at + self.policy.idle_seconds - now)
@@ -386,7 +423,8 @@ class ViewerApp:
         """
         now = self.clock() if now is None else float(now)
         self._take_default_view()  # a default view asked for by switch() or at the start
-        step = self.supply.poll(self.state, self._idle(now))  # background: at most one GL step (a cache hit)
+        supplied = self._supplied(self.state)  # the state as the supply takes it: its point's model file
+        step = self.supply.poll(supplied, self._idle(now))  # background: at most one GL step (a cache hit)
         self._check_background_errors()
         if step is not None:
             return False  # a link (0.15 s for a baked one) or a first draw: no render in the same frame
@@ -401,7 +439,7 @@ class ViewerApp:
                 return False
             self._accumulate(key)
             return True
-        if not self.supply.scene_ready(self.state):
+        if not self.supply.scene_ready(self._supplied(self.state)):
             return False  # the picture on show stays until the new one can be rendered
         if self._defaults.hold():
             return False  # … or until its view is known (the quick guess: tenths of a second)
@@ -409,7 +447,7 @@ class ViewerApp:
             self._refinement = None
             self._preview(key)
             return True
-        if self.moving or not self.supply.scene_ready(self.state, preview=False):
+        if self.moving or not self.supply.scene_ready(self._supplied(self.state), preview=False):
             return False
         self._refine(key)
         return True
@@ -428,7 +466,10 @@ class ViewerApp:
     def status(self) -> str:
         """What is being compiled or loaded for the state on show ("compiling the shader for cd… 12 s"),
         or an empty string."""
-        status = self.supply.status(self.state)
+        supplied = self._supplied(self.state)
+        status = self.supply.status(supplied)
+        if supplied.material != self.state.material:  # the supply names the point's model file
+            status = status.replace(supplied.material, model_label(Path(supplied.material)))
         stage = self.default_view_stage
         if stage:
             choosing = (f"choosing a view that shows {self.state.material}..." if stage == "guessing" else
@@ -444,22 +485,23 @@ class ViewerApp:
 
     def weights_path_in_use(self) -> str | None:
         """The weights path that renders the current state (``None``: none ready yet)."""
-        return self.supply.weights_path_in_use(self.state)
+        return self.supply.weights_path_in_use(self._supplied(self.state))
 
     def _check_background_errors(self) -> None:
         failed = self.supply.mesh_error(self.state.mesh)
         if failed is not None:
             self.message = failed
             self.state = dataclasses.replace(self.state, mesh=self._last_mesh)
-        elif not self.state.slice_mode and self.supply.weights_path_in_use(self.state) is not None:
+        elif not self.state.slice_mode and self.supply.weights_path_in_use(self._supplied(self.state)) is not None:
             self._last_mesh = self.state.mesh
         worker = self.supply.errors.pop("worker", None)
         if worker is not None:
             self.message = worker
 
     def _scene_key(self, state: ViewerState) -> tuple[Any, ...]:
-        return (state.material, "slice" if state.slice_mode else state.mesh, self.supply.weights_path_in_use(state),
-                state.shading)
+        supplied = self._supplied(state)
+        return (supplied.material, "slice" if state.slice_mode else state.mesh,
+                self.supply.weights_path_in_use(supplied), state.shading)
 
     def _timed_render(self, state: ViewerState, size: tuple[int, int], camera: Camera | None = None,
                       preview: bool = False, rows: tuple[int, int] | None = None,
@@ -468,7 +510,7 @@ class ViewerApp:
         ``rows``, only those rows of the slice), timed and counted; the time per effective pixel feeds the
         resolution policy. ``sample``: the index of the mesh render's sub-pixel offset
         (:func:`viewer.antialias.sample_offsets`; 0 = the pixel centre)."""
-        supplied = self.supply.scene(state, preview)
+        supplied = self.supply.scene(self._supplied(state), preview)
         if supplied is None:
             raise GratNetError(f"the shader for {state.material} is still compiling; try again in a moment")
         renderer, buffers = supplied
@@ -646,7 +688,7 @@ class ViewerApp:
         """The next mesh band's rows (:meth:`ResolutionPolicy.band_rows`): on the deferred path a power of two
         (the network runs per covered pixel, not per block of fragments, and a power-of-two band needs no
         padding: :func:`viewer.scheduling.padded_size`); elsewhere a multiple of the policy's."""
-        supplied = self.supply.scene(state)
+        supplied = self.supply.scene(self._supplied(state))
         deferred = supplied is not None and supplied[0].render_path == "deferred"
         return self.policy.band_rows(row_seconds, 1 if deferred else None, power_of_two=deferred)
 
@@ -696,7 +738,9 @@ class ViewerApp:
         if shading != "network" and self.reference is not None:  # gratnet render --reference draws the truth
             config = dataclasses.replace(config, reference=self.reference.loaded.path,
                                          reference_precision=self.reference.loaded.precision)
-        save_config(path, render=config, model_file=str(resolve_material(self.state.material)),
+        model_file, quality = self.point()
+        config = dataclasses.replace(config, quality=quality)
+        save_config(path, render=config, model_file=str(model_file),
                     view={"shading": shading, "flip_mean_covered": self.flip_mean})
         return path
 
@@ -714,8 +758,8 @@ class ViewerApp:
         pay the one-off costs before the first timed frame: loading, the driver's shader JIT (a 1×1 render,
         uncounted) and the import of the display conversion (colour-science, ~1 s); in the background the
         child process starts compiling now (:meth:`frame` polls it)."""
-        self.supply.check(self.state)
-        self.supply.poll(self.state)
+        self.supply.check(self._supplied(self.state))
+        self.supply.poll(self._supplied(self.state))
 
     def release(self) -> None:
         """Free the GL objects and stop background work (the context belongs to the caller)."""

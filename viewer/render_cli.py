@@ -16,6 +16,11 @@
   ``--material`` it must be that material's surface (source and σs) and the view is the material's; alone, the
   fallback view and the exposure the black-picture hint would suggest (gratnet.showcase.suggest_exposure: the
   99th percentile of the lit pixels at white, raised until 3 % of the picture shows).
+- ``--quality fast|accurate``: which of a shipped material's points renders (gratnet.quality; default: the
+  accurate one, ``assets/NAME/model.npz``). A material without the point asked for, or ``--quality`` with a
+  model-file path, is one line before any work. The default view (light, camera, exposure) is the material's,
+  worked out from its accurate point, so that both points render the same scene. The saved config records the
+  point (``render.quality``) and its model file (``model_file``).
 - ``--spp N``: N samples per pixel (anti-aliasing: the mean of N renders at sub-pixel offsets, each its own
   key vector; the same flag and meaning as ``gratnet mitsuba-render``); default 1.
 - Output: ``.png`` = display sRGB, 8-bit (``gratnet.display``, like every GratNet PNG); ``.exr`` = linear
@@ -57,6 +62,8 @@ from viewer.scene_config import (
     add_scene_arguments,
     check_scene,
     load_reference,
+    quality_help,
+    resolve_point,
     resolve_scene_command,
     scene_fields,
     warn_if_black,
@@ -106,6 +113,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     actions["material"].default = None
     actions["material"].help = (f"{(actions['material'].help or '').rsplit(' (default', 1)[0]} (default: "
                                 f"{DEFAULT_MATERIAL}; none with --reference)")
+    quality_help(actions)
     parser.set_defaults(handler=run)
 
 
@@ -113,6 +121,8 @@ def resolve_config(arguments: argparse.Namespace) -> RenderConfig:
     """The config from the flags, every compound flag parsed and every value checked (no GL yet)."""
     config = dataclasses.replace(from_arguments(RenderConfig, arguments), **scene_fields(arguments))
     check_scene(config)
+    if config.material:  # None until _render fills the default: the point asked for exists (before any model is read)
+        resolve_point(config)
     if config.slice and config.width != config.height:
         raise GratNetError(f"--slice renders a square image; give --size N,N (got {config.width},{config.height})")
     light_flag = chosen_kind(config).flag
@@ -185,9 +195,12 @@ def _render(arguments: argparse.Namespace, out: Path) -> int:
 
     from gratnet.modelfile import load_model
     from viewer.camera import Camera, Light
-    from viewer.catalog import build_mesh, resolve_material
+    from viewer.catalog import build_mesh, model_label
 
     reference_only = bool(arguments.reference) and arguments.material is None
+    if reference_only and arguments.quality is not None:
+        raise GratNetError("--quality chooses a shipped material's point; a --reference render without --material "
+                           "has no network")
     if arguments.material is None:
         arguments.material = DEFAULT_MATERIAL
     auto_exposure = reference_only and arguments.exposure is None
@@ -201,7 +214,9 @@ def _render(arguments: argparse.Namespace, out: Path) -> int:
     camera = Camera(config.camera_distance, config.camera_azimuth_degrees, config.camera_elevation_degrees,
                     fov_deg=config.fov_degrees)
     light = Light.from_config(config)
-    model_path = None if reference_only else resolve_material(config.material)
+    model_path = None
+    if not reference_only:
+        model_path, config = resolve_point(config)
     volume = (load_reference(config.reference, config.reference_precision,
                              None if reference_only else config.material) if config.reference else None)
     if volume is not None:
@@ -268,7 +283,7 @@ def _render(arguments: argparse.Namespace, out: Path) -> int:
     if model_path is None:
         source = f"reference {Path(config.reference).name}"
     else:
-        source = model_path.parent.name if model_path.name == "model.npz" else model_path.name
+        source = model_label(model_path)
         source += f" (reference {Path(config.reference).name})" if volume is not None else ""
     print(f"wrote {out}: {source}, {what}, {config.width}×{config.height}{samples}, exposure {config.exposure:g}")
     warn_if_black(xyz, config.exposure)

@@ -31,17 +31,19 @@ from gratnet.codes import DEFERRED_WEIGHTS, RENDER_PATHS, SCHEME, WEIGHTS_PATHS,
 from gratnet.config import config_field, parse_float, parse_numbers
 from gratnet.errors import GratNetError
 from gratnet.lights import DISTANCE_RANGE_METRES, LIGHT_KINDS, LightFlag, light_kind
+from gratnet.quality import DEFAULT_QUALITY, QUALITIES, QUALITY_HELP
 from viewer.defaults import FALLBACK, FOV_DEGREES, SceneDefaults, resolve_defaults
 
 if TYPE_CHECKING:
     import numpy as np
 
 ConfigT = TypeVar("ConfigT")
+SceneT = TypeVar("SceneT", bound="SceneConfig")
 
 __all__ = ["DEFAULT_MATERIAL", "DEFERRED_WEIGHTS", "DEFERRED_WEIGHTS_HELP", "MAX_SAMPLES", "RENDER_PATHS",
            "RENDER_PATH_HELP", "WEIGHT_PATHS", "RenderConfig",
            "SceneConfig", "add_scene_arguments", "check_scene", "check_scene_numbers", "fill_scene_defaults",
-           "load_reference", "parse_size",
+           "load_reference", "parse_size", "quality_help", "resolve_point",
            "resolve_scene_command", "scene_fields", "warn_if_black", "with_fallback", "write_render"]
 _OUTPUT_SUFFIXES = (".png", ".exr")
 #: Largest --spp of ``gratnet render``: viewer.antialias.MAX_SAMPLES (repeated: this module defers numpy).
@@ -74,6 +76,9 @@ class SceneConfig:
     """One light, an orbit camera, a material on a mesh: what every rendering command shares."""
 
     material: str = config_field(DEFAULT_MATERIAL, "shipped material name (assets/NAME/model.npz) or a model-file path")
+    # None when not given: the accurate point of a shipped material; in a saved config, the point that rendered (None
+    # for a model-file path). gratnet.quality names the points.
+    quality: str | None = config_field(None, QUALITY_HELP, choices=QUALITIES)
     mesh: str = config_field("cd", "cd, sphere, plane, or the path of a Wavefront .obj file (metres, +z up)")
     light_theta_degrees: float = config_field(FALLBACK.light_theta_degrees,
                                               "directional light: polar angle from +z, degrees", cli=False)
@@ -235,6 +240,23 @@ def check_scene(config: Any) -> None:
               if kind.flag is not None and getattr(config, kind.flag.field, None) is not None}
     check_scene_numbers((config.light_theta_degrees, config.light_phi_degrees), camera, lights)
     Camera(*camera, fov_deg=config.fov_degrees)  # checks the elevation and the field of view
+
+
+def quality_help(actions: dict[str, argparse.Action]) -> None:
+    """``--quality``'s help ending in its real default (the field's ``None`` means "not given": the accurate
+    point), for the commands that add it from a config class (``gratnet.config.add_arguments``' actions)."""
+    actions["quality"].help = f"{QUALITY_HELP} (default: {DEFAULT_QUALITY})"
+
+
+def resolve_point(config: SceneT) -> tuple[Path, SceneT]:
+    """The model file of ``config``'s ``material`` at its ``quality`` (viewer.catalog.material_point: one line if
+    the material has no such point, or a quality is given with a model-file path), and ``config`` with the point
+    that renders in ``quality`` (``None`` for a model-file path): what the saved config records. Cheap: no model
+    is read."""
+    from viewer.catalog import material_point
+
+    path, quality = material_point(config.material, config.quality)
+    return path, dataclasses.replace(config, quality=quality)
 
 
 def resolve_scene_command(arguments: argparse.Namespace, resolve: Callable[[argparse.Namespace], ConfigT]) -> ConfigT:

@@ -11,6 +11,13 @@
   from the material and the mesh (viewer.defaults), the same values as ``gratnet render``'s: remembered from
   an earlier run, else a quick guess (tenths of a second) that the exact values replace when a
   worker process has them (viewer.default_view), so that the window shows without waiting for them.
+- ``--quality fast|accurate|auto``: which of a shipped material's points renders it (gratnet.quality), for the
+  starting material and the panel's: ``fast`` is the fast point where a material has one (a ``--material`` without
+  one is refused in one line; the panel's others quietly show their only point), ``accurate`` the accurate point.
+  ``auto``, the default, is meant to show the fast point while the view moves and the accurate one once it stands
+  still; for now it shows the accurate point throughout (``ViewerApp.point`` says why). ``--quality`` with a
+  model-file path is refused (it has no points). The default view is the material's either way (its accurate
+  point's, as ``gratnet render``'s).
 - ``--weights-path auto|texture|baked``: where the shader reads the weights, as in ``gratnet render``.
 - ``--render-path auto|forward|deferred``: as in ``gratnet render``. In the window ``auto`` is forward on a CPU
   rasterizer (llvmpipe: the deferred path's first frames after a switch cost 0.3–0.6 s of JIT work, over the
@@ -39,6 +46,7 @@ from typing import TYPE_CHECKING, Any
 
 from gratnet.config import add_quiet_flag, parse_float, parse_int
 from gratnet.errors import GratNetError
+from gratnet.quality import ACCURATE, AUTO, QUALITY_HELP, VIEW_QUALITIES
 from viewer.scene_config import (
     RENDER_PATH_HELP,
     RENDER_PATHS,
@@ -52,7 +60,7 @@ if TYPE_CHECKING:  # the viewer's modules load numpy and pyrr: `gratnet --help` 
     from viewer.state import ViewerState
     from viewer.window import ViewerWindow
 
-__all__ = ["open_window", "register", "run", "starting_state", "starting_view"]
+__all__ = ["open_window", "register", "run", "starting_state", "starting_view", "view_point"]
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
@@ -75,6 +83,10 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     parser.add_argument("--fresnel", action=argparse.BooleanOptionalAction, default=True,
                         help="apply the Fresnel factor (default: on)")
     parser.add_argument("--slice", action="store_true", help="start in BRDF-slice mode")
+    # None when not given (auto): given, it is checked against the material (a model file has no points).
+    parser.add_argument("--quality", choices=VIEW_QUALITIES, default=None,
+                        help=f"{QUALITY_HELP}; or auto: meant to show the fast point while the view moves and the "
+                        "accurate one when it stands still, for now the accurate point throughout (default: auto)")
     parser.add_argument("--weights-path", choices=WEIGHT_PATHS, default="auto",
                         help="where the shader reads the network's weights: texture, baked (literals in a generated "
                         "shader) or auto (baked for nets up to 32k multiply-adds on a CPU rasterizer, else texture; "
@@ -109,6 +121,19 @@ def _scene_numbers(arguments: argparse.Namespace) -> tuple[float, float, float, 
     check_scene(config)
     return (config.light_theta_degrees, config.light_phi_degrees, config.camera_distance,
             config.camera_azimuth_degrees, config.camera_elevation_degrees)
+
+
+def view_point(arguments: argparse.Namespace) -> tuple[str, str]:
+    """``--quality`` checked against ``--material`` (viewer.catalog's rules, one line before any work; ``auto``
+    as the accurate point) and resolved: (the viewer's quality, the model file of the starting point, as the
+    scene supply takes it)."""
+    from viewer.catalog import material_point
+
+    quality = AUTO if arguments.quality is None else arguments.quality
+    path, point = material_point(arguments.material, None if arguments.quality in (None, AUTO) else quality)
+    if arguments.quality == AUTO and point is None:  # auto chooses between points: a model file has none
+        material_point(arguments.material, ACCURATE)  # its one-line error
+    return quality, str(path) if point not in (None, ACCURATE) else arguments.material
 
 
 def _guess_view(arguments: argparse.Namespace) -> tuple[str, ...]:
@@ -166,7 +191,7 @@ def starting_view(arguments: argparse.Namespace, exact: bool = False) -> tuple[V
     _scene_numbers(with_fallback(arguments))  # the flags given are checked before the defaults read the model
     # Read before a window opens (once: the window renders this copy): a bad model or mesh file is one line,
     # not a broken window.
-    load_material(arguments.material)
+    load_material(view_point(arguments)[1])
     if arguments.mesh not in MESHES:  # an .obj file: built now (a built-in mesh cannot fail)
         build_mesh(arguments.mesh)
     guessed: tuple[str, ...] = ()  # the unset --light, --camera, --exposure, from the material and mesh:
@@ -208,8 +233,8 @@ def open_window(arguments: argparse.Namespace, **window_options: Any) -> ViewerW
     # The compile child first: its Python start-up and the first shader overlap the checks, the first view and
     # the window's set-up (a bad material is reported by the checks below).
     worker = None
-    with contextlib.suppress(GratNetError):
-        worker = SceneSupply.start_worker(ViewerState(material=arguments.material, slice_mode=arguments.slice),
+    with contextlib.suppress(GratNetError):  # the model of the starting point (--quality), as the app asks for it
+        worker = SceneSupply.start_worker(ViewerState(material=view_point(arguments)[1], slice_mode=arguments.slice),
                                           arguments.weights_path, arguments.render_path)
     try:
         state, guessed = starting_view(arguments)
@@ -226,10 +251,12 @@ def open_window(arguments: argparse.Namespace, **window_options: Any) -> ViewerW
             worker.close()
         raise
     extra = [] if state.mesh in ("cd", "sphere", "plane") else [state.mesh]
-    return ViewerWindow(state, size, screenshot_dir=arguments.screenshot_dir, extra_meshes=extra,
-                        weights_path=arguments.weights_path, max_samples=arguments.spp,
-                        render_path=arguments.render_path, reference=reference, worker=worker, refine_view=guessed,
-                        **window_options)
+    quality = view_point(arguments)[0]
+    window = ViewerWindow(state, size, screenshot_dir=arguments.screenshot_dir, extra_meshes=extra,
+                          weights_path=arguments.weights_path, max_samples=arguments.spp,
+                          render_path=arguments.render_path, reference=reference, worker=worker, refine_view=guessed,
+                          quality=quality, **window_options)
+    return window
 
 
 def run(arguments: argparse.Namespace) -> int:

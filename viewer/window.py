@@ -26,6 +26,7 @@ from typing import Any
 import numpy as np
 
 from gratnet.errors import GratNetError
+from gratnet.quality import AUTO
 from viewer.app import ViewerApp
 from viewer.reference_view import SHADINGS
 from viewer.scheduling import ResolutionPolicy
@@ -72,7 +73,7 @@ class ViewerWindow:
                  weights_path: str = "auto", background: bool = True,
                  visible: bool = True, title: str = "GratNet viewer", max_samples: int = 16,
                  render_path: str = "auto", reference: Any = None, worker: Any = None,
-                 refine_view: Iterable[str] = ()) -> None:
+                 refine_view: Iterable[str] = (), quality: str = AUTO) -> None:
         from viewer.context import context_from_current
         from viewer.scene_supply import SceneSupply
         from viewer.surface import check_size
@@ -146,7 +147,7 @@ class ViewerWindow:
             self._gl = _GLFunctions(glfw)
             self._texture = self._picture_texture(1, 1)  # drawn by the first frame: see there
             self._app = ViewerApp(self.ctx, state, self._area_pixels(), policy, clock, extra_meshes, weights_path,
-                                  background, worker, max_samples, render_path, reference, refine_view)
+                                  background, worker, max_samples, render_path, reference, refine_view, quality)
             worker = None  # the app owns it now
             # The first frame compiles imgui's own shaders and, drawing the 1×1 picture texture, their variant
             # for its format (0.3–0.5 s on llvmpipe with an empty shader cache): drawn while the window is

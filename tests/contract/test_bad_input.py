@@ -23,8 +23,10 @@ import pytest
 from gratnet.cli import main
 from gratnet.encoding import EncodingSpec, RangeSpec
 from gratnet.modelfile import ModelFile, save_model
+from gratnet.quality import FAST
 from gratnet.volume import Volume, write_volume
-from tests.helpers import flip_in_member
+from tests.helpers import ASSETS, flip_in_member
+from viewer.catalog import material_points, shipped_materials
 
 # Imported here, unpatched: these modules bind viewer.catalog.resolve_material by name when first imported,
 # and a first import inside a test that patches it (bench, view) would keep the patch for the whole worker.
@@ -593,6 +595,41 @@ def test_bad_number_is_one_line_before_any_work(tmp_path, capsys, monkeypatch, c
         out = "f.npz"
     code, stderr = run_cli([*argv, *(["--out", out] if out else []), *(["--max-frames", "1"] if out is None else [])],
                            capsys)
+    assert_one_clear_error(code, stderr, argv[0], needle)
+    assert_nothing_written(tmp_path, set())
+
+
+# --------------------------------------------------------------------------------------------------
+# Issue 42: --quality chooses between a shipped material's points (viewer.catalog); --preset fast is a recipe
+
+
+#: A shipped material without a fast point, and a model file (which has no points).
+_ONE = next(name for name in shipped_materials() if FAST not in material_points(name))
+_FILE = str(ASSETS / _ONE / "model.npz")
+# (argv without --out, the words the one line must hold)
+QUALITY: dict[str, tuple[list[str], str]] = {
+    "render fast, no fast point": ([*RENDER, "--material", _ONE, "--quality", "fast"], f"{_ONE} has no fast point"),
+    "render quality, model file": ([*RENDER, "--material", _FILE, "--quality", "accurate"], "is a model file"),
+    "compare fast, no fast point": (["compare", _ONE, "--reference", "v.exr", "--quality", "fast"], "no fast point"),
+    "compare quality, model file": (["compare", _FILE, "--reference", "v.exr", "--quality", "fast"], "a model file"),
+    "mitsuba-render fast, no fast point": ([*MITSUBA, "--material", _ONE, "--quality", "fast"], "no fast point"),
+    "mitsuba-render quality, model file": ([*MITSUBA, "--material", _FILE, "--quality", "fast"], "a model file"),
+    "view fast, no fast point": (["view", "--material", _ONE, "--quality", "fast"], "has no fast point"),
+    "view auto, model file": (["view", "--material", _FILE, "--quality", "auto"], "is a model file"),
+    "train fast preset, mlp": (["train", "v.exr", "--preset", "fast", "--architecture", "mlp"], "feature-grid recipe"),
+}
+
+
+@pytest.mark.parametrize("case", with_mitsuba_marked(list(QUALITY)))
+def test_a_quality_or_preset_that_cannot_be_had_is_one_line_before_any_work(tmp_path, capsys, monkeypatch, case):
+    argv, needle = QUALITY[case]
+    monkeypatch.chdir(tmp_path)
+    for heavy_step in ("gratnet.modelfile.load_model", "gratnet.volume.read_volume",
+                       "viewer.scene_config.load_reference"):
+        monkeypatch.setattr(heavy_step, lambda *a, **k: pytest.fail("work started before --quality was checked"))
+    out = {"train": ["--out", "run"], "compare": ["--out", "compare"], "view": ["--max-frames", "1"]}.get(
+        argv[0], ["--out", "out.png"])
+    code, stderr = run_cli([*argv, *out], capsys)
     assert_one_clear_error(code, stderr, argv[0], needle)
     assert_nothing_written(tmp_path, set())
 

@@ -10,6 +10,7 @@ import pytest
 
 from bench.slices import BenchConfig, ModelEntry, markdown_table, pareto_front
 from gratnet.cli import main
+from gratnet.cost import ModelCost
 from gratnet.encoding import EncodingSpec, RangeSpec
 from gratnet.modelfile import ModelFile, save_model
 from tests.helpers import REPO
@@ -84,8 +85,12 @@ def test_bench_end_to_end_writes_table_plot_and_config(tmp_path, capsys, ctx):  
         assert row["macs_per_pixel"] == sum(a * b for a, b in zip(sizes[:-1], sizes[1:], strict=True))
         assert row["seconds"] > 0 and row["shader_gmac_per_s"] > 0 and row["torch_cpu_gmac_per_s"] > 0
         assert row["material"] == "sinusoidal" and row["flip_mean"] is None  # no metrics.json beside it
+        assert row["bytes_on_disk"] == model.stat().st_size and row["grid_values_read_per_pixel"] == 0
+        assert row["bytes_gpu"] == ModelCost.of_file(model).bytes_gpu > 0
     assert (out / "pareto.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
-    assert "| tiny |" in (out / "bench.md").read_text()
+    table = (out / "bench.md").read_text()
+    assert "| tiny |" in table and "| MACs/pixel | grid values read | MB on disk | MB on GPU |" in table
+    assert f"| {results[0]['macs_per_pixel']} | 0 | {model.stat().st_size / 1e6:.3g} |" in table
     assert json.loads((out / "bench.config.json").read_text())["bench"]["sizes"] == "16,24"
 
 
@@ -139,6 +144,7 @@ def test_scene_bench_times_every_combination_and_records_the_device(tmp_path, ct
         assert 0 < row["covered_pixels"] <= row["width"] * row["height"]
         # Each sample that hits the disc is one evaluation: about spp × covered pixels.
         assert row["evaluations"] == pytest.approx(row["spp"] * row["covered_pixels"], rel=0.3)
+        assert {key: row[key] for key in ModelCost.of_file(model).to_dict()} == ModelCost.of_file(model).to_dict()
     table = (out / "scenes.md").read_text().splitlines()
     assert len(table) == 2 + len(rows) and "| 24×16 |" in table[2]
     assert not (out / "pareto.png").exists()  # --no-slices: no slice outputs

@@ -103,3 +103,43 @@ def test_the_seeds_section_is_the_recorded_seeds_mean_and_spread(page):
         assert f"{statistics.fmean(flips):.4f} ± {statistics.stdev(flips):.4f}" in line
         verdict = "**yes**" if statistics.fmean(flips) <= PAPER[row["dataset"]] else "no"
         assert f"| {verdict} |" in line
+
+
+def test_every_row_states_its_models_cost(page):
+    """The cost columns are gratnet.cost's figures of each shipped model file, in both material tables."""
+    from gratnet.cost import ModelCost
+
+    column, rows = _paper_table(page)
+    earlier = page.split("## Earlier materials", 1)[1].split("\n## ", 1)[0]
+    header = next(line for line in earlier.splitlines() if line.startswith("| material |"))
+    earlier_column = {name: index for index, name in enumerate(_cells(header)[1:])}
+    earlier_rows = {cells[0]: cells[1:] for cells in map(_cells, earlier.splitlines()[earlier.splitlines().index(
+        header) + 2:]) if cells and cells[0]}
+    assert len(earlier_rows) >= 6
+    for table_column, table in ((column, rows), (earlier_column, earlier_rows)):
+        for name, cells in table.items():
+            cost = ModelCost.of_file(REPO / "assets" / name / "model.npz")
+            assert cells[table_column["MACs/pixel"]] == f"{cost.macs_per_pixel:,}"
+            assert cells[table_column["grid values read"]] == f"{cost.grid_values_read:,}"
+            assert float(cells[table_column["MB on disk"]]) == pytest.approx(cost.bytes_on_disk / 1e6, rel=5e-3)
+            assert float(cells[table_column["MB on GPU"]]) == pytest.approx(cost.bytes_gpu / 1e6, rel=5e-3)
+
+
+def test_the_frame_column_is_the_recorded_frame_of_each_material(tmp_path, monkeypatch):
+    """With benchmarks/frame_time_1080p.py's record the tables gain its frame per material ('—' where it has
+    none); without one, no frame column."""
+    from analysis import results_table
+
+    monkeypatch.chdir(tmp_path)  # the record is found relative to the working folder, as the script runs
+    assert results_table.frame_times() is None
+    assert "frame" not in results_table.cost_header(None)[0]
+    record = {"width": 1920, "height": 1080, "machine": {"gl_renderer": "llvmpipe (LLVM 15.0.6, 256 bits)"},
+              "models": [{"material": "paper-cd", "ms": 1234.5}, {"material": "cd", "error": "failed"}]}
+    (tmp_path / "docs" / "data").mkdir(parents=True)
+    (tmp_path / "docs" / "data" / "frame_times_1080p.json").write_text(json.dumps(record))
+    record = results_table.frame_times()
+    header, separator = results_table.cost_header(record)
+    assert header.endswith("| 1080p CD frame (ms, llvmpipe)") and separator.count("---") == header.count("|") + 1
+    assert results_table.cost_cells(REPO / "assets" / "paper-cd", record).endswith("| 1234")
+    assert results_table.cost_cells(REPO / "assets" / "cd", record).endswith("| —")  # its measurement failed
+    assert results_table.cost_cells(REPO / "assets" / "paper-pits", record).endswith("| —")  # not measured

@@ -167,8 +167,9 @@ def test_evaluation_rebuilds_a_scan_preset_from_a_volumes_source(fields):
 
 
 def test_reproduce_script_replays_every_shipped_paper_models_recorded_training(tmp_path):
-    """scripts/reproduce_paper_models.sh (DRY_RUN) rebuilds each assets/paper-* from its train_command.json:
-    ground truth with the w-slices of the volume it was trained on, the same training flags, the evaluation."""
+    """scripts/reproduce_paper_models.sh (DRY_RUN) rebuilds each assets/paper-* and each of its quality points
+    (assets/NAME/POINT/, e.g. fast/) from its train_command.json: ground truth of the material's height field with the
+    w-slices of the volume it was trained on, the same training flags, the evaluation."""
     import json
     import shlex
     import subprocess
@@ -176,21 +177,34 @@ def test_reproduce_script_replays_every_shipped_paper_models_recorded_training(t
     from gratnet.modelfile import load_model
     from tests.helpers import REPO
 
-    names = sorted(path.parent.name for path in (REPO / "assets").glob("paper-*/train_command.json"))
-    assert len(names) == 8
+    assets = REPO / "assets"
+    materials = sorted(path.parent.name for path in assets.glob("paper-*/train_command.json"))
+    assert len(materials) == 8
+    # The script's order: each material, then its points (sorted); a point shares its material's volume.
+    names = [entry for material in materials for entry in [material, *sorted(
+        f"{material}/{path.parent.name}" for path in (assets / material).glob("*/train_command.json"))]]
     result = subprocess.run(["bash", str(REPO / "scripts" / "reproduce_paper_models.sh")], capture_output=True,
                             text=True, env={"DRY_RUN": "1", "OUT": str(tmp_path), "PATH": "/usr/bin:/bin"},
                             check=True)
     commands = [shlex.split(line[2:]) for line in result.stdout.splitlines() if line.startswith("+ ")]
-    assert len(commands) == 3 * len(names)
-    triples = [commands[index:index + 3] for index in range(0, len(commands), 3)]
-    for name, (groundtruth, train, evaluate) in zip(names, triples, strict=True):
-        recorded = shlex.split(json.loads((REPO / "assets" / name / "train_command.json").read_text())["command"])
+    volumes: dict[str, str] = {}
+    index = 0
+    for name in names:
+        dataset = name.split("/")[0]
+        recorded = shlex.split(json.loads((assets / name / "train_command.json").read_text())["command"])
         # The w-slices of the volume the model was trained on, as its model file records them.
-        slices = str(load_model(REPO / "assets" / name / "model.npz").metadata["volume"]["slices"])
-        assert groundtruth[1:3] == ["groundtruth", name] and groundtruth[groundtruth.index("--slices") + 1] == slices
-        volume = groundtruth[groundtruth.index("--out") + 1]
-        record = json.loads((REPO / "assets" / name / "train_command.json").read_text())
+        slices = str(load_model(assets / name / "model.npz").metadata["volume"]["slices"])
+        if dataset not in volumes:  # the ground truth runs once per volume
+            groundtruth = commands[index]
+            index += 1
+            assert groundtruth[1:3] == ["groundtruth", dataset]
+            assert groundtruth[groundtruth.index("--slices") + 1] == slices
+            volumes[dataset] = groundtruth[groundtruth.index("--out") + 1]
+        volume = volumes[dataset]
+        assert volume.endswith(f"-s{slices}.exr")
+        train, evaluate = commands[index:index + 2]
+        index += 2
+        record = json.loads((assets / name / "train_command.json").read_text())
         environment = [f"{key}={value}" for key, value in record.get("environment", {}).items()]
         if environment:  # a recorded environment (a CPU training's thread count) is replayed through env
             assert train[:1 + len(environment)] == ["env", *environment]
@@ -201,6 +215,8 @@ def test_reproduce_script_replays_every_shipped_paper_models_recorded_training(t
             recorded[3:out] + recorded[out + 2:]
         assert evaluate[1] == "evaluate" and "--views" in evaluate
         assert evaluate[evaluate.index("--volume") + 1] == volume
+        assert evaluate[evaluate.index("--heightfield") + 1] == dataset
+    assert index == len(commands)
     bad = subprocess.run(["bash", str(REPO / "scripts" / "reproduce_paper_models.sh"), "no-such"], capture_output=True,
                          text=True, env={"DRY_RUN": "1", "PATH": "/usr/bin:/bin"})
     assert bad.returncode == 2 and "no assets/no-such/train_command.json" in bad.stderr

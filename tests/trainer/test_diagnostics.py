@@ -131,6 +131,16 @@ def test_training_records_slice_flip_and_plots_the_curves(tiny_run):
     assert "training_curves.png" in report and "Error by region" in report and "brdf_regions.png" in report
 
 
+def test_the_training_report_states_the_models_cost(tiny_run):
+    """`gratnet train` evaluates with its model file's path: the cost includes the file's bytes."""
+    from gratnet.cost import ModelCost
+
+    cost = ModelCost.of_file(tiny_run / "run" / "model.npz")
+    metrics = json.loads((tiny_run / "run" / "metrics.json").read_text())
+    assert metrics["cost"] == {**cost.to_dict(), "summary": cost.summary()} and cost.bytes_on_disk
+    assert cost.summary() in (tiny_run / "run" / "report.md").read_text().split("## Metrics")[0]
+
+
 def test_report_holds_the_oracle_and_the_regions_beside_the_network(tiny_run):
     metrics = json.loads((tiny_run / "run" / "metrics.json").read_text())
     rows = metrics["brdf_slices"]

@@ -7,7 +7,7 @@
 # fast_models_table.py.
 # Usage: bash docs/experiments/probes/fast_models_screen.sh [CANDIDATE ...]   (default: every candidate below)
 #   OUT=out/fast (volume, runs, slice cache), EPOCHS=3, GRATNET=.venv/bin/gratnet
-# The band (--first-frequency) and line (--grid-lines) candidates need fast_models_screen.patch, which is not
+# The band (--first-frequency), line (--grid-lines) and polar (--grid-polar) candidates need fast_models_screen.patch, which is not
 # part of GratNet: `git checkout 54c7d34 && git apply docs/experiments/probes/fast_models_screen.patch`, then
 # run this script from that tree (docs/experiments/2026-11-27-fast-models-screen.md).
 set -euo pipefail
@@ -43,10 +43,22 @@ declare -A candidates=(
     # Narrower funnels on fewer frequencies, the grid as shipped.
     [g4-L19-h28]="--hidden 28,16 --grid-levels 3 --grid-resolution 251 --grid-t-resolution 6 --grid-features 4"
     [g4-L12-h40]="--hidden 40,24 --grid-levels 3 --grid-resolution 251 --grid-t-resolution 6 --grid-features 4 --frequencies 12"
+    # A polar level over (c_u, c_v) (--grid-polar A,R: A angle × R radius nodes, periodic in angle) beside the
+    # square levels: the streaks of a patch's edges and tracks run through the mirror direction, radially.
+    [p4-L8-h44]="--hidden 44,24,12 --grid-levels 3 --grid-resolution 251 --grid-t-resolution 6 --grid-features 4 --frequencies 8 --t-frequencies 2 --grid-polar 1024,64"
+    [p4a-L8-h44]="--hidden 44,24,12 --grid-levels 3 --grid-resolution 251 --grid-t-resolution 6 --grid-features 4 --frequencies 8 --t-frequencies 2 --grid-polar 2048,32"
+    # g8-L8-h44 with the display-weighted loss (paper-blazed's recipe): visible CIE Y weighted 4×.
+    [g8-L8-h44-vis]="--hidden 44,24,12 --grid-levels 3 --grid-resolution 251 --grid-t-resolution 5 --grid-features 8 --frequencies 8 --t-frequencies 2 --loss-visible-y 6e-8,5e-4 --loss-visible-weight 4"
+    # g8-L8-h44's neighbours: a finer finest level with fewer t nodes (351² × 3 t), a shallower and wider funnel.
+    [g8r351t3-L8-h44]="--hidden 44,24,12 --grid-levels 3 --grid-resolution 351 --grid-t-resolution 3 --grid-features 8 --frequencies 8 --t-frequencies 2"
+    [g8-L8-h52]="--hidden 52,16 --grid-levels 3 --grid-resolution 251 --grid-t-resolution 5 --grid-features 8 --frequencies 8 --t-frequencies 2"
+    # g8-L8 with the two lines (the CD's brightest orders are a narrow stripe along v*: g8-L8-h44's error sits there).
+    [ln8-L8-h38]="--hidden 38,24,12 --grid-levels 3 --grid-resolution 251 --grid-t-resolution 5 --grid-features 8 --frequencies 8 --t-frequencies 2 --grid-lines 1001"
     [ln8-L4-h48]="--hidden 48,32,16 --grid-levels 3 --grid-resolution 251 --grid-t-resolution 5 --grid-features 8 --frequencies 4 --t-frequencies 2 --grid-lines 1001"
 )
 order=(base g4-b12-h48 g8-b12-h40 ln4-L4-h56 g4-L4-h56 ln4-b12-h48 g4-L19-h28 g4-L12-h40 g8-L8-h44 ln4-L8-h40 g4-L19-h24 ln4-L2-h48
-       ln8-L4-h48 g4-b14-h32 g8-L4-h56 g4x4-501-L4-h56 g8-L2-h40)
+       ln8-L4-h48 g4-b14-h32 g8-L4-h56 g4x4-501-L4-h56 g8-L2-h40 p4-L8-h44 p4a-L8-h44 g8-L8-h44-vis
+       g8r351t3-L8-h44 g8-L8-h52 ln8-L8-h38)
 names=("$@")
 [ ${#names[@]} -gt 0 ] || names=("${order[@]}")
 for name in "${names[@]}"; do
