@@ -2,7 +2,9 @@
 
 Files: ``index.html`` and ``gratnet.js`` (export/web/, copied; the JavaScript gets the export's data prepended as
 one ``const EXPORT = {…};`` line), ``meshes.bin`` (the CD disc, sphere and plane of viewer/meshes.py, as
-``gratnet render`` draws them) and per material ``NAME.weights.bin`` (export/glsl.py's packed weights).
+``gratnet render`` draws them) and per material ``NAME.weights.bin`` (export/glsl.py's packed weights) and, for a
+feature-grid model, ``NAME.grid<k>.bin`` per grid texture (``u_grid[k]``: the texels viewer/renderer.py uploads, in
+the model's float16 or float32, as ``--format glsl`` writes them).
 
 The page's network is the GLSL module of ``--format glsl`` as GLSL ES 3.00: a header of precision statements and
 ``#define precise`` (empty: WebGL2's GLSL ES 3.00 has no ``precise``; what that costs is measured in
@@ -10,8 +12,11 @@ tests/tools/test_export_web.py), then the module unchanged. The defaults of ever
 per mesh, and the BRDF slice's) are viewer.defaults' own, computed here at export time, so that a URL without
 parameters shows what ``gratnet render`` would.
 
-Feature-grid models are refused: their ``u_grid[chunk]`` is indexed by a loop variable, which GLSL ES 3.00 does not
-allow for sampler arrays (only constant integral expressions).
+Feature-grid models: shaders/featuregrid.glsl indexes ``u_grid`` by constants only (GLSL ES 3.00 allows nothing
+else for sampler arrays); the page loads each grid file as a 3D texture (R/RG/RGB/RGBA 16F or 32F, NEAREST, read with
+``texelFetch``: the runtime's default path) and binds it to ``u_grid[k]``. ``u_grid_smoothstep`` and
+``u_grid_hardware_filter`` are the module's constants (export/glsl.py: the model's interpolation, and 0). A model
+is refused only where its grid textures and the weights exceed WebGL2's guaranteed 16 samplers per fragment shader.
 """
 
 from __future__ import annotations
@@ -23,12 +28,12 @@ from typing import Any
 
 import numpy as np
 
-from export.glsl import GlslModule, glsl_module
+from export.glsl import GlslModule, glsl_module, grid_chunks_of
 from gratnet.errors import GratNetError
 from gratnet.modelfile import ModelFile
 from viewer.defaults import FOV_DEGREES as _FOV_DEGREES
 
-__all__ = ["ES_HEADER", "MESH_NAMES", "PAGE_FILES", "check_web_model", "es_module", "write_web"]
+__all__ = ["ES_HEADER", "MESH_NAMES", "PAGE_FILES", "WEBGL2_SAMPLERS", "check_web_model", "es_module", "write_web"]
 
 #: The page's static files (export/web/).
 PAGE_FILES = ("index.html", "gratnet.js")
@@ -37,6 +42,8 @@ MESH_NAMES = ("cd", "sphere", "plane")
 #: What turns the GLSL module into GLSL ES 3.00 for WebGL2 (the page's shaders start with ``#version 300 es``).
 ES_HEADER = ("precision highp float;\nprecision highp int;\nprecision highp sampler2D;\nprecision highp sampler3D;\n"
              "#define precise\n")
+#: WebGL2's minimum of MAX_TEXTURE_IMAGE_UNITS (samplers a fragment shader may use).
+WEBGL2_SAMPLERS = 16
 _PAGE_ROOT = Path(__file__).resolve().parent / "web"
 #: gratnet render's defaults that are not the material's: size (pixels), field of view (degrees), refractive index.
 _SIZE = (512, 512)
@@ -44,10 +51,13 @@ _IOR = 1.5
 
 
 def check_web_model(model: ModelFile, where: str) -> None:
-    """Refuse (one GratNetError) a model the web page cannot show: feature-grid models (module docstring)."""
-    if model.grids:
-        raise GratNetError(f"{where} is a feature-grid model: --format web cannot export it (WebGL2's GLSL ES 3.00 "
-                           f"indexes sampler arrays only by constants; use --format glsl or hlsl)")
+    """Refuse (one GratNetError) a model the web page cannot show: more grid textures than WebGL2 guarantees
+    samplers to a fragment shader beside the weight texture."""
+    textures = len(grid_chunks_of(model))
+    if textures > WEBGL2_SAMPLERS - 1:
+        raise GratNetError(f"{where} needs {textures} grid textures (levels × ceil(features/4)) beside its weight "
+                           f"texture, more than the {WEBGL2_SAMPLERS} samplers WebGL2 guarantees a fragment shader: "
+                           f"use --format glsl or hlsl")
 
 
 def es_module(module: GlslModule) -> str:
@@ -88,6 +98,18 @@ def _meshes(folder: Path) -> dict[str, dict[str, int]]:
     return table
 
 
+def _grids(module: GlslModule, name: str, folder: Path) -> list[dict[str, object]]:
+    """Write ``NAME.grid<k>.bin`` per grid texture (little-endian, as export/cli.py writes them for the other
+    formats); their entries: file, texels (width, height, depth), channels and type (float16 or float32)."""
+    grids: list[dict[str, object]] = []
+    for k, chunk in enumerate(module.grids):
+        (folder / f"{name}.grid{k}.bin").write_bytes(chunk.astype(chunk.dtype.newbyteorder("<")).tobytes())
+        depth, height, width, channels = chunk.shape
+        grids.append({"file": f"{name}.grid{k}.bin", "texels": [width, height, depth], "channels": int(channels),
+                      "type": str(chunk.dtype)})
+    return grids
+
+
 def write_web(materials: list[tuple[str, str, ModelFile]], folder: Path) -> dict[str, dict[str, object]]:
     """Write the page for ``materials`` (file-name stem, the name or path the user gave, model) into ``folder``;
     the manifest entry of each material."""
@@ -100,11 +122,12 @@ def write_web(materials: list[tuple[str, str, ModelFile]], folder: Path) -> dict
         module = glsl_module(model, name)
         (folder / f"{name}.weights.bin").write_bytes(module.weights.astype("<f4").tobytes())
         width, height = module.weights_size
+        grids = _grids(module, name, folder)
         page_materials[name] = {"shader": es_module(module), "weights": f"{name}.weights.bin",
-                                "texels": [width, height],
+                                "texels": [width, height], "grids": grids,
                                 "defaults": _defaults(given, _FOV_DEGREES, _IOR)}
         entries[name] = {"weights": f"{name}.weights.bin", "weights_texels": [width, height],
-                         "weights_format": "RGBA32F little-endian", "grids": [], "defaults": page_materials[name][
+                         "weights_format": "RGBA32F little-endian", "grids": grids, "defaults": page_materials[name][
                              "defaults"]}
     data = {"materials": page_materials, "meshes": _meshes(folder),
             "render": {"size": list(_SIZE), "fov": _FOV_DEGREES, "ior": _IOR},

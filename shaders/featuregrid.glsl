@@ -52,11 +52,108 @@ vec4 grid_level_features(highp sampler3D grid, vec3 c) {
 
 // Fetch every level's features at the network coordinates of the key set by encoding_set_key. Each chunk
 // redoes its level's cell arithmetic (a few flops beside its eight fetches): one texture per level, as
-// before chunks, is then the same code.
+// before chunks, is then the same code. u_grid is indexed by constants only, one line per texture: GLSL ES 3.00
+// (WebGL2, gratnet export --format web) allows no other sampler-array index. The chain covers 32 textures: the
+// runtime takes at most the per-stage samplers minus 4 others (viewer/renderer.py check_grid_texture_units; 28 on
+// llvmpipe's and NVIDIA's 32), and the shipped models use at most 12 (MAX_FEATURES 16 = 4 chunks a level).
+#if GRID_LEVELS * GRID_CHUNKS > 32
+#error featuregrid.glsl: more than 32 grid textures (GRID_LEVELS * GRID_CHUNKS); extend grid_set_key()
+#endif
 void grid_set_key() {
-    for (int chunk = 0; chunk < GRID_LEVELS * GRID_CHUNKS; ++chunk) {
-        g_grid_features[chunk] = grid_level_features(u_grid[chunk], g_coordinates);
-    }
+    g_grid_features[0] = grid_level_features(u_grid[0], g_coordinates);
+#if GRID_LEVELS * GRID_CHUNKS > 1
+    g_grid_features[1] = grid_level_features(u_grid[1], g_coordinates);
+#endif
+#if GRID_LEVELS * GRID_CHUNKS > 2
+    g_grid_features[2] = grid_level_features(u_grid[2], g_coordinates);
+#endif
+#if GRID_LEVELS * GRID_CHUNKS > 3
+    g_grid_features[3] = grid_level_features(u_grid[3], g_coordinates);
+#endif
+#if GRID_LEVELS * GRID_CHUNKS > 4
+    g_grid_features[4] = grid_level_features(u_grid[4], g_coordinates);
+#endif
+#if GRID_LEVELS * GRID_CHUNKS > 5
+    g_grid_features[5] = grid_level_features(u_grid[5], g_coordinates);
+#endif
+#if GRID_LEVELS * GRID_CHUNKS > 6
+    g_grid_features[6] = grid_level_features(u_grid[6], g_coordinates);
+#endif
+#if GRID_LEVELS * GRID_CHUNKS > 7
+    g_grid_features[7] = grid_level_features(u_grid[7], g_coordinates);
+#endif
+#if GRID_LEVELS * GRID_CHUNKS > 8
+    g_grid_features[8] = grid_level_features(u_grid[8], g_coordinates);
+#endif
+#if GRID_LEVELS * GRID_CHUNKS > 9
+    g_grid_features[9] = grid_level_features(u_grid[9], g_coordinates);
+#endif
+#if GRID_LEVELS * GRID_CHUNKS > 10
+    g_grid_features[10] = grid_level_features(u_grid[10], g_coordinates);
+#endif
+#if GRID_LEVELS * GRID_CHUNKS > 11
+    g_grid_features[11] = grid_level_features(u_grid[11], g_coordinates);
+#endif
+#if GRID_LEVELS * GRID_CHUNKS > 12
+    g_grid_features[12] = grid_level_features(u_grid[12], g_coordinates);
+#endif
+#if GRID_LEVELS * GRID_CHUNKS > 13
+    g_grid_features[13] = grid_level_features(u_grid[13], g_coordinates);
+#endif
+#if GRID_LEVELS * GRID_CHUNKS > 14
+    g_grid_features[14] = grid_level_features(u_grid[14], g_coordinates);
+#endif
+#if GRID_LEVELS * GRID_CHUNKS > 15
+    g_grid_features[15] = grid_level_features(u_grid[15], g_coordinates);
+#endif
+#if GRID_LEVELS * GRID_CHUNKS > 16
+    g_grid_features[16] = grid_level_features(u_grid[16], g_coordinates);
+#endif
+#if GRID_LEVELS * GRID_CHUNKS > 17
+    g_grid_features[17] = grid_level_features(u_grid[17], g_coordinates);
+#endif
+#if GRID_LEVELS * GRID_CHUNKS > 18
+    g_grid_features[18] = grid_level_features(u_grid[18], g_coordinates);
+#endif
+#if GRID_LEVELS * GRID_CHUNKS > 19
+    g_grid_features[19] = grid_level_features(u_grid[19], g_coordinates);
+#endif
+#if GRID_LEVELS * GRID_CHUNKS > 20
+    g_grid_features[20] = grid_level_features(u_grid[20], g_coordinates);
+#endif
+#if GRID_LEVELS * GRID_CHUNKS > 21
+    g_grid_features[21] = grid_level_features(u_grid[21], g_coordinates);
+#endif
+#if GRID_LEVELS * GRID_CHUNKS > 22
+    g_grid_features[22] = grid_level_features(u_grid[22], g_coordinates);
+#endif
+#if GRID_LEVELS * GRID_CHUNKS > 23
+    g_grid_features[23] = grid_level_features(u_grid[23], g_coordinates);
+#endif
+#if GRID_LEVELS * GRID_CHUNKS > 24
+    g_grid_features[24] = grid_level_features(u_grid[24], g_coordinates);
+#endif
+#if GRID_LEVELS * GRID_CHUNKS > 25
+    g_grid_features[25] = grid_level_features(u_grid[25], g_coordinates);
+#endif
+#if GRID_LEVELS * GRID_CHUNKS > 26
+    g_grid_features[26] = grid_level_features(u_grid[26], g_coordinates);
+#endif
+#if GRID_LEVELS * GRID_CHUNKS > 27
+    g_grid_features[27] = grid_level_features(u_grid[27], g_coordinates);
+#endif
+#if GRID_LEVELS * GRID_CHUNKS > 28
+    g_grid_features[28] = grid_level_features(u_grid[28], g_coordinates);
+#endif
+#if GRID_LEVELS * GRID_CHUNKS > 29
+    g_grid_features[29] = grid_level_features(u_grid[29], g_coordinates);
+#endif
+#if GRID_LEVELS * GRID_CHUNKS > 30
+    g_grid_features[30] = grid_level_features(u_grid[30], g_coordinates);
+#endif
+#if GRID_LEVELS * GRID_CHUNKS > 31
+    g_grid_features[31] = grid_level_features(u_grid[31], g_coordinates);
+#endif
 }
 
 float network_input_feature(int f) {

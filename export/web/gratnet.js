@@ -1,7 +1,8 @@
 // GratNet's WebGL2 viewer, written by `gratnet export --format web` (docs/export.md, "The web page").
 // EXPORT (the line above, written at export time): per material its GLSL ES module (the runtime's shaders/*.glsl
 // through export/glsl.py), weight texture and the default views of gratnet render (viewer/defaults.py); the meshes'
-// offsets in meshes.bin; gratnet render's size, field of view and IOR; the XYZ -> linear sRGB matrix.
+// offsets in meshes.bin; gratnet render's size, field of view and IOR; the XYZ -> linear sRGB matrix. A feature-grid
+// material also lists its grid files (u_grid[k]: NAME.grid<k>.bin, texels, channels, float16 or float32).
 //
 // URL parameters, with gratnet render's meanings: material=NAME, mesh=cd|sphere|plane, slice=1 (the BRDF slice),
 // light=THETA,PHI (degrees), camera=DIST,AZIMUTH,ELEVATION (metres, degrees), exposure=X, ior=N (0: no Fresnel),
@@ -13,6 +14,8 @@
 const canvas = document.getElementById("view");
 const panel = document.getElementById("panel");
 const MESHES = ["cd", "sphere", "plane"];
+// Texture units: the weights 0, the linear target 1, a feature-grid material's u_grid[k] GRID_UNIT + k.
+const GRID_UNIT = 2;
 const PARAMETERS = ["material", "mesh", "slice", "light", "camera", "exposure", "ior", "size", "ui"];
 
 function fail(message) {
@@ -217,6 +220,34 @@ function compile(gl, vertex, fragment) {
   return program;
 }
 
+// A grid file as a 3D texture exactly as viewer/renderer.py uploads it (R/RG/RGB/RGBA, 16F or 32F, x fastest), with
+// NEAREST filtering: featuregrid.glsl reads it with texelFetch only, and a 32F texture with a linear filter is
+// incomplete (reads 0) without OES_texture_float_linear. No mipmaps; clamp to edge.
+function gridTexture(gl, grid, bytes) {
+  const half = grid.type === "float16";
+  if (!half && grid.type !== "float32") throw new Error(`${grid.file}: unknown texel type ${grid.type}`);
+  const [width, height, depth] = grid.texels;
+  const channels = grid.channels;
+  const expected = width * height * depth * channels * (half ? 2 : 4);
+  if (bytes.byteLength !== expected) throw new Error(`${grid.file}: ${bytes.byteLength} bytes, expected ${expected}`);
+  const format = [gl.RED, gl.RG, gl.RGB, gl.RGBA][channels - 1];
+  const internal = half ? [gl.R16F, gl.RG16F, gl.RGB16F, gl.RGBA16F][channels - 1]
+    : [gl.R32F, gl.RG32F, gl.RGB32F, gl.RGBA32F][channels - 1];
+  const texture = gl.createTexture();
+  gl.bindTexture(gl.TEXTURE_3D, texture);
+  gl.texStorage3D(gl.TEXTURE_3D, 1, internal, width, height, depth);
+  gl.pixelStorei(gl.UNPACK_ALIGNMENT, 1);  // rows of an odd width of R16F are not 4-byte aligned
+  gl.texSubImage3D(gl.TEXTURE_3D, 0, 0, 0, 0, width, height, depth, format, half ? gl.HALF_FLOAT : gl.FLOAT,
+    half ? new Uint16Array(bytes) : new Float32Array(bytes));
+  gl.pixelStorei(gl.UNPACK_ALIGNMENT, 4);
+  gl.texParameteri(gl.TEXTURE_3D, gl.TEXTURE_MIN_FILTER, gl.NEAREST);
+  gl.texParameteri(gl.TEXTURE_3D, gl.TEXTURE_MAG_FILTER, gl.NEAREST);
+  for (const wrap of [gl.TEXTURE_WRAP_S, gl.TEXTURE_WRAP_T, gl.TEXTURE_WRAP_R]) {
+    gl.texParameteri(gl.TEXTURE_3D, wrap, gl.CLAMP_TO_EDGE);
+  }
+  return texture;
+}
+
 async function fetchBytes(name) {
   const response = await fetch(name);
   if (!response.ok) throw new Error(`cannot load ${name}: HTTP ${response.status}`);
@@ -261,13 +292,24 @@ class Viewer {
       gl.texParameteri(gl.TEXTURE_2D, gl.TEXTURE_MIN_FILTER, gl.NEAREST);
       gl.texParameteri(gl.TEXTURE_2D, gl.TEXTURE_MAG_FILTER, gl.NEAREST);
       gl.texImage2D(gl.TEXTURE_2D, 0, gl.RGBA32F, entry.texels[0], entry.texels[1], 0, gl.RGBA, gl.FLOAT, weights);
+      const grids = entry.grids ?? [];
+      if (1 + grids.length > gl.getParameter(gl.MAX_TEXTURE_IMAGE_UNITS)) {
+        throw new Error(`${name} needs ${grids.length} grid textures and its weights: more than this browser's ` +
+          `${gl.getParameter(gl.MAX_TEXTURE_IMAGE_UNITS)} samplers per shader`);
+      }
+      const gridTextures = [];
+      for (const [k, grid] of grids.entries()) {
+        gl.activeTexture(gl.TEXTURE0 + GRID_UNIT + k);
+        gridTextures.push(gridTexture(gl, grid, await fetchBytes(grid.file)));
+      }
+      gl.activeTexture(gl.TEXTURE0);
       const header = "#version 300 es\n" + entry.shader;
       const surface = compile(gl, SURFACE_VERTEX, header + SURFACE_MAIN);
       for (const [index, attribute] of ["in_position", "in_normal", "in_tangent"].entries()) {
         gl.bindAttribLocation(surface, index, attribute);
       }
       gl.linkProgram(surface);  // again, with the attribute locations the vertex arrays use
-      this.materials[name] = { texture, slice: compile(gl, FULLSCREEN, header + SLICE_MAIN), surface };
+      this.materials[name] = { texture, gridTextures, slice: compile(gl, FULLSCREEN, header + SLICE_MAIN), surface };
     }
     return this.materials[name];
   }
@@ -313,10 +355,17 @@ class Viewer {
     gl.clear(gl.COLOR_BUFFER_BIT | gl.DEPTH_BUFFER_BIT);
     gl.activeTexture(gl.TEXTURE0);
     gl.bindTexture(gl.TEXTURE_2D, material.texture);
+    for (const [k, grid] of material.gridTextures.entries()) {
+      gl.activeTexture(gl.TEXTURE0 + GRID_UNIT + k);
+      gl.bindTexture(gl.TEXTURE_3D, grid);
+    }
     const program = state.slice ? material.slice : material.surface;
     gl.useProgram(program);
     const set = (name, kind, ...values) => gl[`uniform${kind}`](gl.getUniformLocation(program, name), ...values);
     set("u_weights", "1i", 0);
+    if (material.gridTextures.length > 0) {  // u_grid[k] on unit GRID_UNIT + k (u_grid_* are the module's constants)
+      set("u_grid[0]", "1iv", material.gridTextures.map((_, k) => GRID_UNIT + k));
+    }
     set("u_light", "3f", ...light);
     set("u_exposure", "1f", state.exposure);
     set("u_ior", "1f", state.ior);

@@ -13,7 +13,12 @@ two backends: Mesa llvmpipe through ANGLE (``--use-angle=gl-egl``) and SwiftShad
   the canvas its PNG within LDR-FLIP 0.005 (llvmpipe; SwiftShader is held to its measured, looser level);
 - a mesh render is drawn (finite, lit pixels, black background); ``ui=0`` shows the picture alone, ``ui=1`` the
   panel;
-- a bad URL parameter shows one line and no picture; a feature-grid model is refused by the command (exit 2).
+- a bad URL parameter shows one line and no picture.
+
+Feature-grid models (the ``paper-*`` materials; featuregrid.glsl's ``u_grid`` indexed by constants only) are held
+to the same bounds: the slice of paper-cd (4 features a level: one RGBA16F texture), paper-scratches (16: four
+textures a level, 12 in all) and two random grid models (float16 with a last R16F chunk of odd width and smoothstep
+interpolation; float32 with a last RG32F chunk), and paper-cd's mesh render against gratnet render's.
 
 Skipped, with the reason, where chromium or Playwright is missing (scripts/setup.sh installs both).
 """
@@ -35,7 +40,8 @@ import pytest
 
 from gratnet.brdf import a_term, slice_view_directions
 from gratnet.cli import main
-from gratnet.modelfile import evaluate_keys, load_model, save_model
+from gratnet.encoding import EncodingSpec, RangeSpec
+from gratnet.modelfile import ModelFile, evaluate_keys, load_model, save_model
 from gratnet.precision import OWN_KEYS, DriverErrors, assert_within, driver_bound
 from tests.helpers import RELATIVE, random_model
 
@@ -62,6 +68,24 @@ SIZE = 64
 MESH_TOLERANCE = {"llvmpipe": (0.0, 0.005), "swiftshader": (0.06, 0.02)}
 
 
+def _random_grid_model(features: int, levels: int, dtype: str, interpolation: str, seed: int) -> ModelFile:
+    """A random feature-grid model (as tests/runtime/test_grid_shaders.py's): 2 hidden layers of 21, outputs mostly
+    inside (0, 1); levels of 7, 13 and 25 nodes a side (odd widths) and 5, 3, 2 along t."""
+    rng = np.random.default_rng(seed)
+    spec = EncodingSpec.for_grid(101, 5, 4, 2)
+    grids = [(0.5 * rng.standard_normal((t_nodes, nodes, nodes, features))).astype(dtype)
+             for nodes, t_nodes in list(zip((7, 13, 25), (5, 3, 2), strict=True))[:levels]]
+    sizes = [levels * features + spec.features, 21, 21, 3]
+    weights = [(rng.standard_normal((b, a)) / np.sqrt(a)).astype(np.float32)
+               for a, b in zip(sizes[:-1], sizes[1:], strict=True)]
+    weights[-1] = (0.3 * weights[-1]).astype(np.float32)
+    biases = [(0.1 * rng.standard_normal(b)).astype(np.float32) for b in sizes[1:]]
+    biases[-1] = np.array([0.55, 0.6, 0.65], dtype=np.float32)
+    model = ModelFile(sizes, weights, biases, "silu", "clamp", spec, RangeSpec(), "simple-max", grids=grids)
+    model.grid_interpolation = interpolation
+    return model
+
+
 class _QuietHandler(http.server.SimpleHTTPRequestHandler):
     def log_message(self, format: str, *args: object) -> None:  # noqa: A002 - the base class's name
         pass
@@ -69,12 +93,17 @@ class _QuietHandler(http.server.SimpleHTTPRequestHandler):
 
 @pytest.fixture(scope="module")
 def site(tmp_path_factory) -> Iterator[tuple[str, Path]]:
-    """cd and a random model (simple scheme, log range) exported once, served on 127.0.0.1."""
+    """cd, paper-cd, paper-scratches, a random model (simple scheme, log range) and two random grid models exported
+    once, served on 127.0.0.1."""
     folder = tmp_path_factory.mktemp("web")
-    model_path = folder / "random-simple.npz"
-    save_model(model_path, random_model([163, 21, 13, 3], "relu", "sigmoid", "simple", "log", seed=3))
+    models = {"random-simple": random_model([163, 21, 13, 3], "relu", "sigmoid", "simple", "log", seed=3),
+              "random-grid16": _random_grid_model(5, 3, "float16", "smoothstep", seed=5),
+              "random-grid32": _random_grid_model(6, 2, "float32", "linear", seed=6)}
+    for name, model in models.items():
+        save_model(folder / f"{name}.npz", model)
     out = folder / "site"
-    assert main(["export", "cd", str(model_path), "--format", "web", "--out", str(out), "--quiet"]) == 0
+    assert main(["export", "cd", *(str(folder / f"{name}.npz") for name in models), "paper-cd", "paper-scratches",
+                 "--format", "web", "--out", str(out), "--quiet"]) == 0
     server = http.server.ThreadingHTTPServer(("127.0.0.1", 0), functools.partial(_QuietHandler, directory=str(out)))
     thread = threading.Thread(target=server.serve_forever, daemon=True)
     thread.start()
@@ -116,7 +145,8 @@ def _read(page) -> np.ndarray:
 
 
 @needs_browser
-@pytest.mark.parametrize("material", ["cd", "random-simple"])
+@pytest.mark.parametrize("material", ["cd", "random-simple", "paper-cd", "paper-scratches", "random-grid16",
+                                      "random-grid32"])
 def test_brdf_slice_equals_numpy_within_the_float32_bound(site, browser, material):
     from viewer.renderer import xyz_to_linear_srgb_matrix
 
@@ -223,8 +253,8 @@ def _exr_rgb(path: Path) -> np.ndarray:
 
 
 @needs_browser
-@pytest.mark.parametrize("mesh", ["cd", "sphere"])
-def test_a_mesh_render_equals_gratnet_renders_exr_and_its_png_within_flip(site, browser, mesh, tmp_path):
+@pytest.mark.parametrize(("material", "mesh"), [("cd", "cd"), ("cd", "sphere"), ("paper-cd", "cd")])
+def test_a_mesh_render_equals_gratnet_renders_exr_and_its_png_within_flip(site, browser, material, mesh, tmp_path):
     """The page's default view of a mesh against ``gratnet render`` of the same material and mesh (its defaults too):
     the linear floats against the EXR, the canvas against the PNG (LDR-FLIP ≤ 0.005, issue 44's target)."""
     import io
@@ -236,9 +266,9 @@ def test_a_mesh_render_equals_gratnet_renders_exr_and_its_png_within_flip(site, 
     url, _ = site
     size = 64
     for suffix in ("exr", "png"):
-        assert main(["render", "--material", "cd", "--mesh", mesh, "--size", f"{size},{size}", "--out",
+        assert main(["render", "--material", material, "--mesh", mesh, "--size", f"{size},{size}", "--out",
                      str(tmp_path / f"render.{suffix}"), "--quiet"]) == 0
-    with _page(browser, f"{url}?material=cd&mesh={mesh}&size={size}&ui=0") as page:
+    with _page(browser, f"{url}?material={material}&mesh={mesh}&size={size}&ui=0") as page:
         linear = _read(page)
         shot = np.asarray(Image.open(io.BytesIO(page.locator("#view").screenshot())).convert("RGB"), np.float64)
     reference = _exr_rgb(tmp_path / "render.exr")
@@ -277,8 +307,31 @@ def test_a_bad_url_parameter_shows_one_line_and_no_picture(site, browser, query,
     assert words in error and "\n" not in line and line.startswith("gratnet: ")
 
 
-def test_a_feature_grid_model_is_refused_for_the_web_in_one_line(tmp_path, capsys):
-    assert main(["export", "paper-cd", "--format", "web", "--out", str(tmp_path / "site")]) == 2
+def test_a_feature_grid_export_writes_the_grid_textures_the_runtime_uploads(site):
+    """Every grid texture of paper-cd is a file of the texels viewer/renderer.py uploads (export/glsl.py's chunks)."""
+    from export.glsl import grid_chunks_of
+
+    _, out = site
+    config = json.loads((out / "export.config.json").read_text(encoding="utf-8"))
+    for name in ("paper-cd", "paper-scratches", "random-grid16", "random-grid32"):
+        entry = config["materials"][name]
+        chunks = grid_chunks_of(load_model(entry["model"]))
+        assert len(entry["grids"]) == len(chunks) > 0
+        for grid, chunk in zip(entry["grids"], chunks, strict=True):
+            depth, height, width, channels = chunk.shape
+            assert grid["texels"] == [width, height, depth] and grid["channels"] == channels
+            assert (out / grid["file"]).read_bytes() == chunk.astype(chunk.dtype.newbyteorder("<")).tobytes()
+
+
+def test_too_many_grid_textures_for_webgl2_are_refused_in_one_line(tmp_path, capsys):
+    """16 textures (4 levels of 16 features) beside the weights exceed WebGL2's guaranteed 16 samplers."""
+    model_path = tmp_path / "wide.npz"
+    model = _random_grid_model(16, 3, "float16", "linear", seed=1)
+    model.grids.append(model.grids[-1].copy())
+    model.layer_sizes[0] += 16
+    model.weights[0] = np.concatenate([model.weights[0], np.zeros((21, 16), np.float32)], axis=1)
+    save_model(model_path, model)
+    assert main(["export", str(model_path), "--format", "web", "--out", str(tmp_path / "site")]) == 2
     err = capsys.readouterr().err.strip()
-    assert "feature-grid" in err and "\n" not in err
-    assert list(tmp_path.iterdir()) == []
+    assert "16 grid textures" in err and "\n" not in err
+    assert sorted(path.name for path in tmp_path.iterdir()) == ["wide.npz"]
