@@ -167,7 +167,10 @@ def _wait(child: int, reader: int, taken: list[signal.Signals], command: str) ->
     while True:
         info = signal.sigtimedwait([*taken, signal.SIGCHLD], POLL / 2)
         now = time.monotonic()
-        if info is not None and info.si_signo != signal.SIGCHLD:
+        # Only a signal it waited for: after SIGSTOP and SIGCONT of this process (kill -STOP, a shell's Ctrl-Z and
+        # fg) CPython's sigtimedwait can return a record of garbage (seen: si_signo −713092144), which passed on
+        # would end the supervisor with EINVAL and the command with it.
+        if info is not None and info.si_signo in taken:
             if info.si_code != _SI_KERNEL:  # sent to this process alone: the child has not seen it
                 with contextlib.suppress(ProcessLookupError):
                     os.kill(child, info.si_signo)

@@ -90,6 +90,9 @@ elif sys.argv[1] == "callback":  # Ctrl-C inside a weakref callback (a garbage c
     except KeyboardInterrupt:
         print("stand-in: interrupted by itself", file=sys.stderr)
         sys.exit(130)
+elif sys.argv[1] == "short":  # a command that ends by itself after a while (0)
+    print("ready", flush=True)
+    time.sleep(1.5)
 elif sys.argv[1] == "done":
     interrupts.done(0)  # the command returned 0; what follows stands for the interpreter's teardown
     print("ready", flush=True)
@@ -233,4 +236,20 @@ def test_ctrl_c_inside_a_garbage_collection_callback_is_not_lost(tmp_path: Path)
     stderr = process.communicate(timeout=60)[1].decode("utf-8", "replace")
     assert process.returncode == 130, stderr
     assert visible_lines(stderr) == ["stand-in: interrupted by itself"], stderr
+    assert not _gone(tag, tmp_path)
+
+
+def test_a_stopped_and_continued_supervisor_keeps_its_command(tmp_path):
+    """kill -STOP and -CONT of the supervisor (a shell's Ctrl-Z and fg, a pause of a long training) leave the
+    command running to its own end: CPython's sigtimedwait can return a garbage record after SIGCONT, which the
+    supervisor passed on as a signal and died of (EINVAL), taking the training with it (seen 2026-11-27)."""
+    process, tag = _stand_in(tmp_path, "short")
+    for _ in range(3):
+        process.send_signal(signal.SIGSTOP)
+        time.sleep(0.2)
+        process.send_signal(signal.SIGCONT)
+        time.sleep(0.1)
+    _, stderr = process.communicate(timeout=60)
+    assert process.returncode == 0, stderr.decode("utf-8", "replace")
+    assert not visible_lines(stderr.decode("utf-8", "replace"))
     assert not _gone(tag, tmp_path)
