@@ -255,7 +255,7 @@ def cost_cells(folder: Path, record: dict | None) -> str:
     if record is not None:
         frame = next((row for row in record["models"] if row.get("material") == folder.name and "ms" in row
                       and row.get("quality") in (None, ACCURATE)), None)  # the material's own (accurate) point
-        cells.append("—" if frame is None else f"{frame['ms']:.4g}")
+        cells.append("—" if frame is None else f"{frame['ms']:,.0f}")
     return " | ".join(cells)
 
 

@@ -93,8 +93,9 @@ def main(argv: list[str] | None = None) -> int:
         server = http.server.ThreadingHTTPServer(("127.0.0.1", 0), functools.partial(_Quiet, directory=str(site)))
         threading.Thread(target=server.serve_forever, daemon=True).start()
         home = Path(folder) / "home"
-        environment = {**os.environ, "HOME": str(home), "XDG_CONFIG_HOME": str(home / "config"),
-                       "XDG_CACHE_HOME": str(home / "cache")}
+        environment: dict[str, str | float | bool] = {
+            **os.environ, "HOME": str(home), "XDG_CONFIG_HOME": str(home / "config"),
+            "XDG_CACHE_HOME": str(home / "cache")}
         try:
             with playwright_api.sync_playwright() as playwright:
                 for backend in backends:

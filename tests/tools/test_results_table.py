@@ -140,6 +140,6 @@ def test_the_frame_column_is_the_recorded_frame_of_each_material(tmp_path, monke
     record = results_table.frame_times()
     header, separator = results_table.cost_header(record)
     assert header.endswith("| 1080p CD frame (ms, llvmpipe)") and separator.count("---") == header.count("|") + 1
-    assert results_table.cost_cells(REPO / "assets" / "paper-cd", record).endswith("| 1234")
+    assert results_table.cost_cells(REPO / "assets" / "paper-cd", record).endswith("| 1,234")
     assert results_table.cost_cells(REPO / "assets" / "cd", record).endswith("| —")  # its measurement failed
     assert results_table.cost_cells(REPO / "assets" / "paper-pits", record).endswith("| —")  # not measured
