@@ -44,6 +44,7 @@ from gratnet.errors import GratNetError
 from gratnet.featuregrid import CHUNK_FEATURES
 from gratnet.modelfile import ModelFile, pack_texture
 from viewer.glsl import LINE_STRIDE, SHADER_ROOT, preprocess
+from viewer.renderer import frequency_table as runtime_frequency_table
 from viewer.renderer import model_defines, xyz_to_linear_srgb_matrix
 
 __all__ = ["GRID_SAMPLER", "MODULE_INCLUDES", "SAMPLER", "GlslModule", "frequency_table", "glsl_module",
@@ -58,7 +59,6 @@ SAMPLER = "u_weights"
 GRID_SAMPLER = "u_grid"
 #: The uniforms that bound loops: globals filled at run time (module docstring, item 3).
 LOOP_BOUNDS = ("u_layer_count", "u_layers")
-_FREQUENCY_BITS = 10  # the exact part of s^j: shaders/encoding.glsl's a_j has 10 significant bits
 _UNIFORM = re.compile(r"^\s*uniform\s+(?:highp\s+)?(?P<type>\w+)\s+(?P<name>\w+)\s*(?P<array>\[[^\]]*\])?\s*;"
                       r"(?P<comment>.*)$")
 _LINE = re.compile(r"^\s*#\s*line\s+(\d+)\s+(\d+)\s*$")
@@ -130,26 +130,10 @@ def grid_chunks_of(model: ModelFile) -> tuple[np.ndarray, ...]:
     return tuple(chunks)
 
 
-def _split_frequency(value: float) -> tuple[float, float]:
-    """value = a + b, ``a`` rounded to 10 significant bits (exact products in encoding.glsl), b = float32(value − a):
-    the split viewer/renderer.py sends as ``u_frequency`` (tests/tools/test_export_shaders.py compares the two)."""
-    if value == 0.0:
-        return 0.0, 0.0
-    mantissa, exponent = math.frexp(value)
-    exact = math.ldexp(round(mantissa * (1 << _FREQUENCY_BITS)), exponent - _FREQUENCY_BITS)
-    return exact, float(np.float32(value - exact))
-
-
 def frequency_table(model: ModelFile) -> np.ndarray:
-    """``u_frequency``: rows (a_j, b_j, a_t_j, b_t_j) of s^j and s_t^j, ``MAX_FREQUENCIES`` rows, zero-padded."""
-    rows = int(model_defines(model)["MAX_FREQUENCIES"])
-    table = np.zeros((rows, 4), dtype=np.float32)
-    spec = model.encoding
-    for j in range(spec.frequencies):
-        table[j, 0:2] = _split_frequency(spec.scale**j)
-    for j in range(spec.t_frequencies):
-        table[j, 2:4] = _split_frequency(spec.t_scale**j)
-    return table
+    """``u_frequency``: rows (a_j, b_j, a_t_j, b_t_j) of s^j and s_t^j, ``MAX_FREQUENCIES`` rows, zero-padded: the
+    runtime's own table (viewer.renderer.frequency_table)."""
+    return runtime_frequency_table(model, int(model_defines(model)["MAX_FREQUENCIES"]))
 
 
 def _float(value: float) -> str:

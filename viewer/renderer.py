@@ -44,6 +44,7 @@ __all__ = [
     "NetworkRenderer",
     "check_grid_texture_units",
     "choose_weights_path",
+    "frequency_table",
     "ior_uniform",
     "is_software_rasterizer",
     "model_defines",
@@ -125,7 +126,7 @@ def _split_frequency(value: float) -> tuple[float, float]:
     return exact, float(np.float32(value - exact))
 
 
-def _frequency_table(model: ModelFile, rows: int) -> np.ndarray:
+def frequency_table(model: ModelFile, rows: int) -> np.ndarray:
     """Rows (a_j, b_j, a_t_j, b_t_j): s^j and s_t^j in half-turns (float64 powers, then split), zero-padded."""
     table = np.zeros((rows, 4), dtype=np.float32)
     spec = model.encoding
@@ -276,7 +277,7 @@ class NetworkRenderer(ShadingPrograms):
         if source is not WeightSource.BAKED or "u_frequencies" in program:
             set_uniform(program, "u_frequencies", model.encoding.frequencies)
             set_uniform(program, "u_t_frequencies", model.encoding.t_frequencies)
-        set_uniform(program, "u_frequency", _frequency_table(model, int(self.defines["MAX_FREQUENCIES"])))
+        set_uniform(program, "u_frequency", frequency_table(model, int(self.defines["MAX_FREQUENCIES"])))
         set_uniform(program, RANGE.uniform_name, RANGE.code(model.range.kind))
         set_uniform(program, "u_range_bits", float(model.range.bits))
         set_uniform(program, "u_range_power", float(model.range.power))
