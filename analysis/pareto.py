@@ -61,19 +61,31 @@ def _paper_flips(metrics_path: Path) -> tuple[float, float]:
     return statistics.fmean(flips[label] for label in STANDARD_SLICE_LABELS), flips[STANDARD_SLICE_LABELS[0]]
 
 
+def frame_times(path: Path = FRAME_TIMES_JSON) -> dict | None:
+    """benchmarks/frame_time_1080p.py's record, or None when there is none."""
+    return json.loads(path.read_text(encoding="utf-8")) if path.exists() else None
+
+
+def frame_row(record: dict | None, material: str, quality: str = ACCURATE) -> dict | None:
+    """The record's measured frame of ``material`` at ``quality`` (a row without a quality is the accurate one's), or
+    None."""
+    if record is None:
+        return None
+    return next((row for row in record["models"] if row.get("material") == material and "ms" in row
+                 and (row.get("quality") or ACCURATE) == quality), None)
+
+
 def _frame_ms(record: dict | None, dataset: str, quality: str) -> float | None:
     if record is None or (record.get("width"), record.get("height")) != (1920, 1080):
         return None
-    for row in record["models"]:
-        if row.get("material") == dataset and (row.get("quality") or ACCURATE) == quality and "ms" in row:
-            return float(row["ms"])
-    return None
+    row = frame_row(record, dataset, quality)
+    return None if row is None else float(row["ms"])
 
 
-def collect(assets: Path = Path("assets"), frame_times: Path = FRAME_TIMES_JSON,
+def collect(assets: Path = Path("assets"), frame_times_path: Path = FRAME_TIMES_JSON,
             lut_pattern: str = LUT_JSON) -> list[Point]:
     """Every paper-* dataset's points: its quality points (with metrics), then its tables."""
-    record = json.loads(frame_times.read_text(encoding="utf-8")) if frame_times.exists() else None
+    record = frame_times(frame_times_path)
     points = []
     for dataset in sorted(PRESETS):
         if not (assets / dataset / "model.npz").is_file():

@@ -16,9 +16,9 @@ import re
 from pathlib import Path
 
 from analysis import oracle_table, pareto, seed_summary
+from analysis.pareto import frame_row, frame_times
 from gratnet.atomic import write_text_atomic
 from gratnet.cost import ModelCost, megabytes
-from gratnet.quality import ACCURATE
 from trainer.datasets import PRESETS
 from trainer.evaluate import STANDARD_SLICE_LABELS
 
@@ -211,15 +211,6 @@ def paper_oracle(folder: Path, normal: dict, slices: int | None) -> float | None
     return None
 
 
-#: benchmarks/frame_time_1080p.py's record: each shipped material's 1080p CD frame on the machine that ran it.
-FRAME_TIMES_JSON = Path("docs/data/frame_times_1080p.json")
-
-
-def frame_times(path: Path = FRAME_TIMES_JSON) -> dict | None:
-    """The frame-time record, or None when there is none."""
-    return json.loads(path.read_text(encoding="utf-8")) if path.exists() else None
-
-
 def _renderer(record: dict) -> str:
     """A short name of the record's GL renderer: 'llvmpipe', else its name up to the first '(' or '/'."""
     name = str(record.get("machine", {}).get("gl_renderer") or "?")
@@ -253,8 +244,7 @@ def cost_cells(folder: Path, record: dict | None) -> str:
     cells = [f"{cost.macs_per_pixel:,}", f"{cost.grid_values_read:,}", megabytes(cost.bytes_on_disk or 0),
              megabytes(cost.bytes_gpu)]
     if record is not None:
-        frame = next((row for row in record["models"] if row.get("material") == folder.name and "ms" in row
-                      and row.get("quality") in (None, ACCURATE)), None)  # the material's own (accurate) point
+        frame = frame_row(record, folder.name)  # the material's own (accurate) point
         cells.append("—" if frame is None else f"{frame['ms']:,.0f}")
     return " | ".join(cells)
 

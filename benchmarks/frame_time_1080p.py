@@ -25,14 +25,15 @@ import time
 from pathlib import Path
 from typing import Any
 
+from analysis.pareto import FRAME_TIMES_JSON
 from gratnet.atomic import write_text_atomic
 from gratnet.cost import ModelCost
 from gratnet.errors import GratNetError
 from trainer.evaluate import FRAME_TIME_REPEATS, FRAME_TIME_SIZE, measure_frame_time
 from viewer.catalog import material_points, resolve_material, shipped_materials
 
-#: Where docs/results.md (analysis.results_table) reads the frames from.
-DEFAULT_OUT = Path("docs/data/frame_times_1080p.json")
+#: Where docs/results.md (analysis.results_table, analysis.pareto) reads the frames from.
+DEFAULT_OUT = FRAME_TIMES_JSON
 
 
 def _size(text: str) -> tuple[int, int]:

@@ -30,12 +30,12 @@ import time
 from pathlib import Path
 from typing import Any
 
+from export.web import CHROMIUM_BACKENDS
 from gratnet.atomic import atomic_path, write_text_atomic
 from gratnet.cli import main as gratnet_main
 
-#: chromium's flags per WebGL2 backend (the same as tests/tools/test_export_web.py).
-BACKENDS = {"llvmpipe": ["--use-angle=gl-egl", "--ignore-gpu-blocklist"],
-            "swiftshader": ["--use-angle=swiftshader", "--enable-unsafe-swiftshader"]}
+#: chromium's flags per WebGL2 backend (the ones the page's tests use).
+BACKENDS = CHROMIUM_BACKENDS
 
 
 class _Quiet(http.server.SimpleHTTPRequestHandler):
@@ -111,9 +111,8 @@ def main(argv: list[str] | None = None) -> int:
                                    "load_average_before": [round(v, 2) for v in os.getloadavg()],
                                    **measure(page, url, arguments.redraws)}
                             if arguments.screenshot and backend == "llvmpipe" and material == arguments.materials[0]:
-                                with atomic_path(arguments.screenshot) as temporary:
-                                    page.screenshot(path=str(temporary.with_suffix(".png")))
-                                    temporary.with_suffix(".png").replace(temporary)
+                                with atomic_path(arguments.screenshot) as temporary:  # keeps the suffix
+                                    page.screenshot(path=str(temporary))
                             page.close()
                             rows.append(row)
                             print(json.dumps(row), flush=True)

@@ -33,7 +33,15 @@ from gratnet.errors import GratNetError
 from gratnet.modelfile import ModelFile
 from viewer.defaults import FOV_DEGREES as _FOV_DEGREES
 
-__all__ = ["ES_HEADER", "MESH_NAMES", "PAGE_FILES", "WEBGL2_SAMPLERS", "check_web_model", "es_module", "write_web"]
+__all__ = ["CHROMIUM_BACKENDS", "ES_HEADER", "MESH_NAMES", "PAGE_FILES", "WEBGL2_SAMPLERS", "check_web_model",
+           "es_module", "write_web"]
+
+#: Headless chromium's flags per WebGL2 backend that the page is tested and timed on
+#: (shared/notes/browsers-and-shader-tools-here.md): Mesa llvmpipe through ANGLE, and SwiftShader.
+CHROMIUM_BACKENDS = {
+    "llvmpipe": ["--use-angle=gl-egl", "--ignore-gpu-blocklist"],
+    "swiftshader": ["--use-angle=swiftshader", "--enable-unsafe-swiftshader"],
+}
 
 #: The page's static files (export/web/).
 PAGE_FILES = ("index.html", "gratnet.js")

@@ -38,6 +38,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from export.web import CHROMIUM_BACKENDS
 from gratnet.brdf import a_term, slice_view_directions
 from gratnet.cli import main
 from gratnet.encoding import EncodingSpec, RangeSpec
@@ -55,11 +56,8 @@ needs_browser = pytest.mark.skipif(
     CHROMIUM is None or playwright_api is None,
     reason="needs Debian's chromium and the playwright package (scripts/setup.sh installs both)")
 
-#: chromium's flags per WebGL2 backend (shared/notes/browsers-and-shader-tools-here.md).
-BACKENDS = {
-    "llvmpipe": ["--use-angle=gl-egl", "--ignore-gpu-blocklist"],
-    "swiftshader": ["--use-angle=swiftshader", "--enable-unsafe-swiftshader"],
-}
+#: chromium's flags per WebGL2 backend (export.web, shared/notes/browsers-and-shader-tools-here.md).
+BACKENDS = CHROMIUM_BACKENDS
 #: The float32 error each backend is held to: llvmpipe the default; SwiftShader's sin/cos are less exact.
 BACKEND_ERRORS = {"llvmpipe": OWN_KEYS, "swiftshader": DriverErrors(key_error=0.0, sinusoid_error=2.0**-10)}
 SIZE = 64
