@@ -34,6 +34,7 @@ __all__ = [
     "COUNTER_SLOTS",
     "DEFERRED_TILE",
     "DEFERRED_WEIGHTS",
+    "ENVIRONMENT_SAMPLING",
     "GLSL_INCLUDE",
     "HIDDEN",
     "LIGHT",
@@ -131,8 +132,12 @@ COUNTER = Codes("COUNTER", "work counter",
                 ("fragments", "evaluations", "skipped_a_zero", "skipped_bound", "background"))
 #: Light kinds, from the light registry (gratnet.lights): shaders/lights.glsl.
 LIGHT = Codes("LIGHT", "light kind", tuple(kind.name for kind in LIGHT_KINDS), "u_light_kind")
+#: How an environment light is sampled (shaders/environment.glsl): both strategies weighted by multiple importance
+#: sampling (``mis``, the default), or one alone (``light``: the map's luminance; ``material``: the material's table).
+ENVIRONMENT_SAMPLING = Codes("SAMPLING", "environment sampling", ("mis", "light", "material"),
+                             "u_environment_sampling")
 #: Every table, for the generated defines and the tests.
-TABLES = (SCHEME, HIDDEN, OUTPUT, RANGE, MODE, COUNTER, LIGHT)
+TABLES = (SCHEME, HIDDEN, OUTPUT, RANGE, MODE, COUNTER, LIGHT, ENVIRONMENT_SAMPLING)
 
 #: Slots of the counter buffer (``COUNTER_COUNT``): room for counters to come.
 COUNTER_SLOTS = 8

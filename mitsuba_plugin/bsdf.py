@@ -12,8 +12,13 @@ Plugin properties (XML / ``mi.load_dict``):
   tangent (the height field's x on the surface), interpolated like the GL runtime's ``in_tangent``;
   ``mitsuba_plugin.scene`` exports meshes with ``vertex_tangent``. Empty: Mitsuba's own shading frame,
   whose first axis is ∂p/∂u of the mesh's UVs (Gram–Schmidt against the shading normal);
+- ``sampler`` (string, default ``"table"``): how ``sample()`` draws the light direction. ``table``: from the
+  material's own diffraction, its luminance over the key's (u, v) (``gratnet.importance.material_table``,
+  built from the model on first use, a few seconds, then cached in memory and on disk), with
+  ``gratnet.importance.DEFENSIVE_SHARE`` of the samples cosine-weighted; ``mixture``: the earlier sampler, kept
+  for comparison;
 - ``specular_probability`` (float in [0, 1], default 0.5) and ``lobe_degrees`` (float > 0, default 2):
-  the sampling mixture (``mitsuba_plugin.shading``): that share of samples from a vMF lobe of that angular
+  the ``mixture`` sampler (``mitsuba_plugin.shading``): that share of samples from a vMF lobe of that angular
   standard deviation around the mirror direction, the rest cosine-weighted.
 
 Tangent: the height field's x follows ``tangent_attribute`` where the mesh has it, else ∂p/∂u of the mesh's
@@ -45,12 +50,17 @@ from typing import Any
 import numpy as np
 
 from gratnet.errors import GratNetError
+from gratnet.importance import material_table
 from gratnet.modelfile import ModelFile, load_model
 from mitsuba_plugin.shading import (
+    DEFAULT_SAMPLER,
+    SAMPLERS,
     eval_linear_srgb,
+    from_tangent_frame,
     kappa_for_lobe,
     mixture_pdf,
     sample_mixture,
+    to_tangent_frame,
     xyz_to_linear_srgb_matrix,
 )
 
@@ -60,7 +70,7 @@ __all__ = ["MESSAGE_PREFIX", "LOGGER", "PLUGIN_NAME", "PROPERTIES", "bsdf_class"
 
 PLUGIN_NAME = "gratnet"
 #: The properties the plugin takes (any other is refused, with this list).
-PROPERTIES = ("filename", "ior", "tangent_attribute", "specular_probability", "lobe_degrees")
+PROPERTIES = ("filename", "ior", "tangent_attribute", "sampler", "specular_probability", "lobe_degrees")
 #: Start of the plugin's errors and warnings (what :func:`plugin_message` looks for in Mitsuba's wrapping).
 MESSAGE_PREFIX = "gratnet BSDF: "
 #: Where the plugin's warnings go (``gratnet`` commands print the ``gratnet`` loggers on stderr, one line each).
@@ -244,6 +254,9 @@ def bsdf_class(variant: str) -> type:
             self.model = _model(self.model_path)
             self.ior = check_ior(_number(props, "ior", 1.5))
             self.tangent_attribute = _string(props, "tangent_attribute", "")
+            self.sampler = _string(props, "sampler", DEFAULT_SAMPLER)
+            if self.sampler not in SAMPLERS:
+                raise GratNetError(f"property 'sampler' must be one of {', '.join(SAMPLERS)}, got {self.sampler!r}")
             self.specular_probability = _checked(_number(props, "specular_probability", 0.5),
                                                  "specular_probability", 0.0, 1.0)
             self.lobe_degrees = _checked(_number(props, "lobe_degrees", 2.0), "lobe_degrees", 0.0, 90.0,
@@ -253,6 +266,8 @@ def bsdf_class(variant: str) -> type:
                 raise GratNetError(f"unknown propert{'ies' if len(unknown) > 1 else 'y'} "
                                    f"{', '.join(map(repr, unknown))}; the gratnet BSDF takes {', '.join(PROPERTIES)}")
             self.kappa = kappa_for_lobe(self.lobe_degrees)
+            # The table is anisotropic (it follows the tracks): it samples in the tangent frame, like the value.
+            self.table = material_table(self.model) if self.sampler == "table" else None
             self.matrix = xyz_to_linear_srgb_matrix()
             self.m_flags = flags
             self.m_components = [flags]
@@ -306,23 +321,16 @@ def bsdf_class(variant: str) -> type:
             sin_alpha = np.where(good, along_t / np.where(good, length, 1.0), 0.0)
             return np.stack([cos_alpha, sin_alpha], axis=-1)
 
-        @staticmethod
-        def _to_tangent_frame(directions: np.ndarray, rotation: np.ndarray | None) -> np.ndarray:
-            if rotation is None:
-                return directions
-            c, s = rotation[:, 0], rotation[:, 1]
-            x, y = directions[:, 0], directions[:, 1]
-            return np.stack([x * c + y * s, -x * s + y * c, directions[:, 2]], axis=-1)
-
         # -- value --------------------------------------------------------------------------------
-        def _value(self, ctx: Any, si: Any, wi: np.ndarray, wo: np.ndarray, active: np.ndarray) -> np.ndarray:
-            """eval for local (shading-frame) directions: si.wi = ``wi``, sampled/light direction ``wo``."""
+        def _value(self, ctx: Any, si: Any, wi: np.ndarray, wo: np.ndarray, active: np.ndarray,
+                   rotation: np.ndarray | None) -> np.ndarray:
+            """eval for local (shading-frame) directions: si.wi = ``wi``, sampled/light direction ``wo``;
+            ``rotation``: :meth:`_rotation`'s for ``si``."""
             count = wi.shape[0]
             result = np.zeros((count, 3))
             if not ctx.is_enabled(mi.BSDFFlags.GlossyReflection) or not np.any(active):
                 return result
-            rotation = self._rotation(si, count)
-            wi_t, wo_t = self._to_tangent_frame(wi, rotation), self._to_tangent_frame(wo, rotation)
+            wi_t, wo_t = to_tangent_frame(wi, rotation), to_tangent_frame(wo, rotation)
             lanes_on = np.flatnonzero(active)
             if ctx.mode == mi.TransportMode.Importance:  # si.wi is the light side
                 light, view = wi_t[lanes_on], wo_t[lanes_on]
@@ -339,29 +347,53 @@ def bsdf_class(variant: str) -> type:
             count = max(lanes(si.wi), lanes(wo), lanes(active))
             return count, vectors(si.wi, count), vectors(wo, count), mask(active, count)
 
+        # -- sampling -----------------------------------------------------------------------------
+        def _density(self, wi: np.ndarray, wo: np.ndarray, rotation: np.ndarray | None) -> np.ndarray:
+            """The sampler's density (sr⁻¹) of the sampled direction ``wo`` given ``si.wi`` = ``wi`` (shading
+            frame). The table's (u, v) ↔ direction map is the same whichever side is the light, so importance
+            transport (``si.wi`` towards the light) samples the camera side by the same density."""
+            if self.table is None:
+                return mixture_pdf(wi, wo, self.specular_probability, self.kappa)
+            return self.table.pdf(to_tangent_frame(wi, rotation), to_tangent_frame(wo, rotation))
+
+        def _frame(self, ctx: Any, si: Any, count: int, on: np.ndarray) -> np.ndarray | None:
+            """:meth:`_rotation` where it is needed: for the value (glossy reflection asked for) or for the
+            (anisotropic) table's density, on some active lane."""
+            needed = bool(ctx.is_enabled(mi.BSDFFlags.GlossyReflection)) or self.table is not None
+            return self._rotation(si, count) if needed and np.any(on) else None
+
         def eval(self, ctx: Any, si: Any, wo: Any, active: Any = True) -> Any:
             count, wi_np, wo_np, on = self._inputs(si, wo, active)
-            return to_colour(self._value(ctx, si, wi_np, wo_np, on))
+            return to_colour(self._value(ctx, si, wi_np, wo_np, on, self._frame(ctx, si, count, on)))
 
         def pdf(self, ctx: Any, si: Any, wo: Any, active: Any = True) -> Any:
             count, wi_np, wo_np, on = self._inputs(si, wo, active)
-            density = mixture_pdf(wi_np, wo_np, self.specular_probability, self.kappa)
-            return to_float(np.where(on, density, 0.0))
+            rotation = self._rotation(si, count) if self.table is not None and np.any(on) else None
+            return to_float(np.where(on, self._density(wi_np, wo_np, rotation), 0.0))
 
         def eval_pdf(self, ctx: Any, si: Any, wo: Any, active: Any = True) -> tuple[Any, Any]:
             count, wi_np, wo_np, on = self._inputs(si, wo, active)
-            density = mixture_pdf(wi_np, wo_np, self.specular_probability, self.kappa)
-            return to_colour(self._value(ctx, si, wi_np, wo_np, on)), to_float(np.where(on, density, 0.0))
+            rotation = self._frame(ctx, si, count, on)
+            density = np.where(on, self._density(wi_np, wo_np, rotation), 0.0)
+            return to_colour(self._value(ctx, si, wi_np, wo_np, on, rotation)), to_float(density)
 
         def sample(self, ctx: Any, si: Any, sample1: Any, sample2: Any, active: Any = True) -> tuple[Any, Any]:
             count = max(lanes(si.wi), lanes(sample1), lanes(sample2), lanes(active))
             wi_np, on = vectors(si.wi, count), mask(active, count)
-            directions, valid = sample_mixture(wi_np, column(sample1, count), column(sample2.x, count),
-                                               column(sample2.y, count), self.specular_probability, self.kappa)
-            valid &= on
-            density = np.where(valid, mixture_pdf(wi_np, directions, self.specular_probability, self.kappa), 0.0)
+            rotation = self._frame(ctx, si, count, on)
+            xi0, xi1, xi2 = column(sample1, count), column(sample2.x, count), column(sample2.y, count)
+            if self.table is None:
+                directions, valid = sample_mixture(wi_np, xi0, xi1, xi2, self.specular_probability, self.kappa)
+                valid &= on
+                density = np.where(valid, mixture_pdf(wi_np, directions, self.specular_probability, self.kappa),
+                                   0.0)
+            else:
+                # gratnet.importance: its wo is the view (si.wi), its wi the sampled light direction (Mitsuba's wo).
+                sampled, density, valid = self.table.sample(to_tangent_frame(wi_np, rotation), xi0, xi1, xi2)
+                directions = from_tangent_frame(sampled, rotation)
+                valid &= on
             valid &= density > 0.0
-            value = self._value(ctx, si, wi_np, directions, valid)
+            value = self._value(ctx, si, wi_np, directions, valid, rotation)
             weight = np.where(valid[:, None], value / np.where(valid, density, 1.0)[:, None], 0.0)
             # The variant's BSDFSample3f: the stubs type its fields as one generic variant's (eta: Float, …).
             sample: Any = dr.zeros(mi.BSDFSample3f) if scalar else dr.zeros(mi.BSDFSample3f, count)
@@ -380,7 +412,7 @@ def bsdf_class(variant: str) -> type:
 
         def to_string(self) -> str:
             return (f"GratNetBSDF[filename={self.filename!r} ({self.model_path}), ior={self.ior}, tangent_attribute="
-                    f"{self.tangent_attribute!r}, specular_probability={self.specular_probability}, "
-                    f"lobe_degrees={self.lobe_degrees}]")
+                    f"{self.tangent_attribute!r}, sampler={self.sampler!r}, specular_probability="
+                    f"{self.specular_probability}, lobe_degrees={self.lobe_degrees}]")
 
     return GratNetBSDF

@@ -8,7 +8,8 @@ The flags mean what they mean for ``gratnet render`` (same names: --material, --
 and --exposure left out take ``gratnet render``'s defaults for the material and mesh (viewer.defaults), and a
 picture that is 99 % black on the display draws the same warning. With one light, no environment and
 ``--integrator direct`` the two agree up to Monte Carlo noise (tests/runtime/test_mitsuba.py). Added: --spp,
---environment (a constant radiance or a lat-long EXR), --light-intensity, --integrator, --max-depth, --variant,
+--environment (sky, studio, a constant radiance or a lat-long .exr/.hdr: gratnet.environment.load_environment)
+with --environment-rotation and --environment-scale, --light-intensity, --integrator, --max-depth, --variant,
 --seed, the sampling mixture.
 
 Output: ``.png`` = display sRGB, 8-bit (``gratnet.display``); ``.exr`` = linear sRGB float32 R, G, B,
@@ -31,9 +32,18 @@ from pathlib import Path
 from gratnet.config import add_arguments, add_quiet_flag, config_field, from_arguments
 from gratnet.errors import GratNetError
 from gratnet.lights import POINT
-from viewer.scene_config import SceneConfig, add_scene_arguments, quality_help, resolve_point
+from viewer.scene_config import (
+    LightingConfig,
+    SceneConfig,
+    add_scene_arguments,
+    check_lighting,
+    environment_of,
+    lighting_help,
+    quality_help,
+    resolve_point,
+)
 
-__all__ = ["MitsubaRenderConfig", "parse_environment", "register", "run"]
+__all__ = ["MitsubaRenderConfig", "register", "run"]
 
 _OUTPUT_SUFFIXES = (".png", ".exr")
 #: Largest --spp (a typo such as 1e9 would otherwise run for days).
@@ -41,48 +51,23 @@ MAX_SPP = 1 << 16
 
 
 @dataclasses.dataclass
-class MitsubaRenderConfig(SceneConfig):
+class MitsubaRenderConfig(LightingConfig, SceneConfig):
     """Path-tracing a material on a mesh with Mitsuba 3: lights, environment, camera and sampling."""
 
-    light_intensity: float = config_field(
-        1.0, "the light's irradiance (directional, on a plane facing it) or intensity (point, W/sr: irradiance "
-        "intensity/d² at d metres), as gratnet render's at 1; 0: environment only (typical: 0 to 10)")
-    environment: str = config_field(
-        "none", "environment light: none, a constant radiance (one number, or R,G,B in linear sRGB) or the path "
-        "of a lat-long .exr (its up is +z)", cli=False)
-    environment_scale: float = config_field(1.0, "factor on the environment's radiance (typical: 1e-5 to 1)")
     spp: int = config_field(64, f"samples per pixel (1 … {MAX_SPP}; typical: 16 to 256)")
     integrator: str = config_field("path", "direct (one bounce, emitter + BSDF sampling) or path",
                                    choices=["direct", "path"])
     max_depth: int = config_field(8, "path: longest path, in segments (2 = direct lighting; typical: 3 to 16)")
     variant: str = config_field("auto", "Mitsuba variant: llvm_ad_rgb (wide, needs LLVM ≥ 18), scalar_rgb (one "
                                 "lookup at a time) or auto", choices=["auto", "llvm_ad_rgb", "scalar_rgb"])
-    seed: int = config_field(0, "random seed of the sampler")
-    specular_probability: float = config_field(0.5, "share of BSDF samples drawn around the mirror direction "
-                                               "(0 to 1)")
-    lobe_degrees: float = config_field(2.0, "angular standard deviation of that lobe, degrees (typical: 0.5 to 10)")
-
-
-def parse_environment(text: str) -> float | tuple[float, float, float] | Path | None:
-    """``none`` → None; a number or R,G,B (finite, ≥ 0) → a constant radiance; else an existing .exr file."""
-    text = str(text).strip()
-    if text.lower() in ("", "none"):
-        return None
-    parts = text.split(",")
-    try:
-        values = [float(part) for part in parts]
-    except ValueError:
-        values = None
-    if values is not None:
-        if len(values) not in (1, 3) or not all(math.isfinite(v) and v >= 0.0 for v in values):
-            raise GratNetError(f"--environment expects none, a radiance ≥ 0, R,G,B or an .exr file, got {text!r}")
-        return values[0] if len(values) == 1 else (values[0], values[1], values[2])
-    path = Path(text).expanduser()
-    if path.suffix.lower() != ".exr":
-        raise GratNetError(f"--environment expects none, a radiance ≥ 0, R,G,B or an .exr file, got {text!r}")
-    if not path.is_file():
-        raise GratNetError(f"environment map {text} does not exist")
-    return path
+    sampler: str = config_field(
+        "table", "how the BSDF samples light directions: table (the material's own diffraction over the key's (u, v), "
+        "docs/physics.md \"Environment light\") or mixture (a lobe around the mirror direction plus cosine: "
+        "--specular-probability, --lobe-degrees)", choices=["table", "mixture"])
+    specular_probability: float = config_field(0.5, "mixture sampler: share of BSDF samples drawn around the mirror "
+                                               "direction (0 to 1)")
+    lobe_degrees: float = config_field(2.0, "mixture sampler: angular standard deviation of that lobe, degrees "
+                                       "(typical: 0.5 to 10)")
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
@@ -95,18 +80,19 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         epilog="typical use:\n"
         "  gratnet mitsuba-render --material cd --mesh cd --spp 64 --size 512,512 --out cd_mitsuba.png\n"
         "  gratnet mitsuba-render --material blazed --mesh sphere --environment 1e-4 --integrator path "
-        "--out sphere.exr",
+        "--out sphere.exr\n"
+        "  gratnet mitsuba-render --material cd --mesh cd --environment sky --environment-rotation 30 "
+        "--light-intensity 0 --out cd_sky.png",
     )
     parser.add_argument("--out", required=True, metavar="IMAGE.png|IMAGE.exr",
                         help="output: .png (display sRGB, 8-bit) or .exr (linear sRGB float, R G B)")
     add_scene_arguments(parser, lights={POINT.name: "point light position in metres instead of --light (intensity "
                                                     "--light-intensity)"},
                         exposure_of="the radiance (made for --light-intensity 1 without an environment)")
-    parser.add_argument("--environment", dest="environment", default="none", metavar="none|RADIANCE|R,G,B|MAP.exr",
-                        help="environment light: none (default), a constant radiance in linear sRGB (typical: "
-                        "1e-5 to 1e-3 with the default exposure), or a lat-long EXR whose up is +z")
     add_quiet_flag(parser)
-    quality_help(add_arguments(parser, MitsubaRenderConfig))
+    actions = add_arguments(parser, MitsubaRenderConfig)
+    lighting_help(actions)
+    quality_help(actions)
     parser.set_defaults(handler=run)
 
 
@@ -115,14 +101,15 @@ def _resolve_config(arguments: argparse.Namespace) -> MitsubaRenderConfig:
     Mitsuba not loaded yet)."""
     from viewer.scene_config import check_scene, scene_fields
 
-    config = dataclasses.replace(from_arguments(MitsubaRenderConfig, arguments), **scene_fields(arguments),
-                                 environment=str(arguments.environment))
+    config = dataclasses.replace(from_arguments(MitsubaRenderConfig, arguments), **scene_fields(arguments))
     check_scene(config)
     resolve_point(config)  # the material has the point asked for (gratnet render's rule)
-    for name, value in (("--light-intensity", config.light_intensity),
-                        ("--environment-scale", config.environment_scale)):
-        if not (math.isfinite(value) and 0.0 <= value < 3e38):
-            raise GratNetError(f"{name} must be a finite number ≥ 0, got {value!r}")
+    if not (math.isfinite(config.environment_scale) and 0.0 <= config.environment_scale < 3e38):
+        raise GratNetError(f"--environment-scale must be a finite number ≥ 0, got {config.environment_scale!r}")
+    if not math.isfinite(config.environment_rotation):
+        raise GratNetError(f"--environment-rotation must be a finite number of degrees, got "
+                           f"{config.environment_rotation!r}")
+    check_lighting(config)
     if not 1 <= config.spp <= MAX_SPP:
         raise GratNetError(f"--spp must be an integer in 1 … {MAX_SPP}, got {config.spp}")
     if not 1 <= config.max_depth <= 1024:
@@ -131,7 +118,6 @@ def _resolve_config(arguments: argparse.Namespace) -> MitsubaRenderConfig:
         raise GratNetError(f"--specular-probability must be in [0, 1], got {config.specular_probability!r}")
     if not (math.isfinite(config.lobe_degrees) and 0.0 < config.lobe_degrees <= 90.0):
         raise GratNetError(f"--lobe-degrees must be in (0, 90], got {config.lobe_degrees!r}")
-    parse_environment(config.environment)
     return config
 
 
@@ -146,6 +132,7 @@ def run(arguments: argparse.Namespace) -> int:
     from viewer.scene_config import resolve_scene_command, warn_if_black, write_render
 
     out = Path(arguments.out)
+    exposure_given = arguments.exposure is not None
 
     def resolve(flags: argparse.Namespace) -> MitsubaRenderConfig:
         config = _resolve_config(flags)
@@ -156,12 +143,15 @@ def run(arguments: argparse.Namespace) -> int:
     camera = Camera(config.camera_distance, config.camera_azimuth_degrees, config.camera_elevation_degrees,
                     fov_deg=config.fov_degrees)
     light = None
-    if config.light_intensity > 0.0:
-        light = Light.from_config(config, config.light_intensity)
+    if config.effective_light_intensity > 0.0:
+        light = Light.from_config(config, config.effective_light_intensity)
     model_path, config = resolve_point(config)  # the saved config records the point that renders
     load_model(model_path)  # a corrupt model file: one line now, not a Mitsuba traceback later
     mesh = build_mesh(config.mesh)
-    environment = parse_environment(config.environment)
+    environment = environment_of(config)
+    # Under an environment the unit light's default exposure means nothing: the exposure comes from the picture
+    # (gratnet render's rule).
+    auto_exposure = environment is not None and not exposure_given
 
     from mitsuba_plugin import scene as mitsuba_scene
     from mitsuba_plugin.runtime import set_variant
@@ -173,9 +163,9 @@ def run(arguments: argparse.Namespace) -> int:
     scene = mitsuba_scene.build_scene(
         mi, mesh,
         mitsuba_scene.bsdf_dict(model_path, config.effective_ior, specular_probability=config.specular_probability,
-                                lobe_degrees=config.lobe_degrees),
+                                lobe_degrees=config.lobe_degrees, sampler=config.sampler),
         mitsuba_scene.sensor(mi, camera, config.width, config.height, config.spp),
-        mitsuba_scene.emitters(light, environment, config.environment_scale),
+        mitsuba_scene.emitters(light, environment),  # the environment carries its rotation and scale
         integrator=config.integrator, max_depth=config.max_depth, mesh_name=Path(config.mesh).name)
     from tqdm import tqdm
 
@@ -188,6 +178,11 @@ def run(arguments: argparse.Namespace) -> int:
             bar.leave = False  # the bar goes; gratnet.cli's one "interrupted" line stays (exit 130)
             raise
     seconds = time.perf_counter() - started
+    if auto_exposure:
+        from gratnet.showcase import suggest_exposure
+
+        unexposed = image.astype(np.float64) @ np.linalg.inv(xyz_to_linear_srgb_matrix())  # as below
+        config = dataclasses.replace(config, exposure=suggest_exposure(unexposed, 1.0) or 1.0)
     linear = image.astype(np.float64) * config.exposure
     if not np.all(np.isfinite(linear)):
         raise GratNetError("the render contains NaN or inf after the exposure; nothing was written")

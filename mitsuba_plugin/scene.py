@@ -12,8 +12,10 @@
   directional → ``directional`` with ``irradiance`` = its intensity (irradiance on a plane facing the light);
   point → ``point`` with ``intensity`` = its intensity (W/sr, so the irradiance at d metres is intensity/d², as
   the GL runtime's 1/d² falloff). White (1, 1, 1).
-- **Environment**: a constant radiance (linear sRGB) or a lat-long EXR (``envmap``), rotated so that its
-  up (Mitsuba's +y) is GratNet's +z.
+- **Environment**: a ``gratnet.environment.Environment`` (a shipped map, a constant, an .exr or .hdr file) as
+  Mitsuba's ``envmap`` built from its in-memory map (``mi.Bitmap``), with its ``scale`` and ``to_world =
+  Rz(rotation) · Rx(90°)`` (Rx turns Mitsuba's +y up into GratNet's +z): the placement that
+  ``Environment.radiance`` reproduces (tests/runtime/test_mitsuba_environment.py). A constant is an envmap too.
 - **Film**: ``hdrfilm`` with a box filter (each pixel the mean over its area), linear sRGB float.
 - **Rendering** (:func:`render_passes`): passes of a few samples per pixel, with progress between them; a
   Ctrl-C inside one comes out as a plain KeyboardInterrupt (not Dr.Jit's RuntimeError around it).
@@ -28,6 +30,7 @@ from typing import Any
 
 import numpy as np
 
+from gratnet.environment import Environment, constant_environment, load_environment
 from gratnet.errors import GratNetError
 from gratnet.lights import light_kind
 from mitsuba_plugin.bsdf import LOGGER, no_tangent_warning
@@ -35,19 +38,20 @@ from mitsuba_plugin.runtime import interrupted, plugin_errors
 from viewer.camera import Camera, Light
 from viewer.meshes import Mesh
 
-__all__ = ["TANGENT_ATTRIBUTE", "bsdf_dict", "build_scene", "emitters", "mitsuba_mesh", "render_passes", "sensor",
-           "unmapped_triangles"]
+__all__ = ["TANGENT_ATTRIBUTE", "bsdf_dict", "build_scene", "emitters", "environment_emitter", "mitsuba_mesh",
+           "render_passes", "sensor", "unmapped_triangles"]
 
 #: Name of the per-vertex tangent attribute of exported meshes.
 TANGENT_ATTRIBUTE = "vertex_tangent"
 
 
 def bsdf_dict(model_path: str | Path, ior: float | None, *, tangent_attribute: str = TANGENT_ATTRIBUTE,
-              specular_probability: float = 0.5, lobe_degrees: float = 2.0) -> dict[str, Any]:
-    """The ``gratnet`` BSDF's ``load_dict`` entry (``ior`` None: Fresnel off)."""
+              specular_probability: float = 0.5, lobe_degrees: float = 2.0, sampler: str = "table") -> dict[str, Any]:
+    """The ``gratnet`` BSDF's ``load_dict`` entry (``ior`` None: Fresnel off; ``sampler``: ``table`` or
+    ``mixture``, mitsuba_plugin.bsdf)."""
     return {"type": "gratnet", "filename": str(model_path), "ior": 0.0 if ior is None else float(ior),
             "tangent_attribute": tangent_attribute, "specular_probability": float(specular_probability),
-            "lobe_degrees": float(lobe_degrees)}
+            "lobe_degrees": float(lobe_degrees), "sampler": str(sampler)}
 
 
 def unmapped_triangles(mesh: Mesh) -> int:
@@ -110,24 +114,39 @@ def sensor(mi: ModuleType, camera: Camera, width: int, height: int, spp: int,
     return result
 
 
-def emitters(light: Light | None, environment: float | tuple[float, float, float] | str | Path | None = None,
+def emitters(light: Light | None,
+             environment: Environment | float | tuple[float, float, float] | str | Path | None = None,
              environment_scale: float = 1.0) -> dict[str, dict[str, Any]]:
-    """Mitsuba emitter entries: the light (if any) and the environment (a constant radiance, grey or linear
-    sRGB triple, or the path of a lat-long EXR, scaled by ``environment_scale``)."""
+    """Mitsuba emitter entries: the light (if any) and the environment (if any) as :func:`environment_emitter`.
+
+    ``environment``: an :class:`~gratnet.environment.Environment`, or what ``load_environment`` reads: a grey
+    radiance, a linear sRGB triple, a shipped map's name or a map's path. ``environment_scale``: a further factor
+    on its radiance (an Environment carries its own ``scale``)."""
     result: dict[str, dict[str, Any]] = {}
     if light is not None:
         white = {"type": "rgb", "value": [float(light.intensity)] * 3}
         result["light"] = light_kind(light.kind).mitsuba(light.vector, white)  # gratnet/lights.py
-    if isinstance(environment, (str, Path)):
-        import mitsuba as mi
-
-        result["environment"] = {"type": "envmap", "filename": str(environment), "scale": float(environment_scale),
-                                 "to_world": mi.ScalarTransform4f().rotate([1.0, 0.0, 0.0], 90.0)}
-    elif environment is not None:
-        values = [float(v) for v in environment] if isinstance(environment, tuple) else [float(environment)] * 3
-        result["environment"] = {"type": "constant", "radiance": {
-            "type": "rgb", "value": [v * float(environment_scale) for v in values]}}
+    if environment is not None and not isinstance(environment, Environment):
+        if isinstance(environment, (str, Path)):
+            environment = load_environment(str(environment))
+        else:
+            rgb = tuple(float(v) for v in environment) if isinstance(environment, tuple) else (float(environment),) * 3
+            environment = None if max(rgb) == 0.0 else constant_environment((rgb[0], rgb[1], rgb[2]))
+    if environment is not None:
+        result["environment"] = environment_emitter(environment, environment_scale)
     return result
+
+
+def environment_emitter(environment: Environment, scale: float = 1.0) -> dict[str, Any]:
+    """The ``envmap`` entry of ``environment``: its map as a ``mi.Bitmap`` (float32 linear sRGB), ``scale`` =
+    its scale × ``scale``, ``to_world = Rz(rotation_degrees) · Rx(90°)``. Needs a Mitsuba variant set."""
+    import mitsuba as mi
+
+    to_world = (mi.ScalarTransform4f().rotate([0.0, 0.0, 1.0], environment.rotation_degrees)
+                @ mi.ScalarTransform4f().rotate([1.0, 0.0, 0.0], 90.0))
+    pixels = np.array(environment.radiance_map, dtype=np.float32, order="C")  # a writable copy: nanobind wants one
+    return {"type": "envmap", "bitmap": mi.Bitmap(pixels), "scale": float(environment.scale) * float(scale),
+            "to_world": to_world}
 
 
 def build_scene(mi: ModuleType, mesh: Mesh, bsdf: dict[str, Any], sensor_dict: dict[str, Any],

@@ -12,10 +12,16 @@ Value (docs/physics.md "Path tracing: Mitsuba 3"): for light direction ωl and v
 which is Mitsuba's ``eval`` (the BSDF times the cosine of the light-side direction) in radiance transport,
 and exactly what the GLSL runtime shades per unit light. The network runs only where A > 0.
 
-Sampling: a mixture of a von Mises–Fisher lobe around the mirror direction of ωv (probability ``p``,
-concentration κ) and the cosine-weighted hemisphere (probability 1 − p). Samples below the horizon are
-invalid (weight 0); :func:`mixture_pdf` is their exact density in solid angle (sr⁻¹), 0 below the horizon,
-so it integrates to the fraction of valid samples.
+Sampling (:data:`SAMPLERS`, the plugin's ``sampler`` property):
+
+- ``table`` (the default): the material's own diffraction, :mod:`gratnet.importance` — its luminance over the
+  key's (u, v), so the light direction follows every diffraction order, with a cosine-weighted share. The
+  table is anisotropic: directions enter and leave it in the tangent frame (:func:`to_tangent_frame`,
+  :func:`from_tangent_frame`).
+- ``mixture`` (the earlier sampler, kept for comparison): a von Mises–Fisher lobe around the mirror direction
+  of ωv (probability ``p``, concentration κ) and the cosine-weighted hemisphere (probability 1 − p). Samples
+  below the horizon are invalid (weight 0); :func:`mixture_pdf` is their exact density in solid angle (sr⁻¹),
+  0 below the horizon, so it integrates to the fraction of valid samples.
 """
 
 from __future__ import annotations
@@ -31,19 +37,46 @@ from viewer.meshes import arbitrary_tangents
 
 __all__ = [
     "CHUNK",
+    "DEFAULT_SAMPLER",
+    "SAMPLERS",
     "cosine_hemisphere",
     "eval_linear_srgb",
+    "from_tangent_frame",
     "kappa_for_lobe",
     "mirror",
     "mixture_pdf",
     "sample_mixture",
     "vmf_pdf",
+    "to_tangent_frame",
     "vmf_sample",
     "xyz_to_linear_srgb_matrix",
 ]
 
 #: Network evaluations per numpy batch: bounds the float64 hidden activations (≈ 0.1 GB for the shipped size).
 CHUNK = 1 << 16
+#: The BSDF's samplers: the material's own importance table (gratnet.importance), or the lobe + cosine mixture.
+SAMPLERS = ("table", "mixture")
+#: The sampler a ``gratnet`` BSDF uses unless told otherwise.
+DEFAULT_SAMPLER = "table"
+
+
+def to_tangent_frame(directions: np.ndarray, rotation: np.ndarray | None) -> np.ndarray:
+    """Shading-frame directions ``(N, 3)`` in the tangent frame turned by α about the normal, ``rotation`` =
+    ``(cos α, sin α)`` per row (``(N, 2)``; None: the frames are one): ``(x c + y s, −x s + y c, z)``."""
+    if rotation is None:
+        return directions
+    c, s = rotation[:, 0], rotation[:, 1]
+    x, y = directions[:, 0], directions[:, 1]
+    return np.stack([x * c + y * s, -x * s + y * c, directions[:, 2]], axis=-1)
+
+
+def from_tangent_frame(directions: np.ndarray, rotation: np.ndarray | None) -> np.ndarray:
+    """The inverse of :func:`to_tangent_frame`: ``(x c − y s, x s + y c, z)``."""
+    if rotation is None:
+        return directions
+    c, s = rotation[:, 0], rotation[:, 1]
+    x, y = directions[:, 0], directions[:, 1]
+    return np.stack([x * c - y * s, x * s + y * c, directions[:, 2]], axis=-1)
 
 
 def xyz_to_linear_srgb_matrix() -> np.ndarray:

@@ -96,14 +96,20 @@ vec3 safe_normalize(vec3 v) {
 }
 
 #include "lights.glsl"  // the light: u_light_kind, u_light, u_light_intensity -> light_incidence
+#ifdef ENVIRONMENT
+#include "environment.glsl"  // an environment map, sampled per pass (environment_incidence)
+#endif
 
 // The shading inputs of this fragment: the key vector, A(wi, wo), and the factor that multiplies the
 // network's XYZ, exposure * irradiance * A (0 when nothing lights the point: back face, either direction
 // at or below the horizon, a degenerate frame, no irradiance). Returns false when the factor is 0.
-bool surface_inputs(out vec3 key, out float a, out float factor) {
+// `tint`: the light's linear sRGB colour on top of the factor (environment_tint; (1, 1, 1) but under an
+// environment).
+bool surface_inputs(out vec3 key, out float a, out float factor, out vec3 tint) {
     key = vec3(0.0);
     a = 0.0;
     factor = 0.0;
+    tint = vec3(1.0);
     vec3 n = safe_normalize(v_normal);
     if (!gl_FrontFacing || n == vec3(0.0)) {
         return false;  // back face or no frame: A = 0
@@ -113,12 +119,16 @@ bool surface_inputs(out vec3 key, out float a, out float factor) {
     vec3 b = cross(n, t);
     mat3 world_to_tangent = transpose(mat3(t, b, n));  // rows t, b, n
 
+    vec3 wo_world = safe_normalize(u_eye - v_position);
+    vec3 wo = world_to_tangent * wo_world;
     vec3 wi_world;
     float irradiance;
+#ifdef ENVIRONMENT
+    environment_incidence(v_position, world_to_tangent, wo, wi_world, irradiance, tint);
+#else
     light_incidence(v_position, wi_world, irradiance);
-    vec3 wo_world = safe_normalize(u_eye - v_position);
+#endif
     vec3 wi = world_to_tangent * wi_world;
-    vec3 wo = world_to_tangent * wo_world;
     key = -(wi + wo);  // physics.md "Key vector"
     a = a_term(wi, wo, u_ior);  // 0 below either horizon, at |w| <= 1e-6, or for a zero vector
     if (!(a > 0.0) || !(irradiance > 0.0)) {
@@ -135,7 +145,8 @@ void main() {
     vec3 key;
     float a;
     float factor;
-    surface_inputs(key, a, factor);
+    vec3 tint;
+    surface_inputs(key, a, factor, tint);
     out_exposed = vec4(key, factor);
 }
 #else
@@ -145,7 +156,8 @@ void main() {
     vec3 key;
     float a;
     float factor;
-    bool lit = surface_inputs(key, a, factor);
+    vec3 tint;
+    bool lit = surface_inputs(key, a, factor, tint);
     out_key = vec4(key, a);
     if (!lit) {
         count_event(COUNTER_SKIPPED_A_ZERO);
@@ -156,14 +168,18 @@ void main() {
     vec3 xyz = reference_xyz(key);
 #else
     encoding_set_key(key);
-    if (skip_by_bound(factor)) {
+    if (skip_by_bound(factor)) {  // never under an environment: one pass's sample is not the pixel
         count_event(COUNTER_SKIPPED_BOUND);
         return;  // the display would show 0 whatever the network says
     }
     count_event(COUNTER_EVALUATIONS);
     vec3 xyz = range_inverse(mlp_evaluate());
 #endif
+#ifdef ENVIRONMENT
+    out_exposed = vec4(environment_tint(factor * xyz, tint), 1.0);
+#else
     out_exposed = vec4(factor * xyz, 1.0);
+#endif
 }
 #endif
 #endif

@@ -19,7 +19,7 @@ from gratnet.errors import GratNetError
 __all__ = ["check_offsets", "MAX_SAMPLES", "check_samples", "jitter_matrix", "sample_offsets", "sample_range_offsets"]
 
 #: Largest sample count per pixel accepted anywhere (a render, the viewer's accumulation cap).
-MAX_SAMPLES = 1024
+MAX_SAMPLES = 4096
 
 
 def check_samples(samples: object) -> int:

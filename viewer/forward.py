@@ -31,6 +31,7 @@ import numpy as np
 
 from viewer.antialias import jitter_matrix
 from viewer.camera import Camera, Light
+from viewer.environment_light import ENVIRONMENT_DEFINES, EnvironmentPass
 from viewer.glsl import compile_program
 from viewer.pacing import BLOCK, Blocks, Pacer, Progress, covered_block_costs, projected_row_costs, read_rows
 from viewer.shading import MaterialTexture, ShadingPrograms, set_uniform
@@ -91,17 +92,28 @@ class ForwardRenderer:
 
     def render(self, uploaded: MeshBuffers, camera: Camera, light: Light, size: tuple[int, int], exposure: float,
                ior: float | None, layers: int, skip_threshold: float | None, depth_prepass: bool,
-               statistics: dict[str, int] | None, offsets: np.ndarray) -> list[np.ndarray]:
+               statistics: dict[str, int] | None, offsets: np.ndarray, first_sample: int = 0,
+               environment: EnvironmentPass | None = None) -> list[np.ndarray]:
         """``layers`` images (1: exposed XYZ and coverage; 2: also the key vector and A), each ``float32``
         ``(H, W, 4)`` with row 0 at the top, the mean over the samples at ``offsets`` (pixels, ``(N, 2)``).
+
+        ``environment``: light the mesh with an environment too (shaders/environment.glsl): sample k of the
+        render is pass ``first_sample + k`` of its estimator (the surface program compiled with ``ENVIRONMENT``).
 
         Each sample is drawn in bands of rows (a scissor box; :mod:`viewer.pacing`), each band finished before
         the next: the same pixels, bit for bit, as one draw, but no GL call runs long (Ctrl-C is answered)."""
         width, height = size
         program = self.program
-        if statistics is not None:
+        if environment is not None:
+            extra: dict[str, int | float] = dict(ENVIRONMENT_DEFINES)
+            if statistics is not None:
+                extra["COUNT_EVALUATIONS"] = 1
+            program = self.shading.variant_program(SURFACE_PROGRAM, extra)
+        elif statistics is not None:
             _, program = self.shading.counting_program(SURFACE_PROGRAM)
         set_surface_uniforms(program, camera, light, width, height, float(exposure), ior)
+        if environment is not None:
+            environment.lighting.set_uniforms(program, environment.delta_light, environment.seed, environment.sampling)
         bound, unit = self.shading.skip_uniforms(program, skip_threshold)
         vertex_array = uploaded.vertex_array
         if vertex_array is not None and not _bound_to(vertex_array, program):
@@ -132,6 +144,10 @@ class ForwardRenderer:
                 for number, offset in enumerate(offsets):
                     def sampled(fraction: float, number: int = number) -> None:
                         self._report((number + fraction) / count)
+
+                    if environment is not None:
+                        environment.lighting.set_pass(program, first_sample + number)
+                        environment.lighting.bind()
 
                     self._draw_sample(framebuffer, targets, vertex_array, depth_array, program, bound, unit,
                                       camera, offset, depth_prepass, row_costs, sum_framebuffers, sampled)

@@ -60,7 +60,10 @@ from viewer.scene_config import (
     MAX_SAMPLES,
     RenderConfig,
     add_scene_arguments,
+    check_lighting,
     check_scene,
+    environment_of,
+    lighting_help,
     load_reference,
     quality_help,
     resolve_point,
@@ -109,6 +112,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                                                     "at 1 m)"})
     add_quiet_flag(parser)
     actions = add_arguments(parser, RenderConfig)
+    lighting_help(actions)
     # None when left out: --reference without --material renders the volume alone (no network, no model).
     actions["material"].default = None
     actions["material"].help = (f"{(actions['material'].help or '').rsplit(' (default', 1)[0]} (default: "
@@ -138,6 +142,15 @@ def resolve_config(arguments: argparse.Namespace) -> RenderConfig:
     if config.reference and config.render_path == "deferred":
         raise GratNetError("--render-path deferred evaluates the network in a compute pass; a --reference render "
                            "takes the forward path (auto or forward)")
+    check_lighting(config)
+    if config.has_environment:
+        if config.slice:
+            raise GratNetError("--slice renders the BRDF slice under one directional light; --environment lights "
+                               "mesh renders")
+        if config.render_path == "deferred":
+            raise GratNetError("--environment renders on the forward path (--render-path auto or forward)")
+        if config.skip_dark:
+            raise GratNetError("--skip-dark bounds one light's pixel; under --environment every sample counts")
     return config
 
 
@@ -198,6 +211,7 @@ def _render(arguments: argparse.Namespace, out: Path) -> int:
     from viewer.catalog import build_mesh, model_label
 
     reference_only = bool(arguments.reference) and arguments.material is None
+    exposure_given = arguments.exposure is not None
     if reference_only and arguments.quality is not None:
         raise GratNetError("--quality chooses a shipped material's point; a --reference render without --material "
                            "has no network")
@@ -209,11 +223,16 @@ def _render(arguments: argparse.Namespace, out: Path) -> int:
         arguments.light_text, arguments.camera_text, arguments.exposure = (probe.light_text, probe.camera_text,
                                                                             probe.exposure)
     config = resolve_scene_command(arguments, resolve_config)
+    environment = environment_of(config)
+    # Under an environment the unit light's default exposure means nothing: the exposure comes from the picture.
+    auto_exposure = auto_exposure or (environment is not None and not exposure_given)
+    if auto_exposure:
+        config = dataclasses.replace(config, exposure=1.0)
     if config.skip_dark and out.suffix.lower() != ".png":
         raise GratNetError("--skip-dark applies to .png output only: an EXR keeps values below the display's step")
     camera = Camera(config.camera_distance, config.camera_azimuth_degrees, config.camera_elevation_degrees,
                     fov_deg=config.fov_degrees)
-    light = Light.from_config(config)
+    light = Light.from_config(config, config.effective_light_intensity)
     model_path = None
     if not reference_only:
         model_path, config = resolve_point(config)
@@ -255,7 +274,9 @@ def _render(arguments: argparse.Namespace, out: Path) -> int:
                     if renderer.deferred is not None:
                         renderer.deferred.progress = progress
                     xyz = renderer.render(mesh, camera, light, (config.width, config.height), config.exposure,
-                                          config.effective_ior, skip_threshold=skip_threshold, samples=config.spp)
+                                          config.effective_ior, skip_threshold=skip_threshold, samples=config.spp,
+                                          environment=environment, seed=config.seed,
+                                          sampling=config.environment_sampling)
     finally:
         ctx.release()
     if not np.all(np.isfinite(xyz)):
@@ -272,6 +293,9 @@ def _render(arguments: argparse.Namespace, out: Path) -> int:
         documents["deferred_weights"] = deferred_weights
     if model_path is not None:
         documents["model_file"] = str(model_path)
+    if environment is not None:
+        documents["environment"] = {"name": environment.name, "source": environment.source,
+                                    "texels": list(environment.shape)}
     if volume is not None:
         documents["reference"] = {"file": str(Path(config.reference).resolve()), "slices": volume.slices,
                                   "resolution": volume.resolution, "scheme": volume.metadata.get("scheme"),
@@ -280,6 +304,7 @@ def _render(arguments: argparse.Namespace, out: Path) -> int:
     what = (f"BRDF slice, light θ={config.light_theta_degrees:g}° φ={config.light_phi_degrees:g}°" if config.slice
             else f"mesh {config.mesh}")
     samples = "" if config.slice else f", {config.spp} spp"
+    samples += f", environment {environment.name}" if environment is not None else ""
     if model_path is None:
         source = f"reference {Path(config.reference).name}"
     else:

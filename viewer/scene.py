@@ -51,12 +51,15 @@ import numpy as np
 
 from gratnet.codes import RENDER_PATHS, WeightForm
 from gratnet.display import xyz_to_display_srgb8, xyz_to_linear_srgb
+from gratnet.environment import Environment
 from gratnet.errors import GratNetError
+from gratnet.importance import MaterialTable, material_table, volume_table
 from gratnet.modelfile import ModelFile
 from gratnet.volume import Volume
 from viewer.antialias import check_offsets, sample_range_offsets
 from viewer.camera import Camera, Light
 from viewer.deferred import DeferredRenderer
+from viewer.environment_light import EnvironmentLighting, EnvironmentPass
 from viewer.forward import ForwardRenderer
 from viewer.meshes import Mesh
 from viewer.reference import ReferenceRenderer
@@ -140,6 +143,9 @@ class SceneRenderer:
             self.model = model
             self.deferred = DeferredRenderer(self.network, deferred_weights)
         self.forward = ForwardRenderer(self.shading)
+        self._source = model
+        self._importance: MaterialTable | None = None  # the material's importance table (environment light)
+        self._lighting: EnvironmentLighting | None = None  # the last environment's textures
         self._render_path: tuple[str, str] | None = None
         self._measure_render_path = measure_render_path
 
@@ -174,7 +180,8 @@ class SceneRenderer:
                       size: tuple[int, int] = (256, 256), exposure: float = 1.0,
                       ior: float | None = 1.5, *, skip_threshold: float | None = None, depth_prepass: bool = True,
                       statistics: dict[str, int] | None = None, samples: int = 1,
-                      first_sample: int = 0) -> tuple[np.ndarray, np.ndarray]:
+                      first_sample: int = 0, environment: Environment | None = None,
+                      seed: int = 0) -> tuple[np.ndarray, np.ndarray]:
         """:meth:`render_rgba` and, per pixel, the key vector and the A-term behind it (forward path).
 
         Returns:
@@ -184,14 +191,16 @@ class SceneRenderer:
             With ``samples`` > 1 both are means over the samples (as :meth:`render_rgba`).
         """
         rgba, key_a = self._render(mesh, camera, light, size, exposure, ior, 2, skip_threshold, depth_prepass,
-                                   statistics, self._offsets(samples, first_sample, None), "forward")
+                                   statistics, self._offsets(samples, first_sample, None), "forward", first_sample,
+                                   environment, seed)
         return rgba, key_a
 
     def render_rgba(self, mesh: Mesh | MeshBuffers, camera: Camera, light: Light, size: tuple[int, int] = (256, 256),
                     exposure: float = 1.0, ior: float | None = 1.5, *, skip_threshold: float | None = None,
                     depth_prepass: bool = True, statistics: dict[str, int] | None = None, samples: int = 1,
                     first_sample: int = 0, offsets_px: np.ndarray | None = None,
-                    render_path: str | None = None) -> np.ndarray:
+                    render_path: str | None = None, environment: Environment | None = None,
+                    seed: int = 0, sampling: str = "mis") -> np.ndarray:
         """Exposed CIE XYZ and coverage, ``float32`` ``(H, W, 4)``, row 0 at the top.
 
         Channels 0–2: ``exposure · irradiance · A(ωi, ωo) · XYZ(−(ωi + ωo))`` (physics.md eq. 5–7) with
@@ -216,15 +225,26 @@ class SceneRenderer:
         ``offsets_px``: explicit sub-pixel offsets instead (pixels, ``(N, 2)``, x right, y up).
 
         ``render_path``: ``forward`` or ``deferred`` for this render only (default: :attr:`render_path`).
+
+        ``environment``: an environment light besides ``light`` (issue 43; a ``light`` of intensity 0 is none),
+        integrated by shaders/environment.glsl: each sample is one pass of its estimator, pass
+        ``first_sample + k`` for sample k, with random numbers from ``seed``; the mean over samples converges to
+        the integral (physics.md "Environment light"), so more samples mean less noise. Forward path only.
+        ``sampling``: ``mis`` (default), or ``light`` / ``material`` alone (gratnet.codes.ENVIRONMENT_SAMPLING).
         """
         offsets = self._offsets(samples, first_sample, offsets_px)
         path = self.render_path if render_path is None else render_path
+        if environment is not None:
+            if render_path == "deferred":
+                raise GratNetError("an environment light renders on the forward path only (--render-path forward "
+                                   "or auto)")
+            path = "forward"
         if path not in ("forward", "deferred"):
             raise GratNetError(f"a render takes the forward or the deferred path, got {render_path!r}")
         if path == "deferred" and self.deferred is None:
             raise GratNetError("a reference render takes the forward path only")
         return self._render(mesh, camera, light, size, exposure, ior, 1, skip_threshold, depth_prepass,
-                            statistics, offsets, path)[0]
+                            statistics, offsets, path, first_sample, environment, seed, sampling)[0]
 
     @staticmethod
     def _offsets(samples: int, first_sample: int, offsets_px: np.ndarray | None) -> np.ndarray:
@@ -235,18 +255,25 @@ class SceneRenderer:
     def _render(self, mesh: Mesh | MeshBuffers, camera: Camera, light: Light, size: tuple[int, int],
                 exposure: float, ior: float | None, layers: int, skip_threshold: float | None,
                 depth_prepass: bool, statistics: dict[str, int] | None, offsets: np.ndarray,
-                path: str) -> list[np.ndarray]:
+                path: str, first_sample: int = 0, environment: Environment | None = None,
+                seed: int = 0, sampling: str = "mis") -> list[np.ndarray]:
         """Every render method's checks (before any GL work), then ``path``; a :class:`Mesh` is uploaded for
         this render only."""
         width, height = check_size(size)
         skip_threshold_value(skip_threshold)
+        lighting = None
+        if environment is not None:
+            if not isinstance(environment, Environment):
+                raise GratNetError(f"expected a gratnet.environment.Environment, got {type(environment).__name__}")
+            lighting = EnvironmentPass(self.environment_lighting(environment), light.intensity > 0.0, seed, sampling)
+            skip_threshold = None  # a pass's sample is not the pixel: the output bound says nothing of the mean
         uploaded = mesh if isinstance(mesh, MeshBuffers) else self.upload(mesh)
         try:
             if path == "deferred" and self.deferred is not None:  # all samples in one list; render_layers: forward
                 return [self.deferred.render(uploaded, camera, light, (width, height), exposure, ior, skip_threshold,
                                              statistics, offsets)]
             return self.forward.render(uploaded, camera, light, (width, height), exposure, ior, layers,
-                                       skip_threshold, depth_prepass, statistics, offsets)
+                                       skip_threshold, depth_prepass, statistics, offsets, first_sample, lighting)
         finally:
             if uploaded is not mesh:
                 uploaded.release()
@@ -254,12 +281,35 @@ class SceneRenderer:
     def render(self, mesh: Mesh | MeshBuffers, camera: Camera, light: Light, size: tuple[int, int] = (256, 256),
                exposure: float = 1.0, ior: float | None = 1.5, *, skip_threshold: float | None = None,
                depth_prepass: bool = True, statistics: dict[str, int] | None = None, samples: int = 1,
-               first_sample: int = 0) -> np.ndarray:
+               first_sample: int = 0, environment: Environment | None = None, seed: int = 0,
+               sampling: str = "mis") -> np.ndarray:
         """Exposed CIE XYZ, ``float32`` ``(H, W, 3)``, row 0 at the top (see :meth:`render_rgba`)."""
         rgba = self.render_rgba(mesh, camera, light, size, exposure, ior, skip_threshold=skip_threshold,
                                 depth_prepass=depth_prepass, statistics=statistics, samples=samples,
-                                first_sample=first_sample)
+                                first_sample=first_sample, environment=environment, seed=seed, sampling=sampling)
         return np.ascontiguousarray(rgba[..., :3])
+
+    def importance_table(self) -> MaterialTable:
+        """The material's importance table (gratnet.importance: the network's, or the ground-truth volume's in a
+        reference scene), built on first use (cached on disk by gratnet.importance)."""
+        if self._importance is None:
+            if isinstance(self._source, Volume):
+                self._importance = volume_table(self._source)
+            else:
+                self._importance = material_table(self._source)
+        return self._importance
+
+    def environment_lighting(self, environment: Environment) -> EnvironmentLighting:
+        """``environment``'s textures on this context with the material's importance table (kept for the next
+        render with the same environment object)."""
+        if self._lighting is not None and self._lighting.environment is environment:
+            return self._lighting
+        table = self.importance_table()
+        if self._lighting is not None:
+            self._lighting.release()
+            self._lighting = None
+        self._lighting = EnvironmentLighting(self.ctx, environment, table)
+        return self._lighting
 
     def render_srgb8(self, mesh: Mesh | MeshBuffers, camera: Camera, light: Light,
                      size: tuple[int, int] = (256, 256), exposure: float = 1.0, ior: float | None = 1.5, *,
@@ -302,6 +352,9 @@ class SceneRenderer:
 
     def release(self) -> None:
         """Free the GL objects (the context belongs to the caller)."""
+        if self._lighting is not None:
+            self._lighting.release()
+            self._lighting = None
         self.forward.release()
         if self.deferred is not None:
             self.deferred.release()

@@ -22,12 +22,13 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
+import functools
 import math
 from collections.abc import Callable
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, TypeVar
 
-from gratnet.codes import DEFERRED_WEIGHTS, RENDER_PATHS, SCHEME, WEIGHTS_PATHS, WeightForm
+from gratnet.codes import DEFERRED_WEIGHTS, ENVIRONMENT_SAMPLING, RENDER_PATHS, SCHEME, WEIGHTS_PATHS, WeightForm
 from gratnet.config import config_field, parse_float, parse_numbers
 from gratnet.errors import GratNetError
 from gratnet.lights import DISTANCE_RANGE_METRES, LIGHT_KINDS, LightFlag, light_kind
@@ -40,14 +41,15 @@ if TYPE_CHECKING:
 ConfigT = TypeVar("ConfigT")
 SceneT = TypeVar("SceneT", bound="SceneConfig")
 
-__all__ = ["DEFAULT_MATERIAL", "DEFERRED_WEIGHTS", "DEFERRED_WEIGHTS_HELP", "MAX_SAMPLES", "RENDER_PATHS",
-           "RENDER_PATH_HELP", "WEIGHT_PATHS", "RenderConfig",
+__all__ = ["DEFAULT_MATERIAL", "DEFERRED_WEIGHTS", "DEFERRED_WEIGHTS_HELP", "ENVIRONMENT_FORMS", "ENVIRONMENT_HELP",
+           "MAX_SAMPLES", "RENDER_PATHS", "RENDER_PATH_HELP", "WEIGHT_PATHS", "LightingConfig", "RenderConfig",
+           "check_lighting", "environment_of", "lighting_help",
            "SceneConfig", "add_scene_arguments", "check_scene", "check_scene_numbers", "fill_scene_defaults",
            "load_reference", "parse_size", "quality_help", "resolve_point",
            "resolve_scene_command", "scene_fields", "warn_if_black", "with_fallback", "write_render"]
 _OUTPUT_SUFFIXES = (".png", ".exr")
 #: Largest --spp of ``gratnet render``: viewer.antialias.MAX_SAMPLES (repeated: this module defers numpy).
-MAX_SAMPLES = 1024
+MAX_SAMPLES = 4096
 #: ``--weights-path`` choices (gratnet.codes.WEIGHTS_PATHS; ``--render-path``'s and ``--deferred-weights``' come
 #: from there too: RENDER_PATHS, DEFERRED_WEIGHTS).
 WEIGHT_PATHS = WEIGHTS_PATHS
@@ -107,8 +109,88 @@ class SceneConfig:
         return self.ior if self.fresnel and self.ior != 0 else None
 
 
+#: ``--environment`` help, shared by ``gratnet render`` and ``gratnet mitsuba-render``.
+ENVIRONMENT_HELP = ("environment light: none; sky (a physically based sky, its sun 40° up with about 1.2 times the "
+                    "irradiance of --light-intensity 1) or studio (three softboxes of radiance ≤ 1 on grey) from "
+                    "assets/environments/; a constant radiance in linear sRGB (one number, or R,G,B); or the path of "
+                    "a lat-long .exr/.hdr map in linear sRGB whose up is +z (docs/physics.md \"Environment light\")")
+ENVIRONMENT_FORMS = "none|sky|studio|RADIANCE|R,G,B|MAP.exr|MAP.hdr"
+
+
 @dataclasses.dataclass
-class RenderConfig(SceneConfig):
+class LightingConfig:
+    """The light's intensity and an environment light (issue 43): what ``gratnet render`` and ``gratnet
+    mitsuba-render`` add to the scene's one light, with the same flags and defaults."""
+
+    # None when not given: 1, or 0 when an environment lights the scene (it replaces the default light).
+    light_intensity: float | None = config_field(
+        None, "the light's irradiance (directional, on a plane facing it) or intensity (point, W/sr: irradiance "
+        "intensity/d² at d metres); 0: no light but the environment (default: 1, or 0 with --environment; typical: "
+        "0 to 10)")
+    environment: str = config_field("none", ENVIRONMENT_HELP)
+    environment_scale: float = config_field(1.0, "factor on the environment's radiance (typical: 1e-5 to 1)")
+    environment_rotation: float = config_field(
+        0.0, "turn of the environment about +z, degrees (counter-clockwise seen from above: a feature at azimuth φ "
+        "moves to φ + DEGREES)")
+    seed: int = config_field(0, "random seed of the light samples (an environment's; Mitsuba's sampler)")
+
+    @property
+    def has_environment(self) -> bool:
+        """Whether ``environment`` names one (not ``none``, 0 or 0,0,0)."""
+        return environment_of(self) is not None
+
+    @property
+    def effective_light_intensity(self) -> float:
+        """``light_intensity``, or its default: 1, or 0 when an environment lights the scene."""
+        if self.light_intensity is not None:
+            return self.light_intensity
+        return 0.0 if self.has_environment else 1.0
+
+
+def environment_of(config: LightingConfig) -> Any:
+    """The :class:`gratnet.environment.Environment` that ``config``'s ``--environment`` names (rotation and scale
+    applied), or None; a one-line GratNetError for a bad one. A file is read once while its size and modification
+    time stay the same (the checks and the render share it)."""
+    path = Path(str(config.environment).strip()).expanduser()
+    try:
+        status = path.stat()
+        signature: tuple[int, int] | None = (status.st_mtime_ns, status.st_size)
+    except (OSError, ValueError):
+        signature = None
+    return _load_environment(str(config.environment), float(config.environment_rotation),
+                             float(config.environment_scale), signature)
+
+
+@functools.lru_cache(maxsize=2)
+def _load_environment(text: str, rotation_degrees: float, scale: float, signature: tuple[int, int] | None) -> Any:
+    from gratnet.environment import load_environment
+
+    return load_environment(text, rotation_degrees, scale, what="--environment")
+
+
+def check_lighting(config: LightingConfig) -> None:
+    """Refuse (one line) a light intensity or environment the renderers cannot use, reading the environment's map
+    (before any GL work)."""
+    if config.light_intensity is not None and not (math.isfinite(config.light_intensity)
+                                                    and 0.0 <= config.light_intensity < 3e38):
+        raise GratNetError(f"--light-intensity must be a finite number ≥ 0, got {config.light_intensity!r}")
+    if isinstance(config.seed, bool) or not 0 <= config.seed < 2**32:
+        raise GratNetError(f"--seed must be an integer in 0 … {2**32 - 1}, got {config.seed!r}")
+    environment_of(config)
+
+
+def lighting_help(actions: dict[str, argparse.Action]) -> None:
+    """Metavars of the lighting flags (``gratnet.config.add_arguments``' actions)."""
+    actions["environment"].metavar = ENVIRONMENT_FORMS
+    actions["environment_rotation"].metavar = "DEGREES"
+    actions["environment_scale"].metavar = "SCALE"
+    actions["light_intensity"].metavar = "INTENSITY"
+    # The field's None means "not given" (1, or 0 with --environment): its help says so in words, not "None".
+    actions["light_intensity"].help = (actions["light_intensity"].help or "").replace(" (default: None)", "")
+
+
+@dataclasses.dataclass
+class RenderConfig(LightingConfig, SceneConfig):
     """Rendering a material on a mesh (or its BRDF slice) with one light and an orbit camera."""
 
     slice: bool = config_field(False, "render the network's BRDF slice for the light θ,φ instead of a mesh")
@@ -119,6 +201,10 @@ class RenderConfig(SceneConfig):
         choices=WEIGHT_PATHS)
     render_path: str = config_field("auto", RENDER_PATH_HELP, choices=RENDER_PATHS)
     deferred_weights: str = config_field("auto", DEFERRED_WEIGHTS_HELP, choices=DEFERRED_WEIGHTS)
+    environment_sampling: str = config_field(
+        "mis", "how an environment's light is sampled: mis (the map's luminance and the material's own diffraction "
+        "table, weighted by multiple importance sampling), light or material (one alone: for comparisons)",
+        choices=ENVIRONMENT_SAMPLING.names)
     skip_dark: bool = config_field(
         False, "PNG only: skip the network where exposure · A · (the model's cached output bound) cannot reach the "
         "display's smallest step; the first use per model builds the bound (minutes on a CPU)")

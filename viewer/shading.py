@@ -142,6 +142,16 @@ class ShadingPrograms:
             self._compile(key, name, {**self.defines, "COUNT_EVALUATIONS": 1})
         return key, self.compiled[key]
 
+    def variant_program(self, name: str, extra: Mapping[str, int | float]) -> moderngl.Program:
+        """Program ``name`` compiled with the material's defines and ``extra`` (e.g. ``ENVIRONMENT``; with
+        ``COUNT_EVALUATIONS`` too for a counting variant), cached under a key that names them."""
+        if not extra:
+            return self.program(name)
+        key = name + "#" + ",".join(f"{define}={value}" for define, value in sorted(extra.items()))
+        if key not in self.compiled:  # not the plain program first: a baked network's compile takes ~25 s
+            self._compile(key, name, {**self.defines, **extra})
+        return self.compiled[key]
+
     def depth_only_program(self, name: str) -> moderngl.Program:
         """Program ``name`` compiled with ``DEPTH_ONLY`` (shaders/surface.glsl: the same vertex stage, an
         empty fragment stage) for a depth pre-pass; it reads only the vertex stage's uniforms."""

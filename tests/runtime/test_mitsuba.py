@@ -225,16 +225,13 @@ def test_the_chi2_check_rejects_a_pdf_that_is_slightly_off() -> None:
     assert _numpy_chi2_p_value(50.0, 0.5, 6.0, pdf_lobe=6.6) < 1e-6
 
 
-@needs_llvm
-@pytest.mark.parametrize(("theta", "lobe"), [(0.0, 8.0), (45.0, 8.0), (70.0, 4.0), (30.0, 2.0)])
-def test_plugin_sampling_passes_mitsubas_chi2_test(theta: float, lobe: float) -> None:
-    """Mitsuba's ChiSquareTest (as in its own BSDF tests) on the plugin's sample() against its pdf(); validity
-    is pdf > 0 (the adapter's weight-based one would drop directions where the network is 0)."""
-    mi = set_variant("llvm_ad_rgb")
+def _mitsuba_chi2(mi: object, bsdf: object, theta: float) -> object:
+    """Mitsuba's ChiSquareTest (as in its own BSDF tests) of ``bsdf.sample()`` against its ``pdf()`` for the view
+    at ``theta`` (degrees, φ = 0); validity is pdf > 0 (the adapter's weight-based one would drop directions where
+    the network is 0). Returns the test, run at significance 0.01 (``passed`` set on it)."""
     import drjit as dr
     from mitsuba.chi2 import ChiSquareTest, SphericalDomain
 
-    bsdf = _bsdf(mi, lobe_degrees=lobe, specular_probability=0.5)
     wi = [math.sin(math.radians(theta)), 0.0, math.cos(math.radians(theta))]
     ctx = mi.BSDFContext()
 
@@ -253,17 +250,80 @@ def test_plugin_sampling_passes_mitsubas_chi2_test(theta: float, lobe: float) ->
 
     test = ChiSquareTest(domain=SphericalDomain(), sample_func=sample_functor, pdf_func=pdf_functor,
                          sample_dim=3, sample_count=200_000, res=101, ires=8)
-    passed = test.run(significance_level=0.01, quiet=True)
-    print(f"Mitsuba χ² θ={theta}° lobe={lobe}°: p-value {float(test.p_value):.3f}")
-    assert passed, test.messages
+    test.passed = test.run(significance_level=0.01, quiet=True)
+    return test
 
 
 @needs_llvm
-def test_sample_weight_is_eval_over_pdf() -> None:
+@pytest.mark.parametrize(("theta", "lobe"), [(0.0, 8.0), (45.0, 8.0), (70.0, 4.0), (30.0, 2.0)])
+def test_plugin_sampling_passes_mitsubas_chi2_test(theta: float, lobe: float) -> None:
+    """The mixture sampler (``sampler`` = mixture) against its pdf, by Mitsuba's ChiSquareTest."""
+    mi = set_variant("llvm_ad_rgb")
+    test = _mitsuba_chi2(mi, _bsdf(mi, sampler="mixture", lobe_degrees=lobe, specular_probability=0.5), theta)
+    print(f"Mitsuba χ² mixture θ={theta}° lobe={lobe}°: p-value {float(test.p_value):.3f}")
+    assert test.passed, test.messages
+
+
+@pytest.fixture(scope="module")
+def contrasted_material(tmp_path_factory: pytest.TempPathFactory) -> str:
+    """A random network whose luminance varies ~200:1 over (u, v), smoothly at the table's cell scale: the CD's
+    peaks (a few table cells wide) defeat ChiSquareTest's own quadrature of the pdf (ires = 8 points per bin), not
+    the sampler (tests/contract/test_importance.py checks sharp peaks cell by cell)."""
+    from gratnet.modelfile import save_model
+    from tests.helpers import random_model
+
+    model = random_model([163, 32, 16, 3], scheme="simple-max", seed=0)
+    model.weights[-1] = (3.0 * model.weights[-1]).astype(np.float32)
+    path = tmp_path_factory.mktemp("importance") / "contrasted.npz"
+    save_model(path, model)
+    return str(path)
+
+
+@needs_llvm
+@pytest.mark.parametrize("theta", [0.0, 45.0, 75.0])
+def test_plugin_table_sampling_passes_mitsubas_chi2_test(contrasted_material: str, theta: float) -> None:
+    """The table sampler (``sampler`` = table, the default: gratnet.importance) against its pdf, by Mitsuba's
+    ChiSquareTest."""
+    mi = set_variant("llvm_ad_rgb")
+    bsdf = mi.load_dict({"type": "gratnet", "filename": contrasted_material})
+    test = _mitsuba_chi2(mi, bsdf, theta)
+    print(f"Mitsuba χ² table θ={theta}°: p-value {float(test.p_value):.3f}")
+    assert test.passed, test.messages
+
+
+def test_tangent_frame_turns_the_tangent_onto_x_and_back() -> None:
+    """The table samples in the tangent frame: the mesh tangent (cos α, sin α, 0) in Mitsuba's shading frame is
+    the table's x, and from_tangent_frame undoes to_tangent_frame."""
+    rng = np.random.default_rng(6)
+    alpha = rng.uniform(-math.pi, math.pi, 50)
+    rotation = np.stack([np.cos(alpha), np.sin(alpha)], axis=-1)
+    tangent = np.stack([np.cos(alpha), np.sin(alpha), np.zeros(50)], axis=-1)
+    np.testing.assert_allclose(shading.to_tangent_frame(tangent, rotation), np.tile([1.0, 0.0, 0.0], (50, 1)),
+                               atol=1e-12)
+    directions = _random_hemisphere(rng, 50)
+    np.testing.assert_allclose(shading.from_tangent_frame(shading.to_tangent_frame(directions, rotation), rotation),
+                               directions, atol=1e-12)
+    assert shading.to_tangent_frame(directions, None) is directions
+
+
+def test_the_default_sampler_is_the_table_and_a_bad_one_is_one_line() -> None:
+    from gratnet.errors import GratNetError
+    from mitsuba_plugin.runtime import plugin_errors
+
+    mi = set_variant("scalar_rgb")
+    assert "sampler='table'" in str(_bsdf(mi))
+    with pytest.raises(GratNetError, match=r"^gratnet BSDF: property 'sampler' must be one of table, mixture, got "
+                                           r"'magic'$"), plugin_errors():
+        _bsdf(mi, sampler="magic")
+
+
+@needs_llvm
+@pytest.mark.parametrize("sampler", ["table", "mixture"])
+def test_sample_weight_is_eval_over_pdf(sampler: str) -> None:
     mi = set_variant("llvm_ad_rgb")
     import drjit as dr
 
-    bsdf = _bsdf(mi)
+    bsdf = _bsdf(mi, sampler=sampler)
     count = 4000
     rng = np.random.default_rng(5)
     si = dr.zeros(mi.SurfaceInteraction3f, count)

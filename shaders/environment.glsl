@@ -1,0 +1,189 @@
+// Environment light (issue 43; docs/physics.md "Environment light"): a lat-long map of linear sRGB radiance
+// integrated over the hemisphere by multiple importance sampling, one sample per fragment and render pass.
+//
+// Compiled into surface.glsl with ENVIRONMENT. Each pass k draws one sample per pixel with one of M
+// strategies, chosen in turn: strategy (k + o) mod M with o a per-pixel offset, so any M consecutive passes
+// use every strategy once at each pixel, and any one pass is an unbiased one-sample estimate:
+//   light sampling: a direction from the environment's luminance distribution (gratnet.environment);
+//   material sampling: a key (u, v) from the material's own importance table (gratnet.importance),
+//      i.e. a light direction wi.xy = -(u, v) - wo.xy in the tangent frame, with a defensive cosine share;
+//   the delta light (with one of intensity > 0): the directional or point light of lights.glsl.
+// u_environment_sampling (gratnet.codes.ENVIRONMENT_SAMPLING) chooses both environment strategies weighted by
+// the power heuristic (SAMPLING_MIS; Veach 1997, eq. 9.13 with beta = 2) or one alone (weight 1). A pass
+// contributes M * w_s * L(wi) / p_s(wi) as the "irradiance" of the fragment's light, so the mean over passes
+// is the integral of A * XYZ * L over the light's directions (physics.md eq. 9) plus the delta light.
+// Colour: L is linear sRGB; the fragment's XYZ is taken to linear sRGB, multiplied channel by channel and
+// taken back (environment_tint), as Mitsuba's RGB variants multiply the BSDF's value by the emitter's.
+//
+// Needs lights.glsl (light_incidence); includes sampling.glsl and the generated codes.
+
+#include "codes.glsl"
+#include "sampling.glsl"
+
+#define ENVIRONMENT_PI 3.14159265358979
+
+uniform highp sampler2D u_environment;        // RGBA32F (W, H), linear sRGB radiance (scale applied), row 0: zenith
+uniform highp sampler2D u_environment_table;  // its luminance distribution (sampling.glsl), W x (H - 1) cells
+uniform highp sampler2D u_material_table;     // the material's (u, v) distribution (sampling.glsl)
+uniform ivec2 u_environment_cells;            // the distribution's (columns W, rows H - 1)
+uniform ivec2 u_material_cells;               // (columns: u, rows: v)
+uniform vec2 u_environment_rotation;          // (cos, sin) of the map's rotation about world +z
+uniform vec2 u_material_key_range;            // (key_min, key_max): the table's u and v span
+uniform float u_defensive_share;              // share of cosine-weighted material samples (gratnet.importance)
+uniform int u_sample_index;                   // the render pass (sample) index k
+uniform uint u_seed;                          // the render's seed
+uniform int u_environment_sampling;           // SAMPLING_MIS, SAMPLING_LIGHT or SAMPLING_MATERIAL
+uniform bool u_delta_light;                   // the delta light of lights.glsl takes its turn too
+uniform mat3 u_xyz_to_rgb;                    // CIE XYZ -> linear sRGB (gratnet.display)
+uniform mat3 u_rgb_to_xyz;                    // its inverse
+
+// The map's unit-square point (x: azimuth, y: polar angle / pi) of a world direction (gratnet.environment).
+vec2 environment_point(vec3 world) {
+    vec2 c = u_environment_rotation;
+    vec3 local = vec3(c.x * world.x + c.y * world.y, -c.y * world.x + c.x * world.y, world.z);  // Rz(-rotation)
+    float x = atan(local.x, local.y) * (0.5 / ENVIRONMENT_PI);
+    return vec2(x - floor(x), acos(clamp(local.z, -1.0, 1.0)) / ENVIRONMENT_PI);
+}
+
+// The world direction of a unit-square point of the map, and sin(theta) there.
+vec3 environment_direction(vec2 point, out float sin_theta) {
+    float theta = ENVIRONMENT_PI * point.y;
+    float phi = 2.0 * ENVIRONMENT_PI * point.x;
+    sin_theta = sin(theta);
+    vec3 local = vec3(sin_theta * sin(phi), sin_theta * cos(phi), cos(theta));
+    vec2 c = u_environment_rotation;
+    return vec3(c.x * local.x - c.y * local.y, c.y * local.x + c.x * local.y, local.z);  // Rz(rotation)
+}
+
+// The radiance towards world direction `world` (linear sRGB), Mitsuba 3's envmap lookup exactly
+// (gratnet.environment.Environment.radiance): columns centred at x = (c + 1/2)/W and wrapping, rows at
+// y = r/(H - 1) (row 0 at the zenith, row H - 1 at the nadir), bilinear between them.
+vec3 environment_radiance(vec3 world) {
+    vec2 point = environment_point(world);
+    ivec2 size = textureSize(u_environment, 0);  // (W, H)
+    float u = point.x - 0.5 / float(size.x);
+    float s = (u - floor(u)) * float(size.x);
+    int x0 = min(int(floor(s)), size.x - 1);
+    float fx = s - float(x0);
+    int x1 = x0 + 1 == size.x ? 0 : x0 + 1;
+    float t = point.y * float(size.y - 1);
+    int y0 = clamp(int(floor(t)), 0, size.y - 2);
+    float fy = t - float(y0);
+    int y1 = y0 + 1;
+    vec3 top = mix(texelFetch(u_environment, ivec2(x0, y0), 0).rgb, texelFetch(u_environment, ivec2(x1, y0), 0).rgb,
+                   fx);
+    vec3 bottom = mix(texelFetch(u_environment, ivec2(x0, y1), 0).rgb,
+                      texelFetch(u_environment, ivec2(x1, y1), 0).rgb, fx);
+    return mix(top, bottom, fy);
+}
+
+// The solid-angle density of light sampling at world direction `world`.
+float environment_pdf(vec3 world) {
+    vec2 point = environment_point(world);
+    float sin_theta = sin(ENVIRONMENT_PI * point.y);
+    if (!(sin_theta > 0.0)) {
+        return 0.0;
+    }
+    return piecewise_density(u_environment_table, u_environment_cells, point)
+           / (2.0 * ENVIRONMENT_PI * ENVIRONMENT_PI * sin_theta);
+}
+
+// A world direction from the environment's distribution and its solid-angle density (0: none).
+vec3 sample_environment(vec2 xi, out float pdf) {
+    float density;
+    vec2 point = sample_piecewise(u_environment_table, u_environment_cells, xi, density);
+    float sin_theta;
+    vec3 world = environment_direction(point, sin_theta);
+    pdf = sin_theta > 0.0 ? density / (2.0 * ENVIRONMENT_PI * ENVIRONMENT_PI * sin_theta) : 0.0;
+    return world;
+}
+
+// The solid-angle density of material sampling of light direction wi for view wo (tangent frame).
+float material_pdf(vec3 wo, vec3 wi) {
+    if (!(wi.z > 0.0)) {
+        return 0.0;
+    }
+    float span = u_material_key_range.y - u_material_key_range.x;
+    vec2 point = (-(wi.xy + wo.xy) - u_material_key_range.x) / span;
+    float table = piecewise_density(u_material_table, u_material_cells, point) / (span * span);
+    return ((1.0 - u_defensive_share) * table + u_defensive_share / ENVIRONMENT_PI) * wi.z;
+}
+
+// A light direction (tangent frame) from the material's distribution for view wo; false when the sampled
+// key leaves the hemisphere (no light from there). gratnet.importance.MaterialTable.sample.
+bool sample_material(vec3 wo, vec3 xi, out vec3 wi) {
+    if (xi.x < u_defensive_share) {  // cosine-weighted: radius sqrt(xi.y), azimuth 2 pi xi.z
+        float radius = sqrt(xi.y);
+        float phi = 2.0 * ENVIRONMENT_PI * xi.z;
+        wi = vec3(radius * cos(phi), radius * sin(phi), sqrt(max(1.0 - xi.y, 0.0)));
+        return wi.z > 0.0;
+    }
+    float density;
+    vec2 point = sample_piecewise(u_material_table, u_material_cells, xi.yz, density);  // xi.x chose the branch
+    vec2 uv = u_material_key_range.x + (u_material_key_range.y - u_material_key_range.x) * point;
+    vec2 planar = -uv - wo.xy;
+    float planar_squared = dot(planar, planar);
+    wi = vec3(planar, sqrt(max(1.0 - planar_squared, 0.0)));
+    return planar_squared < 1.0;
+}
+
+// The power heuristic's weight of a strategy of density `chosen` beside one of density `other`.
+float power_weight(float chosen, float other) {
+    if (!(chosen > 0.0)) {
+        return 0.0;
+    }
+    float ratio = other / chosen;
+    return 1.0 / (1.0 + ratio * ratio);
+}
+
+// This fragment's light for this pass: the world direction towards it, the scalar irradiance and the linear
+// sRGB tint that multiply A * XYZ (tint (1, 1, 1) for the delta light). irradiance 0: no light this pass.
+void environment_incidence(vec3 position, mat3 world_to_tangent, vec3 wo, out vec3 wi_world, out float irradiance,
+                           out vec3 tint) {
+    bool mis = u_environment_sampling == SAMPLING_MIS;
+    uint sampled = mis ? 2u : 1u;  // environment strategies
+    uint count = sampled + (u_delta_light ? 1u : 0u);  // M
+    uvec2 pixel = uvec2(gl_FragCoord.xy);
+    uint offset = pcg3d(uvec3(pixel, u_seed ^ 0x68bc21ebu)).x % count;
+    uint strategy = (uint(u_sample_index) + offset) % count;
+    float strategies = float(count);
+    tint = vec3(1.0);
+    if (strategy == sampled) {  // the delta light, once in every M passes
+        light_incidence(position, wi_world, irradiance);
+        irradiance *= strategies;
+        return;
+    }
+    if (!mis) {
+        strategy = u_environment_sampling == SAMPLING_LIGHT ? 0u : 1u;
+    }
+    vec3 xi = uniform3(uvec3(pixel, uint(u_sample_index) ^ (u_seed * 0x9e3779b9u)));
+    mat3 tangent_to_world = transpose(world_to_tangent);
+    float chosen;
+    float other;
+    irradiance = 0.0;
+    wi_world = vec3(0.0, 0.0, 1.0);
+    if (strategy == 0u) {
+        wi_world = sample_environment(xi.xy, chosen);
+        other = material_pdf(wo, world_to_tangent * wi_world);
+    } else {
+        vec3 wi;
+        if (!sample_material(wo, xi, wi)) {
+            return;
+        }
+        wi = normalize(wi);
+        chosen = material_pdf(wo, wi);
+        wi_world = tangent_to_world * wi;
+        other = environment_pdf(wi_world);
+    }
+    if (!(chosen > 0.0)) {
+        return;
+    }
+    float weight = mis ? power_weight(chosen, other) : 1.0;
+    tint = environment_radiance(wi_world) * (strategies * weight / chosen);
+    irradiance = 1.0;
+}
+
+// exposed XYZ under a linear sRGB tint: each sRGB channel scaled (the identity for tint (1, 1, 1)).
+vec3 environment_tint(vec3 xyz, vec3 tint) {
+    return u_rgb_to_xyz * (tint * (u_xyz_to_rgb * xyz));
+}

@@ -1,0 +1,171 @@
+"""The environment light of the GL runtime (issue 43; shaders/environment.glsl, viewer/environment_light.py).
+
+Analytic and independent checks first: a far camera with a tiny field of view sees a plane under one view
+direction, so every covered pixel estimates the same integral ∫ A · XYZ · L dωi (physics.md eq. 9) and their mean
+is a Monte Carlo estimate over pixels × samples; numpy integrates the same by dense quadrature over the hemisphere
+(the model by gratnet.modelfile, the map by gratnet.environment). Then the consistency the contract states: a
+small bright disc of environment lights a pixel as a directional light of the same irradiance. A small random
+network keeps the quadrature cheap; the GL context is Mesa llvmpipe on a CPU-only machine.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from gratnet.brdf import a_term
+from gratnet.encoding import EncodingSpec
+from gratnet.environment import Environment, texel_coordinates
+from gratnet.errors import GratNetError
+from gratnet.modelfile import evaluate_keys
+from tests.helpers import random_model
+from viewer.camera import Camera, Light, world_direction
+from viewer.meshes import plane
+from viewer.renderer import xyz_to_linear_srgb_matrix
+from viewer.scene import SceneRenderer
+
+ELEVATION, AZIMUTH = 50.0, -60.0
+FAR = Camera(200.0, AZIMUTH, ELEVATION, fov_deg=0.037)  # ωo the same at every pixel (to 1e-4 rad)
+SIZE = (32, 32)
+NO_LIGHT = Light.directional(0.0, 0.0, 0.0)
+
+
+@pytest.fixture(scope="module")
+def model():
+    return random_model([163, 16, 3], seed=3)
+
+
+@pytest.fixture(scope="module")
+def scene(ctx, model):
+    with SceneRenderer(ctx, model, render_path="forward") as renderer:
+        yield renderer
+
+
+def structured_map(height: int = 64) -> np.ndarray:
+    """Linear sRGB radiance with colour, azimuthal structure and a bright blob, dark within 20° of the horizon
+    and below it (A · XYZ grows as 1/cos θi at grazing light: a dark horizon keeps the integral's variance finite)."""
+    width = 2 * height
+    theta = np.pi * (np.arange(height) + 0.5) / height
+    phi = 2 * np.pi * (np.arange(width) + 0.5) / width
+    t, p = np.meshgrid(theta, phi, indexing="ij")
+    radiance = np.stack([1.0 + 0.5 * np.cos(p), 0.8 + 0.3 * np.sin(2 * p), 0.6 + 0.4 * np.cos(t)], axis=-1)
+    blob = np.exp(-((t - 0.6) ** 2 + np.angle(np.exp(1j * (p - 2.0))) ** 2) / 0.02)
+    radiance = radiance + 20.0 * blob[..., None] * np.array([1.0, 0.9, 0.7])
+    radiance[t > math.radians(70.0)] = 0.0
+    return radiance.astype(np.float32)
+
+
+def hemisphere_integral(model, environment: Environment, wo: np.ndarray, ior: float = 1.5,
+                        steps: int = 600) -> np.ndarray:
+    """∫ A(ωi, ωo) · XYZ(−(ωi + ωo)) ⊙ L(ωi) dωi over the upper hemisphere (plane: tangent frame = world), CIE XYZ,
+    midpoint rule in (θ, φ) with ``steps`` × 2·``steps`` cells; the colour product in linear sRGB."""
+    theta = (np.arange(steps) + 0.5) / steps * (np.pi / 2)
+    phi = (np.arange(2 * steps) + 0.5) / (2 * steps) * (2 * np.pi)
+    t, p = np.meshgrid(theta, phi, indexing="ij")
+    wi = np.stack([np.sin(t) * np.cos(p), np.sin(t) * np.sin(p), np.cos(t)], axis=-1)
+    key = -(wi + wo)
+    xyz = evaluate_keys(model, key[..., 0], key[..., 1], key[..., 2])
+    a = a_term(wi.reshape(-1, 3), np.broadcast_to(wo, (wi.size // 3, 3)), ior).reshape(t.shape)
+    to_rgb = xyz_to_linear_srgb_matrix()
+    rgb = np.einsum("ij,...j->...i", to_rgb, xyz) * environment.radiance(wi.reshape(-1, 3)).reshape(wi.shape)
+    cell = (np.pi / 2 / steps) * (np.pi / steps) * np.sin(t)
+    return np.linalg.inv(to_rgb) @ np.einsum("ijc,ij->c", rgb * a[..., None], cell)
+
+
+def covered_mean(rgba: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Mean and standard error of the exposed XYZ over the pixels covered by every sample."""
+    values = rgba[..., :3][rgba[..., 3] == 1.0].astype(np.float64)
+    assert len(values) > 100
+    return values.mean(axis=0), values.std(axis=0) / math.sqrt(len(values))
+
+
+@pytest.mark.parametrize("sampling", ["mis", "light", "material"])
+def test_environment_matches_quadrature_over_the_hemisphere(scene, model, sampling):
+    environment = Environment("test", structured_map(), rotation_degrees=30.0, scale=1.0, source="test")
+    rgba = scene.render_rgba(plane(), FAR, NO_LIGHT, SIZE, 1.0, 1.5, samples=64, environment=environment, seed=1,
+                             sampling=sampling)
+    mean, error = covered_mean(rgba)
+    expected = hemisphere_integral(model, environment, world_direction(90.0 - ELEVATION, AZIMUTH))
+    assert np.all(np.abs(mean - expected) <= 4.0 * error + 2e-3 * np.abs(expected)), (mean, error, expected)
+    assert np.all(error < 0.05 * np.abs(expected))  # the estimate is informative: a few % per channel
+
+
+@pytest.fixture(scope="module")
+def smooth_scene(ctx):
+    """A random network of low frequencies only (top frequency 2π): A · XYZ is smooth across a small disc."""
+    spec = EncodingSpec(frequencies=2, t_frequencies=1, scale=2.0, t_scale=2.0)
+    with SceneRenderer(ctx, random_model([spec.features, 16, 3], spec=spec, seed=4), render_path="forward") as renderer:
+        yield renderer
+
+
+def test_small_bright_disc_lights_as_a_directional_light(smooth_scene):
+    """A disc of 0.5° radius around (θ, φ) = (35°, 40°) of constant white radiance L: its irradiance on a plane
+    facing it is E = ∫ L dω (from the map itself); the environment render equals the render under a directional
+    light of intensity E from the disc's centre, within the second-order change of A · XYZ across the disc."""
+    scene = smooth_scene
+    height = 1024
+    centre = world_direction(35.0, 40.0)
+    probe = Environment("probe", np.ones((height, 2 * height, 3), np.float32))
+    texels = probe.directions(*texel_coordinates(height, 2 * height))
+    inside = np.degrees(np.arccos(np.clip(texels @ centre, -1.0, 1.0))) < 0.5
+    radiance = np.repeat(np.where(inside, 1000.0, 0.0)[..., None], 3, axis=-1).astype(np.float32)
+    environment = Environment("disc", radiance, 0.0, 1.0, "test")
+    # E = ∫ L dω by quadrature of the map's own (bilinear) radiance around the disc.
+    steps = 400
+    local_t = np.radians(1.0) * (np.arange(steps) + 0.5) / steps
+    local_p = 2 * np.pi * (np.arange(steps) + 0.5) / steps
+    lt, lp = np.meshgrid(local_t, local_p, indexing="ij")
+    axis_x = np.cross([0.0, 0.0, 1.0], centre)
+    axis_x /= np.linalg.norm(axis_x)
+    axis_y = np.cross(centre, axis_x)
+    directions = (np.cos(lt)[..., None] * centre + (np.sin(lt) * np.cos(lp))[..., None] * axis_x
+                  + (np.sin(lt) * np.sin(lp))[..., None] * axis_y)
+    luminance = environment.radiance(directions.reshape(-1, 3)).reshape(*lt.shape, 3)[..., 1]
+    irradiance = float(np.sum(luminance * np.sin(lt)) * (np.radians(1.0) / steps) * (2 * np.pi / steps))
+    camera = Camera(200.0, -90.0, 60.0, fov_deg=0.037)
+    light = Light("directional", tuple(float(c) for c in centre), irradiance)
+    expected = scene.render_rgba(plane(), camera, light, SIZE, 1.0, 1.5)
+    rgba = scene.render_rgba(plane(), camera, NO_LIGHT, SIZE, 1.0, 1.5, samples=64, environment=environment, seed=2)
+    mean, error = covered_mean(rgba)
+    wanted = expected[..., :3][expected[..., 3] == 1.0].mean(axis=0)
+    assert np.all(np.abs(mean - wanted) <= 4.0 * error + 1e-3 * wanted), (mean, error, wanted)
+    assert np.all(error < 0.01 * wanted)
+
+
+def test_samples_are_passes_of_one_estimator(scene):
+    """N samples rendered at once equal the mean of the same N passes rendered one at a time (progressive
+    accumulation), and a seed gives the same picture every time."""
+    environment = Environment("test", structured_map(32), 0.0, 1.0, "test")
+    together = scene.render_rgba(plane(), FAR, NO_LIGHT, SIZE, 1.0, 1.5, samples=4, environment=environment, seed=5)
+    apart = [scene.render_rgba(plane(), FAR, NO_LIGHT, SIZE, 1.0, 1.5, first_sample=k, environment=environment,
+                               seed=5) for k in range(4)]
+    np.testing.assert_allclose(together, np.mean(apart, axis=0), rtol=1e-5, atol=1e-6)
+    again = scene.render_rgba(plane(), FAR, NO_LIGHT, SIZE, 1.0, 1.5, samples=4, environment=environment, seed=5)
+    np.testing.assert_array_equal(together, again)
+    other = scene.render_rgba(plane(), FAR, NO_LIGHT, SIZE, 1.0, 1.5, samples=4, environment=environment, seed=6)
+    assert not np.array_equal(together, other)
+
+
+def test_delta_light_takes_its_turn(scene, model):
+    """With a directional light of intensity > 0 beside the environment, every three passes hold one of each
+    strategy per pixel: the mean is the light's render plus the environment's integral."""
+    environment = Environment("test", structured_map(), 0.0, 1.0, "test")
+    light = Light.directional(30.0, 120.0, 2.0)
+    alone = scene.render_rgba(plane(), FAR, light, SIZE, 1.0, 1.5)
+    both = scene.render_rgba(plane(), FAR, light, SIZE, 1.0, 1.5, samples=48, environment=environment, seed=3)
+    mean, error = covered_mean(both)
+    expected = hemisphere_integral(model, environment, world_direction(90.0 - ELEVATION, AZIMUTH))
+    expected = expected + alone[..., :3][alone[..., 3] == 1.0].mean(axis=0)
+    assert np.all(np.abs(mean - expected) <= 4.0 * error + 2e-3 * np.abs(expected)), (mean, error, expected)
+
+
+def test_environment_refuses_the_deferred_path_and_bad_seeds(scene):
+    environment = Environment("test", structured_map(16), 0.0, 1.0, "test")
+    with pytest.raises(GratNetError, match="forward path"):
+        scene.render_rgba(plane(), FAR, NO_LIGHT, SIZE, environment=environment, render_path="deferred")
+    with pytest.raises(GratNetError, match="seed"):
+        scene.render_rgba(plane(), FAR, NO_LIGHT, SIZE, environment=environment, seed=-1)
+    with pytest.raises(GratNetError, match="environment sampling"):
+        scene.render_rgba(plane(), FAR, NO_LIGHT, SIZE, environment=environment, sampling="uniform")

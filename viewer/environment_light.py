@@ -1,0 +1,137 @@
+"""An environment light on the GPU (issue 43): the map, its luminance distribution and the material's importance
+table as textures, and the uniforms of shaders/environment.glsl.
+
+:class:`EnvironmentLighting` holds one :class:`gratnet.environment.Environment` and one
+:class:`gratnet.importance.MaterialTable` on a context. The forward path (viewer.forward) compiles its surface
+program with ``ENVIRONMENT`` when a render has an environment, calls :meth:`EnvironmentLighting.set_uniforms` once
+and :meth:`EnvironmentLighting.set_pass` before each pass (sample) k, and binds :meth:`EnvironmentLighting.textures`
+with the material's. The estimator (one sample per pixel and pass, MIS between the two distributions, the delta
+light in turn) is shaders/environment.glsl's; docs/physics.md "Environment light" is its contract.
+
+Rendering only: no glfw, no imgui, no torch.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+
+import moderngl
+import numpy as np
+
+from gratnet.codes import ENVIRONMENT_SAMPLING
+from gratnet.environment import Environment
+from gratnet.errors import GratNetError
+from gratnet.importance import DEFENSIVE_SHARE, MaterialTable
+from gratnet.sampling2d import PiecewiseConstant2D
+from viewer.renderer import xyz_to_linear_srgb_matrix
+from viewer.shading import MaterialTexture, set_uniform
+
+__all__ = ["ENVIRONMENT_DEFINES", "ENVIRONMENT_UNITS", "EnvironmentLighting", "EnvironmentPass", "MAX_SEED",
+           "check_seed"]
+
+#: The define that compiles shaders/environment.glsl into the surface program.
+ENVIRONMENT_DEFINES = {"ENVIRONMENT": 1}
+#: Texture units of the map, its distribution and the material's table: units no other program of a mesh render
+#: takes (0 weights, 1–2 passes' inputs, 3 skip bound, 6 reference volume, 8… grid levels).
+ENVIRONMENT_UNITS = {"u_environment": 4, "u_environment_table": 5, "u_material_table": 7}
+#: Seeds are 32-bit unsigned integers in the shader.
+MAX_SEED = 2**32 - 1
+
+
+def check_seed(seed: object) -> int:
+    """``seed`` as an int in 0 … :data:`MAX_SEED`, else GratNetError."""
+    if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or not 0 <= seed <= MAX_SEED:
+        raise GratNetError(f"the seed must be an integer in 0…{MAX_SEED}, got {seed!r}")
+    return int(seed)
+
+
+def _table_texture(ctx: moderngl.Context, distribution: PiecewiseConstant2D) -> moderngl.Texture:
+    packed = np.ascontiguousarray(distribution.packed())
+    texture = ctx.texture((packed.shape[1], packed.shape[0]), 1, packed.tobytes(), dtype="f4")
+    texture.filter = moderngl.NEAREST, moderngl.NEAREST
+    return texture
+
+
+class EnvironmentLighting:
+    """An environment and a material's importance table on ``ctx`` (see the module docstring); release when done.
+
+    Args:
+        ctx: the render's context.
+        environment: the map (its rotation and scale applied here as in gratnet.environment).
+        table: the material's importance table (gratnet.importance), built for this material.
+    """
+
+    def __init__(self, ctx: moderngl.Context, environment: Environment, table: MaterialTable) -> None:
+        self.environment = environment
+        self.table = table
+        radiance = np.ascontiguousarray(environment.radiance_map * np.float32(environment.scale), dtype=np.float32)
+        distribution = environment.distribution()
+        rows, columns = distribution.shape
+        self.cells = columns, rows  # (W, H − 1): cells between the map's rows (gratnet.environment)
+        height, width = radiance.shape[:2]
+        self._textures: list[moderngl.Texture] = []
+        try:
+            map_texture = ctx.texture((width, height), 3, radiance.tobytes(), dtype="f4")
+            map_texture.filter = moderngl.NEAREST, moderngl.NEAREST  # texelFetch: bilinear by hand, as Mitsuba
+            self._textures.append(map_texture)
+            self._textures.append(_table_texture(ctx, distribution))
+            self._textures.append(_table_texture(ctx, table.distribution))
+        except BaseException:
+            self.release()
+            raise
+
+    def textures(self) -> tuple[tuple[MaterialTexture, int], ...]:
+        """``(texture, unit)`` pairs to bind before a draw."""
+        units = list(ENVIRONMENT_UNITS.values())
+        return tuple(zip(self._textures, units, strict=True))
+
+    def set_uniforms(self, program: moderngl.Program, delta_light: bool, seed: int, sampling: str = "mis") -> None:
+        """The uniforms of shaders/environment.glsl but the pass index: ``delta_light``: the light of lights.glsl
+        takes its turn too; ``sampling``: :data:`gratnet.codes.ENVIRONMENT_SAMPLING`."""
+        set_uniform(program, ENVIRONMENT_SAMPLING.uniform_name, ENVIRONMENT_SAMPLING.code(sampling))
+        set_uniform(program, "u_delta_light", bool(delta_light))
+        for name, unit in ENVIRONMENT_UNITS.items():
+            set_uniform(program, name, unit)
+        rows, columns = self.table.distribution.shape
+        angle = math.radians(self.environment.rotation_degrees)
+        to_rgb = xyz_to_linear_srgb_matrix()
+        set_uniform(program, "u_environment_cells", self.cells)
+        set_uniform(program, "u_material_cells", (columns, rows))
+        set_uniform(program, "u_environment_rotation", (math.cos(angle), math.sin(angle)))
+        set_uniform(program, "u_material_key_range", (float(self.table.key_min), float(self.table.key_max)))
+        set_uniform(program, "u_defensive_share", float(DEFENSIVE_SHARE))
+        set_uniform(program, "u_seed", check_seed(seed))
+        # GLSL mat3 uniforms are column-major: the transpose of the row-major numpy matrix.
+        set_uniform(program, "u_xyz_to_rgb", np.ascontiguousarray(to_rgb.T, dtype=np.float32))
+        set_uniform(program, "u_rgb_to_xyz", np.ascontiguousarray(np.linalg.inv(to_rgb).T, dtype=np.float32))
+
+    @staticmethod
+    def set_pass(program: moderngl.Program, index: int) -> None:
+        """The pass (sample) index k of the next draw."""
+        set_uniform(program, "u_sample_index", int(index))
+
+    def bind(self) -> None:
+        """Bind the textures to their units."""
+        for texture, unit in self.textures():
+            texture.use(location=unit)
+
+    def release(self) -> None:
+        for texture in self._textures:
+            texture.release()
+        self._textures.clear()
+
+
+@dataclasses.dataclass(frozen=True)
+class EnvironmentPass:
+    """What a forward render needs of an environment: the textures, whether the delta light takes its turn, the seed
+    of the random numbers and the sampling (:data:`gratnet.codes.ENVIRONMENT_SAMPLING`)."""
+
+    lighting: EnvironmentLighting
+    delta_light: bool
+    seed: int = 0
+    sampling: str = "mis"
+
+    def __post_init__(self) -> None:
+        check_seed(self.seed)
+        ENVIRONMENT_SAMPLING.code(self.sampling)  # a one-line error for another name
