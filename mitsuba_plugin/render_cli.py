@@ -104,11 +104,6 @@ def _resolve_config(arguments: argparse.Namespace) -> MitsubaRenderConfig:
     config = dataclasses.replace(from_arguments(MitsubaRenderConfig, arguments), **scene_fields(arguments))
     check_scene(config)
     resolve_point(config)  # the material has the point asked for (gratnet render's rule)
-    if not (math.isfinite(config.environment_scale) and 0.0 <= config.environment_scale < 3e38):
-        raise GratNetError(f"--environment-scale must be a finite number ≥ 0, got {config.environment_scale!r}")
-    if not math.isfinite(config.environment_rotation):
-        raise GratNetError(f"--environment-rotation must be a finite number of degrees, got "
-                           f"{config.environment_rotation!r}")
     check_lighting(config)
     if not 1 <= config.spp <= MAX_SPP:
         raise GratNetError(f"--spp must be an integer in 1 … {MAX_SPP}, got {config.spp}")

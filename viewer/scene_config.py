@@ -176,6 +176,11 @@ def check_lighting(config: LightingConfig) -> None:
         raise GratNetError(f"--light-intensity must be a finite number ≥ 0, got {config.light_intensity!r}")
     if isinstance(config.seed, bool) or not 0 <= config.seed < 2**32:
         raise GratNetError(f"--seed must be an integer in 0 … {2**32 - 1}, got {config.seed!r}")
+    if not (math.isfinite(config.environment_scale) and 0.0 <= config.environment_scale < 3e38):
+        raise GratNetError(f"--environment-scale must be a finite number ≥ 0, got {config.environment_scale!r}")
+    if not math.isfinite(config.environment_rotation):
+        raise GratNetError(f"--environment-rotation must be a finite number of degrees, got "
+                           f"{config.environment_rotation!r}")
     environment_of(config)
 
 

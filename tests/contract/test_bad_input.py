@@ -578,6 +578,26 @@ NUMBERS: dict[str, tuple[list[str], str]] = {
     "mitsuba-render environment scale negative": ([*MITSUBA, "--environment-scale", "-1"], "--environment-scale"),
     "mitsuba-render environment negative": ([*MITSUBA, "--environment", "-1"], "--environment"),
     "mitsuba-render lobe 0": ([*MITSUBA, "--lobe-degrees", "0"], "--lobe-degrees"),
+    "mitsuba-render seed negative": ([*MITSUBA, "--seed", "-1"], "--seed"),
+    "mitsuba-render light intensity negative": ([*MITSUBA, "--light-intensity", "-1"], "--light-intensity"),
+    # gratnet render's environment light (issue 43): the same flags and checks as mitsuba-render's
+    "render environment unknown": ([*RENDER, "--environment", "cloudy"], "--environment"),
+    "render environment negative": ([*RENDER, "--environment", "-1"], "--environment"),
+    "render environment nan": ([*RENDER, "--environment", "nan,1,1"], "--environment"),
+    "render environment missing file": ([*RENDER, "--environment", "missing.exr"], "missing.exr"),
+    "render environment scale negative": ([*RENDER, "--environment", "sky", "--environment-scale", "-1"],
+                                          "--environment-scale"),
+    "render environment rotation inf": ([*RENDER, "--environment", "sky", "--environment-rotation", "inf"],
+                                        "--environment-rotation"),
+    "render environment with slice": ([*RENDER, "--environment", "sky", "--slice"], "--slice"),
+    "render environment deferred": ([*RENDER, "--environment", "sky", "--render-path", "deferred"],
+                                    "forward path"),
+    "render environment skip dark": ([*RENDER, "--environment", "studio", "--skip-dark"], "--skip-dark"),
+    "render environment spp 0": ([*RENDER, "--environment", "studio", "--spp", "0"], "--spp"),
+    "render seed negative": ([*RENDER, "--environment", "studio", "--seed", "-1"], "--seed"),
+    "render light intensity negative": ([*RENDER, "--light-intensity", "-1"], "--light-intensity"),
+    "render environment sampling unknown": ([*RENDER, "--environment", "sky", "--environment-sampling", "uniform"],
+                                            "--environment-sampling"),
 }
 
 

@@ -56,10 +56,12 @@ declare -A candidates=(
     # g8-L8 with the two lines (the CD's brightest orders are a narrow stripe along v*: g8-L8-h44's error sits there).
     [ln8-L8-h38]="--hidden 38,24,12 --grid-levels 3 --grid-resolution 251 --grid-t-resolution 5 --grid-features 8 --frequencies 8 --t-frequencies 2 --grid-lines 1001"
     [ln8-L4-h48]="--hidden 48,32,16 --grid-levels 3 --grid-resolution 251 --grid-t-resolution 5 --grid-features 8 --frequencies 4 --t-frequencies 2 --grid-lines 1001"
+    # More features per grid node at the file limit (10 × 3 levels, ~7.8 MB), the funnel narrowed to stay under 5,940 MACs.
+    [g10-L8-h40]="--hidden 40,24,12 --grid-levels 3 --grid-resolution 251 --grid-t-resolution 5 --grid-features 10 --frequencies 8 --t-frequencies 2"
 )
 order=(base g4-b12-h48 g8-b12-h40 ln4-L4-h56 g4-L4-h56 ln4-b12-h48 g4-L19-h28 g4-L12-h40 g8-L8-h44 ln4-L8-h40 g4-L19-h24 ln4-L2-h48
        ln8-L4-h48 g4-b14-h32 g8-L4-h56 g4x4-501-L4-h56 g8-L2-h40 p4-L8-h44 p4a-L8-h44 g8-L8-h44-vis
-       g8r351t3-L8-h44 g8-L8-h52 ln8-L8-h38 g8t6-L8-h44)
+       g8r351t3-L8-h44 g8-L8-h52 ln8-L8-h38 g8t6-L8-h44 g10-L8-h40)
 names=("$@")
 [ ${#names[@]} -gt 0 ] || names=("${order[@]}")
 for name in "${names[@]}"; do
