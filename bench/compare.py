@@ -11,6 +11,11 @@ Views (:func:`views`): for each mesh, the default view ``gratnet render`` takes 
 exposure of viewer.defaults) and two more that no default aims: the light turned 90° in azimuth about the normal,
 and the camera 60° further round and 25° lower (light kept). Every view keeps the default's exposure.
 
+Under ``--environment`` (``gratnet render``'s flags: "error where users look", under real light) both renders are
+lit by it (the light off unless ``--light-intensity``), the light-turned view turns the environment by the same
+90°, and each view's exposure comes from the reference's picture (gratnet.showcase.suggest_exposure); ``--spp`` is
+then also the number of light samples, the same passes and seed for both renders.
+
 ``--quality fast|accurate`` chooses which of a shipped material's points is scored (gratnet.quality; default: the
 accurate one); the views are the material's either way (worked out from its accurate point), so the two points are
 scored on the same scenes. compare.config.json records the point (``compare.quality``) and its ``model_file``.
@@ -35,7 +40,7 @@ from gratnet.config import add_arguments, add_quiet_flag, config_field, from_arg
 from gratnet.errors import GratNetError
 from gratnet.quality import QUALITIES, QUALITY_HELP
 from viewer.defaults import SceneDefaults
-from viewer.scene_config import quality_help
+from viewer.scene_config import MAX_SAMPLES, LightingConfig, check_lighting, lighting_help, quality_help
 
 __all__ = ["CompareConfig", "View", "register", "run", "views"]
 
@@ -47,15 +52,16 @@ _MIN_ELEVATION_DEGREES = 10.0
 
 
 @dataclasses.dataclass
-class CompareConfig:
-    """Network against reference renders on meshes."""
+class CompareConfig(LightingConfig):
+    """Network against reference renders on meshes (under the views' directional light, or an environment)."""
 
     reference: str = config_field("", "the material's ground-truth volume (gratnet groundtruth's EXR; the "
                                   "material's own surface and σs, checked)")
     meshes: str = config_field("cd,sphere,plane", "meshes, comma-separated: cd, sphere, plane or .obj files")
     width: int = config_field(384, "image width, pixels")
     height: int = config_field(384, "image height, pixels")
-    spp: int = config_field(4, "samples per pixel of both renders (anti-aliasing, 1 … 1024)")
+    spp: int = config_field(4, f"samples per pixel of both renders (anti-aliasing and, under --environment, light "
+                            f"samples; 1 … {MAX_SAMPLES})")
     reference_precision: str = config_field("float16", "storage of the reference texture: float16 or float32",
                                             choices=("float16", "float32"))
     weights_path: str = config_field("auto", "where the network's shader reads its weights: texture, baked or auto "
@@ -88,6 +94,14 @@ def views(material: str, mesh: str) -> list[View]:
     return [base, turned, camera]
 
 
+def _view_environment(environment: Any, view: View) -> Any:
+    """The environment of ``view`` (None without one): the light-turned view turns the environment instead, by the
+    same angle about +z."""
+    if environment is None or not view.name.startswith("light"):
+        return environment
+    return dataclasses.replace(environment, rotation_degrees=environment.rotation_degrees + LIGHT_TURN_DEGREES)
+
+
 def register(subparsers: argparse._SubParsersAction) -> None:
     """Add the ``compare`` subcommand."""
     parser = subparsers.add_parser(
@@ -102,7 +116,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     parser.add_argument("--out", required=True, metavar="DIR",
                         help="output folder (compare.md, compare.json, compare.png)")
     add_quiet_flag(parser)
-    quality_help(add_arguments(parser, CompareConfig))
+    actions = add_arguments(parser, CompareConfig)
+    lighting_help(actions)
+    quality_help(actions)
     parser.set_defaults(handler=run)
 
 
@@ -116,8 +132,9 @@ def _check(config: CompareConfig, material: str) -> tuple[Path, CompareConfig, l
     if not config.reference:
         raise GratNetError("--reference VOLUME.exr is required: the material's ground-truth volume")
     check_size((config.width, config.height))
-    if isinstance(config.spp, bool) or not 1 <= config.spp <= 1024:
-        raise GratNetError(f"--spp must be an integer in 1 … 1024, got {config.spp}")
+    if isinstance(config.spp, bool) or not 1 <= config.spp <= MAX_SAMPLES:
+        raise GratNetError(f"--spp must be an integer in 1 … {MAX_SAMPLES}, got {config.spp}")
+    check_lighting(config)
     check_precision(config.reference_precision)
     meshes = [part.strip() for part in config.meshes.split(",") if part.strip()]
     if not meshes:
@@ -134,15 +151,17 @@ def run(arguments: argparse.Namespace) -> int:
 
     from gratnet.atomic import check_output_folder
     from gratnet.modelfile import load_model
+    from gratnet.showcase import suggest_exposure
     from trainer.metrics import show_pair
     from viewer.camera import Camera, Light
     from viewer.catalog import build_mesh
     from viewer.context import create_headless_context
     from viewer.scene import SceneRenderer
-    from viewer.scene_config import load_reference
+    from viewer.scene_config import environment_of, load_reference
 
     config = from_arguments(CompareConfig, arguments)
     model_path, config, meshes = _check(config, arguments.material)
+    environment = environment_of(config)
     out = check_output_folder(arguments.out)
     volume = load_reference(config.reference, config.reference_precision, arguments.material)
     scenes = [view for mesh in meshes for view in views(arguments.material, mesh)]
@@ -157,9 +176,18 @@ def run(arguments: argparse.Namespace) -> int:
             for view in tqdm(scenes, desc="compare", unit="view", disable=arguments.quiet, file=sys.stderr):
                 mesh = build_mesh(view.mesh)
                 camera = Camera(view.camera_distance, view.camera_azimuth_degrees, view.camera_elevation_degrees)
-                light = Light.directional(view.light_theta_degrees, view.light_phi_degrees)
-                truth = reference.render_rgba(mesh, camera, light, size, view.exposure, 1.5, samples=config.spp)
-                guess = network.render_rgba(mesh, camera, light, size, view.exposure, 1.5, samples=config.spp)
+                light = Light.directional(view.light_theta_degrees, view.light_phi_degrees,
+                                          config.effective_light_intensity)
+                lit = _view_environment(environment, view)
+                exposure = 1.0 if lit is not None else view.exposure  # under an environment: from the picture
+                truth, guess = (scene.render_rgba(mesh, camera, light, size, exposure, 1.5, samples=config.spp,
+                                                  environment=lit, seed=config.seed)
+                                for scene in (reference, network))
+                if lit is not None:
+                    exposure = suggest_exposure(truth[..., :3], 1.0) or 1.0
+                    truth, guess = (np.concatenate([image[..., :3] * exposure, image[..., 3:]], axis=-1)
+                                    for image in (truth, guess))
+                    view = dataclasses.replace(view, exposure=exposure)
                 shown = show_pair(truth[..., :3], guess[..., :3])
                 covered = truth[..., 3] > 0.0
                 rows.append({**dataclasses.asdict(view),

@@ -248,6 +248,24 @@ def test_compare_scores_the_network_against_the_reference(tmp_path):
     assert "| **mean** |" in (out / "compare.md").read_text()
 
 
+def test_compare_under_an_environment(tmp_path):
+    """``gratnet compare --environment``: both renders lit by it (the volume's own importance table for the
+    reference), the light-turned view turns the environment, exposures from the reference's picture."""
+    import json
+
+    volume = cd_volume(tmp_path / "cd.exr")
+    out = tmp_path / "compare"
+    assert main(["compare", "cd", "--reference", str(volume), "--meshes", "plane", "--width", "20", "--height", "16",
+                 "--spp", "4", "--environment", "studio", "--weights-path", "texture", "--quiet",
+                 "--out", str(out)]) == 0
+    document = json.loads((out / "compare.json").read_text())
+    rows = document["views"]
+    assert len(rows) == 3 and all(0.0 < row["flip_covered"] <= 1.0 for row in rows)
+    assert len({row["exposure"] for row in rows}) > 1  # each from its own picture, not the default's
+    config = json.loads((out / "compare.config.json").read_text())
+    assert config["compare"]["environment"] == "studio"
+
+
 def test_compare_refuses_a_foreign_volume_before_rendering(tmp_path, capsys):
     volume = cd_volume(tmp_path / "cd.exr", sigma_s_um=3.0)
     assert main(["compare", "cd", "--reference", str(volume), "--out", str(tmp_path / "c")]) == 2
