@@ -17,6 +17,8 @@ from gratnet.precision import OWN_KEYS, UNIT_ROUNDOFF, DriverErrors, assert_with
 from viewer.state import ViewerState
 
 if TYPE_CHECKING:
+    import pytest
+
     from viewer.camera import Camera, Light
 
 #: The repository's root (tests/ is one below it).
@@ -283,3 +285,31 @@ def two_point_material(assets: Path, name: str = "duo", fast: bool = True) -> di
     if fast:
         points["fast"] = dataclasses.replace(random_model([SPEC.features, 8, 3], seed=2), metadata=metadata)
     return write_material(assets, name, points)
+
+
+# --------------------------------------------------------------------------------------------------
+# Bad input (tests/contract/test_bad_input*.py)
+
+
+def run_cli(argv: list[str], capsys: pytest.CaptureFixture[str]) -> tuple[int, str]:
+    """``gratnet ARGV``'s exit status and stderr."""
+    from gratnet.cli import main
+
+    code = main(argv)
+    return code, capsys.readouterr().err
+
+
+def assert_one_clear_error(code: int, stderr: str, command: str, *needles: str) -> None:
+    lines = stderr.strip().splitlines()
+    assert code == 2, (code, stderr)
+    assert len(lines) == 1, stderr
+    assert lines[0].startswith(f"gratnet {command}: error: "), stderr
+    assert "Traceback" not in stderr
+    for needle in needles:
+        assert needle in lines[0], stderr
+
+
+def assert_nothing_written(folder: Path, before: set[str]) -> None:
+    """No new file in ``folder`` (atomic writers leave no ``.NAME.*.tmp*`` behind either)."""
+    after = {path.name for path in folder.iterdir()} if folder.is_dir() else set()
+    assert after <= before, sorted(after - before)

@@ -25,7 +25,7 @@ from gratnet.encoding import EncodingSpec, RangeSpec
 from gratnet.modelfile import ModelFile, save_model
 from gratnet.quality import FAST
 from gratnet.volume import Volume, write_volume
-from tests.helpers import ASSETS, flip_in_member
+from tests.helpers import ASSETS, assert_nothing_written, assert_one_clear_error, flip_in_member, run_cli
 from viewer.catalog import material_points, shipped_materials
 
 # Imported here, unpatched: these modules bind viewer.catalog.resolve_material by name when first imported,
@@ -34,27 +34,6 @@ importlib.import_module("viewer.scene_supply")
 importlib.import_module("viewer.app")
 
 TINY_FIELD = ["--dx-um", "0.1", "--height-scale-um", "0.5"]
-
-
-def run_cli(argv: list[str], capsys: pytest.CaptureFixture[str]) -> tuple[int, str]:
-    code = main(argv)
-    return code, capsys.readouterr().err
-
-
-def assert_one_clear_error(code: int, stderr: str, command: str, *needles: str) -> None:
-    lines = stderr.strip().splitlines()
-    assert code == 2, (code, stderr)
-    assert len(lines) == 1, stderr
-    assert lines[0].startswith(f"gratnet {command}: error: "), stderr
-    assert "Traceback" not in stderr
-    for needle in needles:
-        assert needle in lines[0], stderr
-
-
-def assert_nothing_written(folder: Path, before: set[str]) -> None:
-    """No new file in ``folder`` (atomic writers leave no ``.NAME.*.tmp*`` behind either)."""
-    after = {path.name for path in folder.iterdir()} if folder.is_dir() else set()
-    assert after <= before, sorted(after - before)
 
 
 # --------------------------------------------------------------------------------------------------
@@ -578,26 +557,6 @@ NUMBERS: dict[str, tuple[list[str], str]] = {
     "mitsuba-render environment scale negative": ([*MITSUBA, "--environment-scale", "-1"], "--environment-scale"),
     "mitsuba-render environment negative": ([*MITSUBA, "--environment", "-1"], "--environment"),
     "mitsuba-render lobe 0": ([*MITSUBA, "--lobe-degrees", "0"], "--lobe-degrees"),
-    "mitsuba-render seed negative": ([*MITSUBA, "--seed", "-1"], "--seed"),
-    "mitsuba-render light intensity negative": ([*MITSUBA, "--light-intensity", "-1"], "--light-intensity"),
-    # gratnet render's environment light (issue 43): the same flags and checks as mitsuba-render's
-    "render environment unknown": ([*RENDER, "--environment", "cloudy"], "--environment"),
-    "render environment negative": ([*RENDER, "--environment", "-1"], "--environment"),
-    "render environment nan": ([*RENDER, "--environment", "nan,1,1"], "--environment"),
-    "render environment missing file": ([*RENDER, "--environment", "missing.exr"], "missing.exr"),
-    "render environment scale negative": ([*RENDER, "--environment", "sky", "--environment-scale", "-1"],
-                                          "--environment-scale"),
-    "render environment rotation inf": ([*RENDER, "--environment", "sky", "--environment-rotation", "inf"],
-                                        "--environment-rotation"),
-    "render environment with slice": ([*RENDER, "--environment", "sky", "--slice"], "--slice"),
-    "render environment deferred": ([*RENDER, "--environment", "sky", "--render-path", "deferred"],
-                                    "forward path"),
-    "render environment skip dark": ([*RENDER, "--environment", "studio", "--skip-dark"], "--skip-dark"),
-    "render environment spp 0": ([*RENDER, "--environment", "studio", "--spp", "0"], "--spp"),
-    "render seed negative": ([*RENDER, "--environment", "studio", "--seed", "-1"], "--seed"),
-    "render light intensity negative": ([*RENDER, "--light-intensity", "-1"], "--light-intensity"),
-    "render environment sampling unknown": ([*RENDER, "--environment", "sky", "--environment-sampling", "uniform"],
-                                            "--environment-sampling"),
 }
 
 
