@@ -316,3 +316,10 @@ def write_bytes_atomic(target: str | os.PathLike[str], data: bytes) -> None:
 def write_text_atomic(target: str | os.PathLike[str], text: str) -> None:
     """Write UTF-8 ``text`` to ``target`` atomically."""
     write_bytes_atomic(target, text.encode("utf-8"))
+
+
+def cache_folder(*parts: str) -> Path:
+    """GratNet's folder for caches that can be rebuilt (``$XDG_CACHE_HOME/gratnet``, else ``~/.cache/gratnet``),
+    joined with ``parts``; nothing is created."""
+    base = os.environ.get("XDG_CACHE_HOME")
+    return (Path(base) if base else Path.home() / ".cache").joinpath("gratnet", *parts)

@@ -43,17 +43,16 @@ import dataclasses
 import hashlib
 import json
 import math
-import os
 import sys
 from collections.abc import Iterable
 from pathlib import Path
 
 import numpy as np
 
-from gratnet.atomic import atomic_path
+from gratnet.atomic import atomic_path, cache_folder
 from gratnet.encoding import range_inverse
 from gratnet.errors import GratNetError
-from gratnet.modelfile import ModelFile, load_model, mlp_forward, network_inputs
+from gratnet.modelfile import ModelFile, content_digest, load_model, mlp_forward, network_inputs
 from gratnet.network import activate_hidden, activate_output
 
 __all__ = [
@@ -296,27 +295,16 @@ def _dilate(values: np.ndarray, radius: int) -> np.ndarray:
 
 
 def _model_digest(model: ModelFile, params: BoundParameters) -> str:
-    digest = hashlib.sha256()
-    for array in (*model.weights, *model.biases, *model.grids):
-        digest.update(np.ascontiguousarray(array, dtype=np.float32).tobytes())
-    contract = {"layer_sizes": list(model.layer_sizes), "activation": model.activation,
-                "output_activation": model.output_activation, "scheme": model.scheme,
-                "encoding": dataclasses.asdict(model.encoding), "range": dataclasses.asdict(model.range),
-                "parameters": dataclasses.asdict(params), "format": _FORMAT, "version": _FORMAT_VERSION}
+    digest = hashlib.sha256(content_digest(model).encode("ascii"))
+    contract = {"parameters": dataclasses.asdict(params), "format": _FORMAT, "version": _FORMAT_VERSION}
     digest.update(json.dumps(contract, sort_keys=True).encode("utf-8"))
     return digest.hexdigest()[:32]
-
-
-def _cache_folder() -> Path:
-    base = os.environ.get("XDG_CACHE_HOME")
-    root = Path(base) if base else Path.home() / ".cache"
-    return root / "gratnet" / "bounds"
 
 
 def bounds_cache_path(model: ModelFile, parameters: BoundParameters | None = None) -> Path:
     """Where :func:`output_bounds` keeps ``model``'s bound for ``parameters`` (may not exist yet)."""
     params = (parameters or BoundParameters()).resolved(model)
-    return _cache_folder() / f"{_model_digest(model, params)}.npz"
+    return cache_folder("bounds") / f"{_model_digest(model, params)}.npz"
 
 
 def _read_cached(path: Path, params: BoundParameters) -> OutputBounds | None:

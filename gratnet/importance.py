@@ -81,7 +81,6 @@ import dataclasses
 import hashlib
 import json
 import math
-import os
 import sys
 import threading
 import time
@@ -90,10 +89,10 @@ from pathlib import Path
 
 import numpy as np
 
-from gratnet.atomic import atomic_path
+from gratnet.atomic import atomic_path, cache_folder
 from gratnet.encoding import network_coordinates, range_inverse
 from gratnet.errors import GratNetError
-from gratnet.modelfile import ModelFile, network_inputs, validated
+from gratnet.modelfile import ModelFile, content_digest, network_inputs, validated
 from gratnet.network import activate_hidden, activate_output
 from gratnet.sampling2d import PiecewiseConstant2D
 
@@ -391,16 +390,8 @@ def volume_luminance(xyz: np.ndarray, scheme: str) -> Luminance:
 
 
 def model_digest(model: ModelFile) -> str:
-    """Hash of a model's content: its weights, biases and grids (as float32 bytes) and its contract."""
-    digest = hashlib.sha256()
-    for array in (*model.weights, *model.biases, *model.grids):
-        digest.update(np.ascontiguousarray(array, dtype=np.float32).tobytes())
-    contract = {"layer_sizes": list(model.layer_sizes), "activation": model.activation,
-                "output_activation": model.output_activation, "scheme": model.scheme,
-                "encoding": dataclasses.asdict(model.encoding), "range": dataclasses.asdict(model.range),
-                "grid_interpolation": model.grid_interpolation}
-    digest.update(json.dumps(contract, sort_keys=True).encode("utf-8"))
-    return digest.hexdigest()
+    """Hash of a model's content (gratnet.modelfile.content_digest)."""
+    return content_digest(model)
 
 
 def _volume_digest(xyz: np.ndarray, scheme: str) -> str:
@@ -411,8 +402,7 @@ def _volume_digest(xyz: np.ndarray, scheme: str) -> str:
 
 def importance_cache_folder() -> Path:
     """``$XDG_CACHE_HOME/gratnet/importance`` (else ``~/.cache/gratnet/importance``): the on-disk tables."""
-    base = os.environ.get("XDG_CACHE_HOME")
-    return (Path(base) if base else Path.home() / ".cache") / "gratnet" / "importance"
+    return cache_folder("importance")
 
 
 _MEMORY: dict[str, MaterialTable] = {}

@@ -609,6 +609,23 @@ def _grid_header(header: dict[str, Any], where: str) -> list[list[int]]:
     return [[int(n) for n in shape] for shape in levels]
 
 
+def content_digest(model: ModelFile) -> str:
+    """SHA-256 (hex) of what a model computes: its weights, biases and grids (as float32 bytes) and its contract
+    (layer sizes, activations, scheme, encoding, range, grid interpolation): the key of the caches built from a
+    model (gratnet.bounds, gratnet.importance)."""
+    import hashlib
+
+    digest = hashlib.sha256()
+    for array in (*model.weights, *model.biases, *model.grids):
+        digest.update(np.ascontiguousarray(array, dtype=np.float32).tobytes())
+    contract = {"layer_sizes": list(model.layer_sizes), "activation": model.activation,
+                "output_activation": model.output_activation, "scheme": model.scheme,
+                "encoding": dataclasses.asdict(model.encoding), "range": dataclasses.asdict(model.range),
+                "grid_interpolation": model.grid_interpolation}
+    digest.update(json.dumps(contract, sort_keys=True).encode("utf-8"))
+    return digest.hexdigest()
+
+
 def load_model(path: str | os.PathLike[str]) -> ModelFile:
     """Read and fully validate a GratNet model file written by :func:`save_model`.
 

@@ -5,6 +5,7 @@ conftest.py), never from one another: tests/contract/test_architecture.py checks
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from pathlib import Path
 from typing import TYPE_CHECKING
 
@@ -313,3 +314,36 @@ def assert_nothing_written(folder: Path, before: set[str]) -> None:
     """No new file in ``folder`` (atomic writers leave no ``.NAME.*.tmp*`` behind either)."""
     after = {path.name for path in folder.iterdir()} if folder.is_dir() else set()
     assert after <= before, sorted(after - before)
+
+
+# --------------------------------------------------------------------------------------------------
+# Sampling (χ² of directions against their density)
+
+
+def solid_angle_chi2(directions: np.ndarray, density: Callable[[np.ndarray], np.ndarray], count: int,
+                     bins: tuple[int, int], sub: int) -> tuple[float, float]:
+    """A χ² test of sampled unit ``directions`` (the valid ones of ``count`` draws) against ``density`` (sr⁻¹ of
+    ``(N, 3)`` directions) over a (cos θ, φ) histogram of ``bins``; each bin's expectation by the midpoint rule on
+    ``sub`` × ``sub`` points (d(solid angle) = d cos θ · dφ), bins expected to hold fewer than 5 samples pooled, as
+    Mitsuba's ChiSquareTest does. Returns ``(p-value, expected total)``: the density's integral times ``count``."""
+    import math
+
+    from scipy import stats
+
+    bins_cos, bins_phi = bins
+    histogram, _, _ = np.histogram2d(directions[:, 2], np.arctan2(directions[:, 1], directions[:, 0]),
+                                     bins=[bins_cos, bins_phi], range=[[0.0, 1.0], [-math.pi, math.pi]])
+    c = (np.arange(bins_cos * sub) + 0.5) / (bins_cos * sub)
+    p = -math.pi + 2.0 * math.pi * (np.arange(bins_phi * sub) + 0.5) / (bins_phi * sub)
+    cc, pp = np.meshgrid(c, p, indexing="ij")
+    s = np.sqrt(1.0 - cc * cc)
+    grid = np.stack([s * np.cos(pp), s * np.sin(pp), cc], -1).reshape(-1, 3)
+    values = np.asarray(density(grid)).reshape(bins_cos * sub, bins_phi * sub)
+    cell = (1.0 / (bins_cos * sub)) * (2.0 * math.pi / (bins_phi * sub))
+    expected = values.reshape(bins_cos, sub, bins_phi, sub).sum(axis=(1, 3)) * cell * count
+    order = np.argsort(expected.ravel())
+    e, observed = expected.ravel()[order], histogram.ravel()[order]
+    keep = e >= 5.0
+    pooled_e, pooled_h = np.append(e[keep], e[~keep].sum()), np.append(observed[keep], observed[~keep].sum())
+    pooled_e *= pooled_h.sum() / pooled_e.sum()
+    return float(stats.chisquare(pooled_h, pooled_e).pvalue), float(expected.sum())

@@ -65,8 +65,9 @@ _CACHE_ENTRIES = 256  # the remembered views kept (the oldest go first)
 def view_cache_file() -> Path:
     """The remembered exact default views: ``$XDG_CACHE_HOME/gratnet/default_views.json`` (else
     ``~/.cache/gratnet/default_views.json``)."""
-    base = os.environ.get("XDG_CACHE_HOME")
-    return (Path(base) if base else Path.home() / ".cache") / "gratnet" / "default_views.json"
+    from gratnet.atomic import cache_folder
+
+    return cache_folder("default_views.json")
 
 
 def _cache_key(material: str, mesh: str, slice_mode: bool, fov_degrees: float, ior: float | None) -> str | None:

@@ -41,7 +41,6 @@ from __future__ import annotations
 import json
 import logging
 import math
-import os
 import time
 from collections.abc import Callable
 from pathlib import Path
@@ -49,6 +48,7 @@ from pathlib import Path
 import moderngl
 import numpy as np
 
+from gratnet.atomic import cache_folder
 from gratnet.codes import RENDER_PATHS, WeightForm
 from gratnet.display import xyz_to_display_srgb8, xyz_to_linear_srgb
 from gratnet.environment import Environment
@@ -368,8 +368,7 @@ class SceneRenderer:
 def render_path_cache_file() -> Path:
     """The JSON file of measured ``auto`` verdicts: ``$XDG_CACHE_HOME/gratnet/render_path.json`` (else
     ``~/.cache/gratnet/render_path.json``)."""
-    base = os.environ.get("XDG_CACHE_HOME")
-    return (Path(base) if base else Path.home() / ".cache") / "gratnet" / "render_path.json"
+    return cache_folder("render_path.json")
 
 
 def _cache_key(scene: SceneRenderer) -> str:

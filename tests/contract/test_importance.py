@@ -20,7 +20,7 @@ from gratnet.errors import GratNetError
 from gratnet.importance import DEFENSIVE_SHARE, MaterialTable, luminance_table
 from gratnet.modelfile import evaluate_keys
 from gratnet.volume import Volume, volume_axes
-from tests.helpers import random_model
+from tests.helpers import random_model, solid_angle_chi2
 
 #: Synthetic peaks: (u, v, σ, height); the specular one at the origin, two "orders" off it.
 PEAKS = ((0.0, 0.0, 0.05, 1.0), (0.6, 0.0, 0.04, 0.5), (-0.3, 0.8, 0.06, 0.3))
@@ -164,32 +164,14 @@ def test_the_uv_chi2_rejects_a_wrong_cosine_share(table: MaterialTable) -> None:
 def test_samples_match_the_pdf_chi2_in_solid_angle() -> None:
     """A histogram over (cos θ, φ), as tests/runtime/test_mitsuba.py's for the mixture, with wide peaks (so that
     the midpoint rule over each bin is accurate): checks the cos θi of the solid-angle density."""
-    from scipy import stats
-
     wide = luminance_table(lambda u, v, w: peaks_luminance(u, v, w, ((0.0, 0.0, 0.3, 1.0), (0.8, 0.3, 0.25, 0.6))),
                            32, subsamples=1, progress=False)
     wo = view(40.0, 10.0)
     rng = np.random.default_rng(3)
-    count, bins_cos, bins_phi, sub = 300_000, 30, 60, 8
+    count = 300_000
     wi, _, valid = wide.sample(wo, rng.random(count), rng.random(count), rng.random(count))
-    d = wi[valid]
-    histogram, _, _ = np.histogram2d(d[:, 2], np.arctan2(d[:, 1], d[:, 0]), bins=[bins_cos, bins_phi],
-                                     range=[[0.0, 1.0], [-math.pi, math.pi]])
-    c = (np.arange(bins_cos * sub) + 0.5) / (bins_cos * sub)
-    p = -math.pi + 2.0 * math.pi * (np.arange(bins_phi * sub) + 0.5) / (bins_phi * sub)
-    cc, pp = np.meshgrid(c, p, indexing="ij")
-    s = np.sqrt(1.0 - cc * cc)
-    grid = np.stack([s * np.cos(pp), s * np.sin(pp), cc], -1).reshape(-1, 3)
-    density = wide.pdf(wo, grid).reshape(bins_cos * sub, bins_phi * sub)
-    cell = (1.0 / (bins_cos * sub)) * (2.0 * math.pi / (bins_phi * sub))
-    expected = density.reshape(bins_cos, sub, bins_phi, sub).sum(axis=(1, 3)) * cell * count
-    assert abs(expected.sum() - valid.sum()) < 5.0 * math.sqrt(count) + 2e-3 * count
-    order = np.argsort(expected.ravel())
-    e, h = expected.ravel()[order], histogram.ravel()[order]
-    keep = e >= 5.0
-    pooled_e, pooled_h = np.append(e[keep], e[~keep].sum()), np.append(h[keep], h[~keep].sum())
-    pooled_e *= pooled_h.sum() / pooled_e.sum()
-    p_value = float(stats.chisquare(pooled_h, pooled_e).pvalue)
+    p_value, expected = solid_angle_chi2(wi[valid], lambda grid: wide.pdf(wo, grid), count, (30, 60), 8)
+    assert abs(expected - valid.sum()) < 5.0 * math.sqrt(count) + 2e-3 * count
     print(f"importance table: χ² p-value in solid angle {p_value:.3f}")
     assert p_value > 0.001
 

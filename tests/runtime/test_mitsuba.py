@@ -27,6 +27,7 @@ from gratnet.brdf import a_term  # noqa: E402
 from gratnet.modelfile import evaluate_keys, load_model  # noqa: E402
 from mitsuba_plugin import shading  # noqa: E402
 from mitsuba_plugin.runtime import llvm_usable, set_variant  # noqa: E402
+from tests.helpers import solid_angle_chi2  # noqa: E402
 from viewer.catalog import ASSETS  # noqa: E402
 
 MATERIAL = ASSETS / "cd" / "model.npz"
@@ -181,35 +182,19 @@ def _numpy_chi2_p_value(theta: float, probability: float, lobe: float, pdf_lobe:
     """scipy χ² p-value of a (cos θ, φ) histogram of :func:`shading.sample_mixture` against the integrated
     :func:`shading.mixture_pdf` (invalid samples land in no bin; the pdf integrates to the valid share).
     ``pdf_lobe``: a different lobe width for the pdf (a deliberately wrong pdf)."""
-    from scipy import stats
-
     rng = np.random.default_rng(4)
-    count, bins_cos, bins_phi, sub = 400_000, 40, 80, 6
+    count = 400_000
     kappa = shading.kappa_for_lobe(lobe)
     pdf_kappa = kappa if pdf_lobe is None else shading.kappa_for_lobe(pdf_lobe)
     view = np.array([[math.sin(math.radians(theta)), 0.0, math.cos(math.radians(theta))]])
     directions, valid = shading.sample_mixture(view, rng.random(count), rng.random(count), rng.random(count),
                                                probability, kappa)
-    d = directions[valid]
-    histogram, _, _ = np.histogram2d(d[:, 2], np.arctan2(d[:, 1], d[:, 0]), bins=[bins_cos, bins_phi],
-                                     range=[[0.0, 1.0], [-math.pi, math.pi]])
-    # Midpoint rule on sub × sub points per bin; d(solid angle) = d cos θ · dφ.
-    c = (np.arange(bins_cos * sub) + 0.5) / (bins_cos * sub)
-    p = -math.pi + 2.0 * math.pi * (np.arange(bins_phi * sub) + 0.5) / (bins_phi * sub)
-    cc, pp = np.meshgrid(c, p, indexing="ij")
-    s = np.sqrt(1.0 - cc * cc)
-    grid = np.stack([s * np.cos(pp), s * np.sin(pp), cc], -1).reshape(-1, 3)
-    density = shading.mixture_pdf(view, grid, probability, pdf_kappa).reshape(bins_cos * sub, bins_phi * sub)
-    cell = (1.0 / (bins_cos * sub)) * (2.0 * math.pi / (bins_phi * sub))
-    expected = density.reshape(bins_cos, sub, bins_phi, sub).sum(axis=(1, 3)) * cell * count
+    p_value, expected = solid_angle_chi2(directions[valid],
+                                         lambda grid: shading.mixture_pdf(view, grid, probability, pdf_kappa),
+                                         count, (40, 80), 6)
     if pdf_lobe is None:
-        assert abs(expected.sum() - valid.sum()) < 4.0 * math.sqrt(count) + 1e-3 * count
-    order = np.argsort(expected.ravel())
-    e, h = expected.ravel()[order], histogram.ravel()[order]
-    keep = e >= 5.0  # pool the cells expected to hold fewer than 5 samples, as Mitsuba's test does
-    pooled_e, pooled_h = np.append(e[keep], e[~keep].sum()), np.append(h[keep], h[~keep].sum())
-    pooled_e *= pooled_h.sum() / pooled_e.sum()
-    return float(stats.chisquare(pooled_h, pooled_e).pvalue)
+        assert abs(expected - valid.sum()) < 4.0 * math.sqrt(count) + 1e-3 * count
+    return p_value
 
 
 @pytest.mark.parametrize(("theta", "probability", "lobe"), [(0.0, 0.5, 10.0), (50.0, 0.5, 6.0), (75.0, 0.7, 10.0),
