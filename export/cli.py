@@ -23,23 +23,19 @@ import argparse
 import dataclasses
 import hashlib
 import json
-import os
 import re
-import shutil
-import tempfile
-from collections.abc import Callable
 from pathlib import Path
 from typing import TYPE_CHECKING
 
 from gratnet import __version__
-from gratnet.atomic import WRITTEN, check_output_folder, host_tag, make_folder
+from gratnet.atomic import atomic_folder, check_output_folder
 from gratnet.errors import GratNetError
 from gratnet.modelfile import ModelFile
 
 if TYPE_CHECKING:
     from export.glsl import GlslModule
 
-__all__ = ["FORMATS", "Material", "check_out_folder", "export_name", "register", "run", "write_folder"]
+__all__ = ["FORMATS", "Material", "check_out_folder", "export_name", "register", "run"]
 
 #: The formats ``--format`` takes, in its help's order.
 FORMATS = ("glsl", "hlsl", "web")
@@ -80,29 +76,6 @@ def _sha256(path: Path) -> str:
         for block in iter(lambda: stream.read(1 << 20), b""):
             digest.update(block)
     return digest.hexdigest()
-
-
-def write_folder(out: Path, write: Callable[[Path], None]) -> None:
-    """Run ``write(folder)`` on a new hidden temporary folder beside ``out``, then rename it onto ``out`` (an empty
-    folder there is replaced); on any failure the temporary folder is removed and ``out`` is left as it was."""
-    parent = make_folder(out.parent if str(out.parent) else Path("."))
-    temporary = Path(tempfile.mkdtemp(prefix=f".{out.name[:100]}.{host_tag()}-{os.getpid()}-", suffix=".tmp",
-                                      dir=parent))
-    try:
-        umask = os.umask(0)
-        os.umask(umask)
-        os.chmod(temporary, 0o777 & ~umask)  # mkdtemp's folder is private (0700); an output folder is not
-        write(temporary)
-        try:
-            os.rename(temporary, out)  # atomic; replaces an empty folder, fails on a non-empty one
-        except OSError as error:
-            raise GratNetError(f"cannot write --out {out}: {error.strerror or error}") from error
-    except OSError as error:  # the disk is full, …
-        raise GratNetError(f"cannot write --out {out}: {error.strerror or error}") from error
-    finally:
-        if temporary.exists():
-            shutil.rmtree(temporary, ignore_errors=True)
-    WRITTEN.append(out)
 
 
 def _load(materials: list[str]) -> list[Material]:
@@ -209,7 +182,7 @@ def run(arguments: argparse.Namespace) -> int:
                                 for material in materials}}
         (folder / "export.config.json").write_text(json.dumps(config, indent=2) + "\n", encoding="utf-8")
 
-    write_folder(out, write)
+    atomic_folder(out, write, flag="--out")
     if not arguments.quiet:
         print(f"gratnet export: wrote {out} ({export_format}: {', '.join(m.name for m in materials)})")
     return 0

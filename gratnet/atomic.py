@@ -27,7 +27,7 @@ import re
 import socket
 import stat
 import tempfile
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from pathlib import Path
 
 from gratnet import interrupts
@@ -323,3 +323,30 @@ def cache_folder(*parts: str) -> Path:
     joined with ``parts``; nothing is created."""
     base = os.environ.get("XDG_CACHE_HOME")
     return (Path(base) if base else Path.home() / ".cache").joinpath("gratnet", *parts)
+
+
+def atomic_folder(out: str | os.PathLike[str], write: Callable[[Path], None], flag: str = "--out") -> None:
+    """Run ``write(folder)`` on a new hidden temporary folder beside ``out``, then rename it onto ``out`` (an empty
+    folder there is replaced): a folder of outputs lands whole or not at all. On any failure the temporary folder is
+    removed and ``out`` is left as it was; an OSError becomes one GratNetError naming ``flag``."""
+    import shutil
+
+    out = Path(out)
+    parent = make_folder(out.parent if str(out.parent) else Path("."))
+    temporary = Path(tempfile.mkdtemp(prefix=f".{out.name[:100]}.{host_tag()}-{os.getpid()}-", suffix=".tmp",
+                                      dir=parent))
+    try:
+        umask = os.umask(0)
+        os.umask(umask)
+        os.chmod(temporary, 0o777 & ~umask)  # mkdtemp's folder is private (0700); an output folder is not
+        write(temporary)
+        try:
+            os.rename(temporary, out)  # atomic; replaces an empty folder, fails on a non-empty one
+        except OSError as error:
+            raise GratNetError(f"cannot write {flag} {out}: {error.strerror or error}") from error
+    except OSError as error:  # the disk is full, …
+        raise GratNetError(f"cannot write {flag} {out}: {error.strerror or error}") from error
+    finally:
+        if temporary.exists():
+            shutil.rmtree(temporary, ignore_errors=True)
+    WRITTEN.append(out)
