@@ -135,13 +135,15 @@ def _check_format(export_format: str) -> None:
         check_tools()
 
 
-def _usage_note(export_format: str, materials: list[Material]) -> str:
+def _usage_note(export_format: str, materials: list[Material], single_file: bool = False) -> str:
     names = ", ".join(material.name for material in materials)
     if export_format == "web":
+        opening = ("Open index.html in a browser with WebGL2 (it holds everything; file:// works)" if single_file else
+                   "Serve this folder over HTTP (`python3 -m http.server`; a page opened from file:// cannot fetch its "
+                   "binaries) and open index.html in a browser with WebGL2")
         return (f"# GratNet export (web)\n\nMaterials: {names}. Written by `gratnet export` (GratNet "
                 f"{__version__}).\n\n"
-                f"Serve this folder over HTTP (`python3 -m http.server`; a page opened from file:// cannot fetch its "
-                f"binaries) and open index.html in a browser with WebGL2. URL parameters (gratnet render's meanings): "
+                f"{opening}. URL parameters (gratnet render's meanings): "
                 f"material, mesh=cd|sphere|plane, slice=1, light=THETA,PHI, camera=DIST,AZIMUTH,ELEVATION, exposure, "
                 f"ior, size=N or W,H, ui=0. Docs: docs/export.md in the GratNet repository.\n")
     vec, kind = ("vec3", "GLSL") if export_format == "glsl" else ("float3", "HLSL (shader model 5.0)")
@@ -160,6 +162,8 @@ def run(arguments: argparse.Namespace) -> int:
     """Check everything, then write every file of the export into a temporary folder renamed onto ``--out``."""
     export_format = arguments.format
     _check_format(export_format)
+    if arguments.single_file and export_format != "web":
+        raise GratNetError(f"--single-file makes one web page; --format {export_format} writes shader modules")
     out = check_out_folder(arguments.out)
     materials = _load(list(arguments.material))
     if export_format == "web":
@@ -172,11 +176,12 @@ def run(arguments: argparse.Namespace) -> int:
         if export_format == "web":
             from export.web import write_web
 
-            entries = write_web([(m.name, m.given, m.model) for m in materials], folder)
+            entries = write_web([(m.name, m.given, m.model) for m in materials], folder, arguments.single_file)
         else:
             entries = _write_shaders(export_format, materials, folder)
-        (folder / "README.md").write_text(_usage_note(export_format, materials), encoding="utf-8")
-        config = {"format": export_format, "gratnet_version": __version__,
+        (folder / "README.md").write_text(_usage_note(export_format, materials, arguments.single_file),
+                                          encoding="utf-8")
+        config = {"format": export_format, "gratnet_version": __version__, "single_file": arguments.single_file,
                   "materials": {material.name: {"model": str(material.path), "model_sha256": _sha256(material.path),
                                                 **entries[material.name]}
                                 for material in materials}}
@@ -202,6 +207,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     parser.add_argument("material", metavar="MATERIAL", nargs="+", help="shipped material names or model-file paths")
     parser.add_argument("--format", required=True, choices=FORMATS, help="what to write")
     parser.add_argument("--out", required=True, metavar="DIR", help="output folder: new or empty")
+    parser.add_argument("--single-file", action="store_true",
+                        help="web: one index.html holding the script and every binary (base64), which opens from "
+                        "file:// (no server needed; about a third larger)")
     add_quiet_flag(parser)
     parser.set_defaults(handler=run)
 

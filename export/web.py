@@ -1,7 +1,8 @@
 """``gratnet export --format web``: a self-contained WebGL2 viewer folder (docs/export.md, "The web page").
 
 Files: ``index.html`` and ``gratnet.js`` (export/web/, copied; the JavaScript gets the export's data prepended as
-one ``const EXPORT = {…};`` line), ``meshes.bin`` (the CD disc, sphere and plane of viewer/meshes.py, as
+one ``const EXPORT = {…};`` line; with ``--single-file`` both, and every binary below as base64, in one
+``index.html`` that opens from file://), ``meshes.bin`` (the CD disc, sphere and plane of viewer/meshes.py, as
 ``gratnet render`` draws them) and per material ``NAME.weights.bin`` (export/glsl.py's packed weights) and, for a
 feature-grid model, ``NAME.grid<k>.bin`` per grid texture (``u_grid[k]``: the texels viewer/renderer.py uploads, in
 the model's float16 or float32, as ``--format glsl`` writes them).
@@ -21,6 +22,7 @@ is refused only where its grid textures and the weights exceed WebGL2's guarante
 
 from __future__ import annotations
 
+import base64
 import json
 import shutil
 from pathlib import Path
@@ -118,9 +120,11 @@ def _grids(module: GlslModule, name: str, folder: Path) -> list[dict[str, object
     return grids
 
 
-def write_web(materials: list[tuple[str, str, ModelFile]], folder: Path) -> dict[str, dict[str, object]]:
+def write_web(materials: list[tuple[str, str, ModelFile]], folder: Path,
+              single_file: bool = False) -> dict[str, dict[str, object]]:
     """Write the page for ``materials`` (file-name stem, the name or path the user gave, model) into ``folder``;
-    the manifest entry of each material."""
+    the manifest entry of each material. ``single_file``: one ``index.html`` with the script and every binary
+    (base64) inside it, which opens from file:// (no fetch)."""
     from viewer.renderer import xyz_to_linear_srgb_matrix
 
     entries: dict[str, dict[str, object]] = {}
@@ -141,7 +145,23 @@ def write_web(materials: list[tuple[str, str, ModelFile]], folder: Path) -> dict
             "render": {"size": list(_SIZE), "fov": _FOV_DEGREES, "ior": _IOR},
             # The EXR of gratnet render is linear sRGB: the page's read-back is too (rows of the matrix).
             "xyz_to_linear_srgb": np.asarray(xyz_to_linear_srgb_matrix(), dtype=np.float64).tolist()}
-    shutil.copyfile(_PAGE_ROOT / "index.html", folder / "index.html")
     script = (_PAGE_ROOT / "gratnet.js").read_text(encoding="utf-8")
-    (folder / "gratnet.js").write_text(f"const EXPORT = {json.dumps(data)};\n{script}", encoding="utf-8")
+    if not single_file:
+        shutil.copyfile(_PAGE_ROOT / "index.html", folder / "index.html")
+        (folder / "gratnet.js").write_text(f"const EXPORT = {json.dumps(data)};\n{script}", encoding="utf-8")
+        return entries
+    binaries = sorted(folder.glob("*.bin"))
+    data["inline"] = {path.name: base64.b64encode(path.read_bytes()).decode("ascii") for path in binaries}
+    for path in binaries:
+        path.unlink()
+    # "</" would end the inline <script> early wherever it stood in the data; JSON reads "<\/" as "</".
+    inline = f"const EXPORT = {json.dumps(data)};\n".replace("</", "<\\/") + script
+    page = (_PAGE_ROOT / "index.html").read_text(encoding="utf-8")
+    tag = '<script type="module" src="gratnet.js"></script>'
+    if tag not in page:
+        raise GratNetError("export/web/index.html lost its script tag; the single-file page cannot be made")
+    (folder / "index.html").write_text(page.replace(tag, f'<script type="module">\n{inline}</script>'),
+                                       encoding="utf-8")
+    for entry in entries.values():
+        entry["inline"] = True  # the binaries named are inside index.html
     return entries

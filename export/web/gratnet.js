@@ -249,6 +249,12 @@ function gridTexture(gl, grid, bytes) {
 }
 
 async function fetchBytes(name) {
+  if (EXPORT.inline && name in EXPORT.inline) {  // a single-file page (gratnet export --single-file): no fetch
+    const text = atob(EXPORT.inline[name]);
+    const bytes = new Uint8Array(text.length);
+    for (let i = 0; i < text.length; i++) bytes[i] = text.charCodeAt(i);
+    return bytes.buffer;
+  }
   const response = await fetch(name);
   if (!response.ok) throw new Error(`cannot load ${name}: HTTP ${response.status}`);
   return response.arrayBuffer();

@@ -344,6 +344,8 @@ def test_bad_input_is_one_line_exit_2_and_nothing_written(tmp_path, capsys):
         "unknown format": (["cd", "--format", "metal", "--out", str(tmp_path / "new")], "--format"),
         "one name twice": (["cd", str(resolve_material("cd")), "--format", "glsl", "--out",
                             str(tmp_path / "new")], "one name"),
+        "--single-file for a shader module": (["cd", "--format", "hlsl", "--single-file", "--out",
+                                               str(tmp_path / "new")], "--single-file"),
     }
     for what, (argv, words) in cases.items():
         assert main(["export", *argv]) == 2, what

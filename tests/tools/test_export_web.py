@@ -175,6 +175,26 @@ def test_brdf_slice_equals_numpy_within_the_float32_bound(site, browser, materia
 
 
 @needs_browser
+def test_a_single_file_page_opens_from_file_and_draws_what_the_folder_draws(site, browser, tmp_path):
+    """``--single-file``: one index.html (script and binaries inside) opened from file:// gives the served folder's
+    floats exactly, for a BRDF slice and a mesh render."""
+    url, out = site
+    single = tmp_path / "single"
+    model = json.loads((out / "export.config.json").read_text(encoding="utf-8"))["materials"]["random-simple"]["model"]
+    assert main(["export", model, "cd", "--format", "web", "--single-file", "--out", str(single), "--quiet"]) == 0
+    assert sorted(path.name for path in single.iterdir()) == ["README.md", "export.config.json", "index.html"]
+    for query in (f"?material=random-simple&slice=1&ui=0&size={SIZE}&light=30,20",
+                  f"?material=cd&mesh=sphere&ui=0&size={SIZE}"):
+        with _page(browser, (single / "index.html").as_uri() + query) as page:
+            assert page.evaluate("window.gratnetError") is None
+            inline = _read(page)
+        with _page(browser, url + query) as page:
+            served = _read(page)
+        assert np.abs(served).max() > 0
+        np.testing.assert_array_equal(inline, served)
+
+
+@needs_browser
 def test_without_parameters_the_page_takes_gratnet_renders_defaults(site, browser):
     from viewer.defaults import resolve_defaults
 
