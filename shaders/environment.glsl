@@ -31,6 +31,7 @@ uniform vec2 u_environment_rotation;          // (cos, sin) of the map's rotatio
 uniform vec2 u_material_key_range;            // (key_min, key_max): the table's u and v span
 uniform float u_defensive_share;              // share of cosine-weighted material samples (gratnet.importance)
 uniform int u_sample_index;                   // the render pass (sample) index k
+uniform ivec2 u_pixel_origin;                 // this target's place in the whole picture (a band of it: viewer)
 uniform uint u_seed;                          // the render's seed
 uniform int u_environment_sampling;           // SAMPLING_MIS, SAMPLING_LIGHT or SAMPLING_MATERIAL
 uniform bool u_delta_light;                   // the delta light of lights.glsl takes its turn too
@@ -143,7 +144,7 @@ void environment_incidence(vec3 position, mat3 world_to_tangent, vec3 wo, out ve
     bool mis = u_environment_sampling == SAMPLING_MIS;
     uint sampled = mis ? 2u : 1u;  // environment strategies
     uint count = sampled + (u_delta_light ? 1u : 0u);  // M
-    uvec2 pixel = uvec2(gl_FragCoord.xy);
+    uvec2 pixel = uvec2(ivec2(gl_FragCoord.xy) + u_pixel_origin);  // the whole picture's pixel: bands agree
     uint offset = pcg3d(uvec3(pixel, u_seed ^ 0x68bc21ebu)).x % count;
     uint strategy = (uint(u_sample_index) + offset) % count;
     float strategies = float(count);

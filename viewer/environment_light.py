@@ -24,8 +24,8 @@ from gratnet.environment import Environment
 from gratnet.errors import GratNetError
 from gratnet.importance import DEFENSIVE_SHARE, MaterialTable
 from gratnet.sampling2d import PiecewiseConstant2D
-from viewer.renderer import xyz_to_linear_srgb_matrix
 from viewer.shading import MaterialTexture, set_uniform
+from viewer.srgb import XYZ_TO_LINEAR_SRGB
 
 __all__ = ["ENVIRONMENT_DEFINES", "ENVIRONMENT_UNITS", "EnvironmentLighting", "EnvironmentPass", "MAX_SEED",
            "check_seed"]
@@ -95,7 +95,7 @@ class EnvironmentLighting:
             set_uniform(program, name, unit)
         rows, columns = self.table.distribution.shape
         angle = math.radians(self.environment.rotation_degrees)
-        to_rgb = xyz_to_linear_srgb_matrix()
+        to_rgb = XYZ_TO_LINEAR_SRGB  # colour-science's matrix, without importing it (viewer.srgb)
         set_uniform(program, "u_environment_cells", self.cells)
         set_uniform(program, "u_material_cells", (columns, rows))
         set_uniform(program, "u_environment_rotation", (math.cos(angle), math.sin(angle)))
@@ -107,9 +107,11 @@ class EnvironmentLighting:
         set_uniform(program, "u_rgb_to_xyz", np.ascontiguousarray(np.linalg.inv(to_rgb).T, dtype=np.float32))
 
     @staticmethod
-    def set_pass(program: moderngl.Program, index: int) -> None:
-        """The pass (sample) index k of the next draw."""
+    def set_pass(program: moderngl.Program, index: int, pixel_origin: tuple[int, int] = (0, 0)) -> None:
+        """The pass (sample) index k of the next draw, and the render target's lower-left pixel in the whole
+        picture (GL pixels, y up: a band of rows drawn alone keys its random numbers as the whole picture would)."""
         set_uniform(program, "u_sample_index", int(index))
+        set_uniform(program, "u_pixel_origin", (int(pixel_origin[0]), int(pixel_origin[1])))
 
     def bind(self) -> None:
         """Bind the textures to their units."""
@@ -125,12 +127,14 @@ class EnvironmentLighting:
 @dataclasses.dataclass(frozen=True)
 class EnvironmentPass:
     """What a forward render needs of an environment: the textures, whether the delta light takes its turn, the seed
-    of the random numbers and the sampling (:data:`gratnet.codes.ENVIRONMENT_SAMPLING`)."""
+    of the random numbers, the sampling (:data:`gratnet.codes.ENVIRONMENT_SAMPLING`) and where the render target
+    lies in the whole picture (``pixel_origin``: GL pixels of its lower-left corner; a band of a larger picture)."""
 
     lighting: EnvironmentLighting
     delta_light: bool
     seed: int = 0
     sampling: str = "mis"
+    pixel_origin: tuple[int, int] = (0, 0)
 
     def __post_init__(self) -> None:
         check_seed(self.seed)

@@ -146,7 +146,7 @@ class ForwardRenderer:
                         self._report((number + fraction) / count)
 
                     if environment is not None:
-                        environment.lighting.set_pass(program, first_sample + number)
+                        environment.lighting.set_pass(program, first_sample + number, environment.pixel_origin)
                         environment.lighting.bind()
 
                     self._draw_sample(framebuffer, targets, vertex_array, depth_array, program, bound, unit,

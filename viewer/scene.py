@@ -200,7 +200,7 @@ class SceneRenderer:
                     depth_prepass: bool = True, statistics: dict[str, int] | None = None, samples: int = 1,
                     first_sample: int = 0, offsets_px: np.ndarray | None = None,
                     render_path: str | None = None, environment: Environment | None = None,
-                    seed: int = 0, sampling: str = "mis") -> np.ndarray:
+                    seed: int = 0, sampling: str = "mis", pixel_origin: tuple[int, int] = (0, 0)) -> np.ndarray:
         """Exposed CIE XYZ and coverage, ``float32`` ``(H, W, 4)``, row 0 at the top.
 
         Channels 0–2: ``exposure · irradiance · A(ωi, ωo) · XYZ(−(ωi + ωo))`` (physics.md eq. 5–7) with
@@ -231,6 +231,9 @@ class SceneRenderer:
         ``first_sample + k`` for sample k, with random numbers from ``seed``; the mean over samples converges to
         the integral (physics.md "Environment light"), so more samples mean less noise. Forward path only.
         ``sampling``: ``mis`` (default), or ``light`` / ``material`` alone (gratnet.codes.ENVIRONMENT_SAMPLING).
+        ``pixel_origin``: this image's lower-left pixel in a larger picture (GL pixels, y up), when it is a band of
+        one: the light samples are keyed by the whole picture's pixels, so the bands of N passes make the picture of
+        one N-pass render of the whole.
         """
         offsets = self._offsets(samples, first_sample, offsets_px)
         path = self.render_path if render_path is None else render_path
@@ -244,7 +247,7 @@ class SceneRenderer:
         if path == "deferred" and self.deferred is None:
             raise GratNetError("a reference render takes the forward path only")
         return self._render(mesh, camera, light, size, exposure, ior, 1, skip_threshold, depth_prepass,
-                            statistics, offsets, path, first_sample, environment, seed, sampling)[0]
+                            statistics, offsets, path, first_sample, environment, seed, sampling, pixel_origin)[0]
 
     @staticmethod
     def _offsets(samples: int, first_sample: int, offsets_px: np.ndarray | None) -> np.ndarray:
@@ -256,7 +259,7 @@ class SceneRenderer:
                 exposure: float, ior: float | None, layers: int, skip_threshold: float | None,
                 depth_prepass: bool, statistics: dict[str, int] | None, offsets: np.ndarray,
                 path: str, first_sample: int = 0, environment: Environment | None = None,
-                seed: int = 0, sampling: str = "mis") -> list[np.ndarray]:
+                seed: int = 0, sampling: str = "mis", pixel_origin: tuple[int, int] = (0, 0)) -> list[np.ndarray]:
         """Every render method's checks (before any GL work), then ``path``; a :class:`Mesh` is uploaded for
         this render only."""
         width, height = check_size(size)
@@ -265,7 +268,8 @@ class SceneRenderer:
         if environment is not None:
             if not isinstance(environment, Environment):
                 raise GratNetError(f"expected a gratnet.environment.Environment, got {type(environment).__name__}")
-            lighting = EnvironmentPass(self.environment_lighting(environment), light.intensity > 0.0, seed, sampling)
+            lighting = EnvironmentPass(self.environment_lighting(environment), light.intensity > 0.0, seed, sampling,
+                                       pixel_origin)
             skip_threshold = None  # a pass's sample is not the pixel: the output bound says nothing of the mean
         uploaded = mesh if isinstance(mesh, MeshBuffers) else self.upload(mesh)
         try:

@@ -148,6 +148,27 @@ def test_samples_are_passes_of_one_estimator(scene):
     assert not np.array_equal(together, other)
 
 
+def test_bands_with_their_pixel_origin_make_the_whole_picture(scene):
+    """A picture drawn as bands of rows (the viewer's refinement: viewer.scheduling.BandCamera, each band its own
+    render target) keys its light samples by the whole picture's pixels: the bands equal the whole render."""
+    from viewer.scheduling import BandCamera
+
+    environment = Environment("test", structured_map(32), 0.0, 1.0, "test")
+    camera = Camera(0.25, -60.0, 50.0)
+    width, height = 24, 20
+    whole = scene.render_rgba(plane(), camera, NO_LIGHT, (width, height), 1.0, 1.5, samples=3, environment=environment,
+                              seed=4)
+    bands = []
+    for row0, row1 in ((0, 7), (7, 15), (15, 20)):
+        band = BandCamera(camera.distance, camera.azimuth_deg, camera.elevation_deg, camera.target, camera.fov_deg,
+                          camera.near, camera.far, full_aspect=width / height, height=height, row0=row0, row1=row1)
+        bands.append(scene.render_rgba(plane(), band, NO_LIGHT, (width, row1 - row0), 1.0, 1.5, samples=3,
+                                       environment=environment, seed=4, pixel_origin=(0, height - row1)))
+    together = np.concatenate(bands, axis=0)
+    assert np.abs(whole[..., :3]).max() > 0
+    np.testing.assert_allclose(together, whole, rtol=1e-5, atol=1e-6 * float(np.abs(whole).max()))
+
+
 def test_delta_light_takes_its_turn(scene, model):
     """With a directional light of intensity > 0 beside the environment, every three passes hold one of each
     strategy per pixel: the mean is the light's render plus the environment's integral."""
