@@ -154,7 +154,8 @@ def build_scene(mi: ModuleType, mesh: Mesh, bsdf: dict[str, Any], sensor_dict: d
                 mesh_name: str = "gratnet_mesh") -> Any:
     """A loaded ``mi.Scene``: the mesh (called ``mesh_name``) with the BSDF, the sensor, the emitters and the
     integrator (``direct``: emitter and BSDF sampling with MIS, one bounce; ``path``: up to ``max_depth``
-    bounces), emitters hidden from camera rays (the background is black, as in gratnet render). The BSDF's own errors come out as its one line (``runtime.plugin_errors``)."""
+    bounces), emitters hidden from camera rays (the background is black, as in gratnet render). The BSDF's own
+    errors come out as its one line (``runtime.plugin_errors``)."""
     if integrator not in ("direct", "path"):
         raise GratNetError(f"unknown integrator {integrator!r}; choose direct or path")
     # hide_emitters: camera rays that miss the mesh see black, as gratnet render's background (an environment
