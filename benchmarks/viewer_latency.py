@@ -24,6 +24,13 @@ picture that does. ``--default-view`` starts at the material's default view on t
 shows). The load average at the start and the end is in the report: on a shared 2-core machine it decides the
 numbers.
 
+``--environment SPEC`` (issue 43) opens the viewer under that environment light (``gratnet view --environment``:
+the light off, the exposure from the first picture under it) and adds a phase, "environment", between the launch
+and the interaction: frames until the picture on show is rendered with the environment
+(``environment_picture_s``, from ``--launched-at``; before it the scene shows without the environment while the
+compile child warms the variant and builds the importance table). ``environment_samples_at_end``: the passes the
+still view had accumulated when the session ended.
+
 The X screen must hold the window (``-screen 0 WxHx24``; ``xvfb-run``'s default screen is 640×480 at 8 bits):
 the drag stays inside the picture and the screen. Examples (an empty shader cache: the first compile, as a
 new user sees it):
@@ -32,6 +39,9 @@ new user sees it):
         python benchmarks/viewer_latency.py --material blazed --mesh plane --switch-to cd --inject
     xvfb-run -a -s "-screen 0 1280x1024x24" python benchmarks/viewer_latency.py --material paper-cd --mesh cd \\
         --size 512,512 --default-view --switch-to cd --inject
+    MESA_SHADER_CACHE_DIR=$(mktemp -d) XDG_CACHE_HOME=$(mktemp -d) xvfb-run -a -s "-screen 0 1280x1024x24" \
+        python benchmarks/viewer_latency.py --material paper-cd --mesh cd --size 512,512 --default-view \
+        --environment sky --switch-to paper-cd --inject
 """
 
 from __future__ import annotations
@@ -248,6 +258,8 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--timeout-s", type=float, default=120.0, help="limit of each phase")
     parser.add_argument("--launched-at", type=float, default=_STARTED)
     parser.add_argument("--background", action=argparse.BooleanOptionalAction, default=True)
+    parser.add_argument("--environment", default=None, metavar="SPEC",
+                        help="open the viewer under this environment light (gratnet view --environment)")
     parser.add_argument("--default-view", action="store_true",
                         help="open the window as gratnet view does, at the material's default view on the mesh "
                         "(default: the fixed view of issue 11's measurements: camera 0.15 m, light 30°)")
@@ -258,7 +270,7 @@ def main(argv: list[str] | None = None) -> int:
 
     width, height = (int(v) for v in arguments.size.split(","))
     report: dict[str, Any] = {"material": arguments.material, "mesh": arguments.mesh, "size": [width, height],
-                              "default_view": arguments.default_view,
+                              "default_view": arguments.default_view, "environment": arguments.environment,
                               "shader_cache": os.environ.get("MESA_SHADER_CACHE_DIR", "default"),
                               "load_average_at_start": [round(value, 2) for value in os.getloadavg()]}
     constructed = time.perf_counter()
@@ -266,12 +278,17 @@ def main(argv: list[str] | None = None) -> int:
         from gratnet.cli import build_parser
         from viewer.view_cli import open_window
 
+        lighting = [] if arguments.environment is None else ["--environment", arguments.environment]
         command = build_parser(only="view").parse_args(
-            ["view", "--material", arguments.material, "--mesh", arguments.mesh, "--size", arguments.size])
+            ["view", "--material", arguments.material, "--mesh", arguments.mesh, "--size", arguments.size, *lighting])
         window = open_window(command, background=arguments.background)
     else:
         state = ViewerState(material=arguments.material, mesh=arguments.mesh, camera_distance=0.15, light_theta=30.0)
-        window = ViewerWindow(state, (width, height), background=arguments.background)
+        if arguments.environment is not None:  # as gratnet view --environment: the light off, the exposure found
+            state = ViewerState(material=arguments.material, mesh=arguments.mesh, camera_distance=0.15,
+                                light_theta=30.0, light_intensity=0.0, environment=arguments.environment)
+        window = ViewerWindow(state, (width, height), background=arguments.background,
+                              auto_exposure=arguments.environment is not None)
     report["window_open_s"] = time.perf_counter() - constructed  # the constructor (blocks only when not background)
     report["window_shown_s"] = time.perf_counter() - arguments.launched_at  # the panel is on screen from here
     session = Session(window, arguments.launched_at)
@@ -288,6 +305,13 @@ def main(argv: list[str] | None = None) -> int:
         report["worker_started_s"] = None if worker is None else round(worker.started - arguments.launched_at, 3)
         report["worker_ready_at_s"] = {} if worker is None else {
             " ".join(k): round(v - arguments.launched_at, 3) for k, v in worker.ready_at.items()}
+
+        if arguments.environment is not None:
+            session.phase = "environment"
+            took = session.run_until(lambda: app.environment_live() and app.image is not None
+                                     and app.image.key == app.render_key(), arguments.timeout_s)
+            report["environment_picture_s"] = None if took is None else time.perf_counter() - arguments.launched_at
+            report["environment_exposure"] = app.state.exposure
 
         session.phase = "interact"
         session.run_until(lambda: False, arguments.interact_s)
@@ -325,6 +349,11 @@ def main(argv: list[str] | None = None) -> int:
         session.run_until(lambda: app.image is not None and app.image.complete, arguments.timeout_s)
         session.run_until(lambda: False, 0.5)
         report["frame_figure_at_rest_s"] = app.stats.last_frame_s  # what the panel shows as "frame"
+        if arguments.environment is not None:  # the slice shows none: back to the mesh, a few seconds still
+            app.switch(slice_mode=False)
+            session.phase = "environment still"
+            session.run_until(lambda: False, 5.0)
+            report["environment_samples_at_end"] = app.samples
     finally:
         if session.injector is not None and session.injector.poll() is None:
             session.injector.kill()

@@ -42,6 +42,7 @@ __all__ = [
     "MaterialDisplay",
     "analyse_model",
     "black_fraction",
+    "exposure_for_brightness",
     "black_image_hint",
     "brightness",
     "material_display",
@@ -278,7 +279,13 @@ def suggest_exposure(xyz_exposed: np.ndarray, exposure: float) -> float | None:
     """
     if not (math.isfinite(exposure) and exposure > 0):
         return None
-    values = brightness(np.asarray(xyz_exposed, dtype=np.float64)).reshape(-1) / exposure
+    return exposure_for_brightness(brightness(np.asarray(xyz_exposed, dtype=np.float64)) / exposure)
+
+
+def exposure_for_brightness(values: np.ndarray) -> float | None:
+    """:func:`suggest_exposure`'s rule on the pixels' brightness at exposure 1 (the largest linear sRGB channel, any
+    shape): for callers that have the brightness without colour-science (the viewer: viewer.srgb)."""
+    values = np.asarray(values, dtype=np.float64).reshape(-1)
     lit = values[values > 0]
     if lit.size == 0:
         return None

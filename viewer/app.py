@@ -4,60 +4,18 @@ Two layers, so that the logic can be tested without a display:
 
 - :class:`ViewerApp` (this module; no glfw, no imgui; any OpenGL ≥ 4.3 context, a window's or a headless
   one): the :class:`~viewer.state.ViewerState`, the scene supply (:mod:`viewer.scene_supply`: models,
-  meshes, shaders), the :class:`~viewer.scheduling.ResolutionPolicy`, the frame cache and the screenshot.
+  meshes, shaders), the :class:`~viewer.scheduling.ResolutionPolicy` and the frame cache.
   :meth:`ViewerApp.frame` renders only what the state needs: nothing when the picture on show is already
   the full-resolution picture of the current state.
 - :class:`~viewer.window.ViewerWindow` (:mod:`viewer.window`): the thin shell of glfw, imgui and EGL glue
   that draws the panel and the picture and turns input into :meth:`ViewerApp.set`, :meth:`ViewerApp.orbit`
   and :meth:`ViewerApp.zoom`.
 
-Where the rest lives: the panel's sliders and the state (:mod:`viewer.state`), the resolution policy and
-cost model (:mod:`viewer.scheduling`), models, meshes and compiled shaders (:mod:`viewer.scene_supply`),
-a switch's default view (:mod:`viewer.default_view`).
-
-Never blocking (issue 11; measured in docs/benchmarks.md "Viewer: a window that never blocks"): the window
-never compiles a shader that has not been compiled already. :class:`~viewer.scene_supply.SceneSupply`
-(background mode, the window's default) has a child process (:mod:`viewer.compile_worker`) compile each
-material's programs on its own EGL context, which fills Mesa's disk shader cache; the window then links
-the same program text as a cache hit, one short step per frame. The quick texture path (about a second
-to compile) gives the first picture; on a CPU rasterizer the faster baked program (25–60 s to compile)
-takes over when its compile is done; while idle, a child at a low priority warms the other shipped
-materials' quick programs, so that a switch to one links them at once. Until then the panel's status line
-says what is compiling ("compiling the shader for cd… 12 s") and the picture on show stays. Meshes are
-built on a thread, the first frame (imgui's own shaders) is drawn before the window is shown, and a
-switch's (or a start's) default view is guessed in a worker process and refined in another
-(:mod:`viewer.default_view`; a new picture waits up to 2 s for the guess). Each frame's work, the figure the
-panel shows as "frame", is its events, panel, at most one preview or band, and drawing; the idle wait for
-input is not counted.
-
-Staying responsive on a CPU rasterizer (issue 35: Mesa llvmpipe, 2 cores; a covered pixel of a shipped
-feature-grid network costs 30–75 µs, so a 512² disc holds ~9 s of work):
-
-- The window renders on the deferred path there (:func:`viewer.compile_worker.window_render_path`: the
-  network once per covered pixel), its renders padded to power-of-two sizes
-  (:func:`viewer.scheduling.padded_size`: the compute kernels' variant the compile child warmed).
-- While the state keeps changing (a slider or the mouse moving, and for ``idle_seconds`` after the last
-  change), every new state is rendered at a reduced resolution: the smallest of 1/2 … 1/32 whose
-  predicted cost fits ``interactive_budget_s`` (the cost model: measured seconds per covered pixel × the
-  covered pixels of the last preview; before any measurement a preview of at most 1024 pixels).
-  Previews of the built-in disc and sphere use coarser tessellations (on the forward path llvmpipe's
-  cost per triangle dominates at low resolution).
-- Once the state has stood still, the full-resolution picture is built in horizontal bands (the same
-  camera with clip space cropped to the band's rows: the same pixel centres as one full render), one
-  band per frame sized to ``refine_budget_s``; the window keeps handling input between bands, the
-  preview stays on show under the bands not yet done, and any change abandons the refinement.
-  (BRDF-slice mode doubles the resolution per level up to full, each level in bands of rows that fit
-  ``refine_budget_s``: a scissor box limits the slice render to the band's rows.)
-- Progressive anti-aliasing (issue 12; ``max_samples``, the panel's "samples" choice): once a mesh view's
-  full-resolution picture is complete and the view stands still, each further step adds the next sub-pixel
-  sample (:func:`viewer.antialias.sample_offsets`, the offsets of ``gratnet render --spp``) in bands of rows
-  sized like the refinement's, into float32 sums, and shows their mean, until ``max_samples`` (not while a
-  faster program for the view still compiles in the background: that compile gets the CPU); any change
-  of the view starts again from the 1-sample preview. Previews and refinement bands are 1 sample (the pixel
-  centre), so interaction costs what it did. The mean of k samples equals ``SceneRenderer.render(...,
-  samples=k)`` (tests/runtime/test_viewer.py). BRDF-slice mode stays at 1 sample.
-- When the picture is complete (and has its samples) and nothing changes, nothing is rendered, and the
-  window sleeps in ``glfw.wait_events_timeout`` instead of spinning.
+Where the rest lives: the panel's sliders and the state (:mod:`viewer.state`); the resolution policy, its cost
+model and how the viewer spends its frames (:mod:`viewer.scheduling`: staying responsive on a CPU rasterizer, issue
+35; progressive anti-aliasing, issue 12); models, meshes and shaders, never blocking (:mod:`viewer.scene_supply`,
+issue 11); a switch's default view (:mod:`viewer.default_view`); the environment light (:mod:`viewer.environment_view`,
+issue 43); screenshots and slider driving (:mod:`viewer.screenshot`).
 
 Every pixel comes from :class:`SceneRenderer` (``render_rgba`` / ``render_brdf_slice``), converted by
 :mod:`viewer.srgb` (``gratnet.display``'s bytes without importing colour-science), so the window shows
@@ -71,15 +29,16 @@ import math
 import time
 from collections.abc import Callable, Iterable
 from pathlib import Path
-from typing import Any, Protocol
+from typing import Any
 
 import numpy as np
 
 from gratnet.errors import GratNetError
 from gratnet.quality import AUTO, FAST, VIEW_QUALITIES, check_quality
-from viewer.camera import Camera
+from viewer.camera import Camera, Light
 from viewer.catalog import MESHES, material_point, material_points, model_label, shipped_materials
 from viewer.default_view import DefaultViewRequests
+from viewer.environment_view import ENVIRONMENT_SAMPLES, EnvironmentChoices, picture_exposure
 from viewer.reference_view import SHADINGS, LoadedReference, ReferenceView, flip_heat_map
 from viewer.scheduling import (
     UNCOVERED_COST,
@@ -100,7 +59,7 @@ from viewer.scheduling import (
 from viewer.srgb import display_srgb8
 from viewer.state import SLIDERS, ViewerState
 
-__all__ = ["ViewerApp", "drive_slider"]
+__all__ = ["ViewerApp"]
 
 
 _FLIP_CHANNELS = 7  # FLIP mode's picture data: network XYZ, reference XYZ, coverage
@@ -131,6 +90,12 @@ class ViewerApp:
             the default view (``gratnet view`` without ``--light``, ``--camera`` or ``--exposure``): the exact
             defaults replace them once worked out, unless the user moves the view first.
         quality: ``gratnet view --quality`` (gratnet.quality): which of a material's points renders it (:meth:`point`).
+        environments: environment specs the viewer offers besides :data:`ENVIRONMENT_CHOICES` (``gratnet view
+            --environment``'s); an environment in ``state`` or here makes the compile child warm the environment
+            variant and the panel show its chooser; empty and none in ``state``: no environment light at all.
+        environment_samples: passes accumulated while a view under an environment stands still.
+        auto_exposure: take the exposure from the first preview under an environment (``gratnet view
+            --environment`` without ``--exposure``), again after a switch of material, mesh or environment.
 
     Raises:
         GratNetError: the initial material or mesh cannot be loaded.
@@ -141,7 +106,8 @@ class ViewerApp:
                  extra_meshes: Iterable[str] = (), weights_path: str = "auto", background: bool = False,
                  worker: Any = None, max_samples: int = 1, render_path: str = "auto",
                  reference: LoadedReference | None = None, refine_view: Iterable[str] = (),
-                 quality: str = AUTO) -> None:
+                 quality: str = AUTO, environments: Iterable[str] = (),
+                 environment_samples: int = ENVIRONMENT_SAMPLES, auto_exposure: bool = False) -> None:
         from viewer.antialias import check_samples
         from viewer.scene_supply import SceneSupply
         from viewer.surface import check_size
@@ -158,7 +124,20 @@ class ViewerApp:
         self.weights_path = weights_path
         self.quality = check_quality(quality, VIEW_QUALITIES)
         self._points: dict[str, tuple[Path, str | None]] = {}  # material -> its point on show (see point())
-        self.supply = SceneSupply(ctx, weights_path, background, worker, render_path)
+        self.choices = EnvironmentChoices(self.state.environment if self.state.has_environment else None,
+                                          environments)
+        self.environments = self.choices.specs  #: the panel's environment choices (empty: none at all)
+        #: Passes accumulated while a view under an environment stands still.
+        self.environment_samples = check_samples(environment_samples)
+        self.auto_exposure = bool(auto_exposure)
+        # The automatic exposure (auto_exposure): "preview" from the first preview under the environment, then "full"
+        # from its first full-resolution pass (a 16² preview's one pass is too noisy to trust alone); "": none due.
+        self._exposure_stage = "preview" if self.auto_exposure and self.state.has_environment else ""
+        if self._exposure_stage:
+            import gratnet.showcase  # noqa: F401 - the exposure rule, imported now rather than in a frame
+        self.supply = SceneSupply(ctx, weights_path, background, worker, render_path, environment=self.choices.warmed)
+        if self.choices.warmed is not None:
+            self.supply.warm_environment = self.choices.map(self.choices.warmed)
         # A switch of material, mesh or mode brings that pair's default view (viewer.default_view): remembered, or
         # a quick guess at once and the exact one from a worker process (started now in the background mode).
         self._defaults = DefaultViewRequests(background)
@@ -245,6 +224,12 @@ class ViewerApp:
                 value = SLIDERS[name].clamp(value)
             elif name in ("fresnel", "slice_mode"):
                 value = bool(value)
+            elif name == "environment":
+                value = self.choices.check(value)
+            elif name == "seed":
+                from viewer.environment_light import check_seed
+
+                value = check_seed(value)
             elif name == "shading" and value not in SHADINGS:
                 raise GratNetError(f"shading must be one of {', '.join(SHADINGS)}, got {value!r}")
             setattr(new, name, value)
@@ -270,8 +255,14 @@ class ViewerApp:
         if new.mesh not in self.meshes:
             self.meshes.append(new.mesh)
         self.message = ""
+        if self.auto_exposure and new.has_environment and new.environment != self.state.environment:
+            self._exposure_stage = "preview"  # another environment: its own exposure
+        elif "exposure" in changes and not self._applying_view:
+            self._exposure_stage = ""  # the user's exposure wins
         self.state = new
         return True
+
+    _applying_view = False  # set while a default view or the automatic exposure is applied (not the user's)
 
     def switch(self, **changes: Any) -> bool:
         """The panel's material, mesh and BRDF-slice choices: :meth:`set` them, then bring the new pair's
@@ -283,6 +274,7 @@ class ViewerApp:
             raise GratNetError(f"switch() takes material, mesh and slice_mode, not {', '.join(sorted(unknown))}")
         changed = self.set(**changes) if changes else False
         if changed or not changes:
+            self._exposure_stage = "preview" if self.auto_exposure and self.state.has_environment else ""
             self._defaults.request(self.state)
             self._take_default_view()  # remembered, or computed at once (blocking mode)
         return changed
@@ -292,7 +284,13 @@ class ViewerApp:
         quick guess, then the exact one), unless the user moved the view since."""
         ready = self._defaults.take(self.state)
         if ready is not None:
-            self.set(**ready)
+            if self.auto_exposure and self.state.has_environment and self._exposure_stage != "preview":
+                ready = {name: value for name, value in ready.items() if name != "exposure"}  # the picture's stays
+            self._applying_view = True
+            try:
+                self.set(**ready)
+            finally:
+                self._applying_view = False
             self._defaults.applied(self.state)
 
     def set_size(self, size: tuple[int, int]) -> bool:
@@ -306,14 +304,39 @@ class ViewerApp:
         return True
 
     def set_max_samples(self, samples: int) -> bool:
-        """The accumulation cap (the panel's "samples" choice; 1 … viewer.antialias.MAX_SAMPLES): a still mesh
+        """The accumulation cap (the panel's "samples" choice; 1 … viewer.antialias.MAX_SAMPLES) of the view on
+        show (:attr:`sample_cap`: ``environment_samples`` under an environment, else ``max_samples``): a still mesh
         view gains one sample per pixel at a time, band by band, up to it. Lowering it below the samples on
         show keeps them. Returns whether it changed."""
         from viewer.antialias import check_samples
 
         samples = check_samples(samples)
-        changed, self.max_samples = samples != self.max_samples, samples
+        if self.environment_live():
+            changed, self.environment_samples = samples != self.environment_samples, samples
+        else:
+            changed, self.max_samples = samples != self.max_samples, samples
         return changed
+
+    @property
+    def sample_cap(self) -> int:
+        """The samples a still view of the state on show accumulates (under an environment: its passes)."""
+        return self.environment_samples if self.environment_live() else self.max_samples
+
+    def environment_live(self, state: ViewerState | None = None) -> bool:
+        """Whether ``state`` (default: the one on show) renders with its environment now: a network mesh view
+        with one, and the environment variant ready (the compile child's; before that the view is shown without
+        the environment)."""
+        state = self.state if state is None else state
+        return (state.has_environment and bool(self.environments) and not state.slice_mode
+                and state.shading == "network" and self.supply.environment_live(self._supplied(state)))
+
+    def environment(self, state: ViewerState | None = None) -> Any:
+        """The :class:`gratnet.environment.Environment` of ``state`` (default: the one on show; turned and scaled) or
+        ``None`` (:class:`viewer.environment_view.EnvironmentChoices`)."""
+        state = self.state if state is None else state
+        if not state.has_environment:
+            return None
+        return self.choices.environment(state.environment, state.environment_rotation, state.environment_scale)
 
     @property
     def samples(self) -> int:
@@ -339,7 +362,7 @@ class ViewerApp:
         else on its way for it: while a faster program compiles in the background, extra samples would take
         the CPU from that compile (and each costs several times more on the slower path)."""
         accumulation = self._current_accumulation()
-        return (accumulation is not None and accumulation.samples < self.max_samples and not self.moving
+        return (accumulation is not None and accumulation.samples < self.sample_cap and not self.moving
                 and not self.state.slice_mode and self.supply.scene_ready(self._supplied(self.state), preview=False)
                 and not self.supply.pending(self._supplied(self.state)))
 
@@ -375,7 +398,7 @@ class ViewerApp:
         self._flip_picture, self._flip_mean = (xyz, None) if xyz.shape[-1] == _FLIP_CHANNELS else (None, None)
 
     @staticmethod
-    def _display(xyz: np.ndarray) -> np.ndarray:
+    def display_pixels(xyz: np.ndarray) -> np.ndarray:
         """8-bit display sRGB of exposed XYZ (:mod:`viewer.srgb`: ``gratnet.display``'s bytes without importing
         colour-science); FLIP-mode data (network XYZ, reference XYZ, coverage) shows as the FLIP heat map."""
         if xyz.shape[-1] == _FLIP_CHANNELS:
@@ -383,7 +406,8 @@ class ViewerApp:
         return display_srgb8(xyz)
 
     def render_key(self) -> tuple[Any, ...]:
-        return (*self.state.key(), *self.full_size(), self.point()[1])  # another point: another picture
+        # Another point, or the environment becoming ready: another picture.
+        return (*self.state.key(), *self.full_size(), self.point()[1], self.environment_live())
 
     def full_size(self) -> tuple[int, int]:
         """The full-resolution picture's size: the render size, or its largest square in slice mode."""
@@ -501,7 +525,7 @@ class ViewerApp:
     def _scene_key(self, state: ViewerState) -> tuple[Any, ...]:
         supplied = self._supplied(state)
         return (supplied.material, "slice" if state.slice_mode else state.mesh,
-                self.supply.weights_path_in_use(supplied), state.shading)
+                self.supply.weights_path_in_use(supplied), state.shading, self.environment_live(state))
 
     def _timed_render(self, state: ViewerState, size: tuple[int, int], camera: Camera | None = None,
                       preview: bool = False, rows: tuple[int, int] | None = None,
@@ -514,6 +538,12 @@ class ViewerApp:
         if supplied is None:
             raise GratNetError(f"the shader for {state.material} is still compiling; try again in a moment")
         renderer, buffers = supplied
+        environment = self.environment(state) if self.environment_live(state) else None
+        light = state.light()
+        if environment is None and state.has_environment and state.light_intensity == 0.0:
+            light = Light.directional(state.light_theta, state.light_phi)  # the view without it: not black
+        # A band of rows keys its light samples by the whole picture's pixels (GL rows count from the bottom).
+        origin = (0, camera.height - camera.row1) if isinstance(camera, BandCamera) else (0, 0)
         started = time.perf_counter()
         shading = state.shading if self.reference_available(state.material) else "network"
         truth = self.reference.scene() if shading != "network" and self.reference is not None else None
@@ -527,10 +557,12 @@ class ViewerApp:
                     xyz = xyz[rows[0]:rows[1]]
             else:  # the reference draws the network's mesh buffers: the same geometry, preview or full
                 target, view = size, camera or state.camera()
-                if scene.render_path == "deferred":  # power-of-two sides: the warm variant (padded_size)
+                lit = environment if scene is renderer else None
+                if scene.render_path == "deferred" and lit is None:  # power-of-two sides: the warm variant
                     target, view = self._padded(view, size)
-                rgba = scene.render_rgba(buffers, view, state.light(), target, state.exposure,
-                                         state.effective_ior, first_sample=sample)[:size[1], :size[0]]
+                rgba = scene.render_rgba(buffers, view, light, target, state.exposure, state.effective_ior,
+                                         first_sample=sample, environment=lit, seed=state.seed,
+                                         pixel_origin=origin)[:size[1], :size[0]]
                 xyz, coverage = rgba[..., :3], rgba[..., 3]
             pictures.append(xyz)
         if shading == "flip":  # network XYZ, reference XYZ, coverage: _display shows the FLIP heat map
@@ -569,10 +601,16 @@ class ViewerApp:
         if seconds_per_pixel is not None:  # with the last preview's coverage
             covered = float(np.mean(self._coverage))
             predicted = seconds_per_pixel * full[0] * full[1] * (covered + UNCOVERED_COST * (1.0 - covered))
+        elif self.environment_live():
+            # Nothing measured under the environment yet: the smallest preview. Its forward-path passes cost several
+            # times the deferred path's pixels on a CPU rasterizer (paper-cd, 32² on llvmpipe: 0.23 s, 16²: 0.06 s).
+            predicted = math.inf
         factor = self.policy.reduced_factor(predicted, full)
         size = reduced_size(full, factor)  # square in slice mode (full is square)
         self._accumulation = None  # a new view: its samples start again
         xyz, coverage = self._timed_render(self.state, size, preview=True)
+        if self._exposure_stage == "preview" and self.environment_live():
+            xyz, key = self._expose(xyz, key, final=size == full)
         self._coverage = coverage.mean(axis=1)
         self.stats.preview_renders += 1
         self.stats.last_kind = f"preview 1/{factor}"
@@ -581,7 +619,28 @@ class ViewerApp:
         complete = size == full
         if complete:
             self._picture_complete(xyz)
-        self._publish(key, self._display(xyz), size, complete, 1.0 if complete else 0.0)
+        self._publish(key, self.display_pixels(xyz), size, complete, 1.0 if complete else 0.0)
+
+    def _expose(self, xyz: np.ndarray, key: tuple[Any, ...], final: bool) -> tuple[np.ndarray, tuple[Any, ...]]:
+        """The automatic exposure under an environment from a picture (``xyz``, at the state's exposure): the first
+        preview's, then (``final``) the first full-resolution pass's (:func:`viewer.environment_view.picture_exposure`).
+        The picture is linear in the exposure, so it is rescaled, not rendered again. Returns it and the new state's
+        key (unchanged when nothing is lit)."""
+        exposure = picture_exposure(xyz, self.state.exposure)
+        self._exposure_stage = "" if final else "full"
+        if exposure is None:
+            return xyz, key
+        old = self.state.exposure
+        self._applying_view = True
+        try:
+            changed = self.set(exposure=exposure)
+        finally:
+            self._applying_view = False
+        if not changed:
+            return xyz, key
+        new_key = self.render_key()
+        self._seen_key = new_key  # the same view: not a change to wait out
+        return xyz * np.float32(self.state.exposure / old), new_key
 
     def _refine(self, key: tuple[Any, ...]) -> None:
         state, (width, height) = self.state, self.full_size()
@@ -603,7 +662,7 @@ class ViewerApp:
             row_pixels = effective_pixels_per_row(disc_coverage(side, (row0, side)))
             row1 = min(side, row0 + self.policy.band_rows(seconds_per_pixel * row_pixels * first_band_margin(row0)))
             xyz = self._timed_render(state, (side, side), rows=(row0, row1))[0]
-            refinement.pixels[row0:row1] = self._display(xyz)
+            refinement.pixels[row0:row1] = self.display_pixels(xyz)
             refinement.next_row = row1
             level_done = row1 == side
             if level_done:
@@ -617,12 +676,15 @@ class ViewerApp:
             row1 = min(height, row0 + rows)
             band = self._band_camera(state, width, height, row0, row1)
             xyz = self._timed_render(state, (width, row1 - row0), band)[0]
-            refinement.pixels[row0:row1] = self._display(xyz)
+            refinement.pixels[row0:row1] = self.display_pixels(xyz)
             if refinement.xyz is None:
                 refinement.xyz = np.zeros((height, width, xyz.shape[-1]), dtype=np.float32)
             refinement.xyz[row0:row1] = xyz
             refinement.next_row = row1
             done, rendered, progress = row1 == height, (width, height), row1 / height
+            if done and self._exposure_stage and self.environment_live():  # the exposure from all its pixels
+                refinement.xyz, key = self._expose(refinement.xyz, key, final=True)
+                refinement.pixels = self.display_pixels(refinement.xyz)
             if done:  # sample 0 of the progressive anti-aliasing
                 self._accumulation = Accumulation(key, refinement.xyz)
                 self._picture_complete(refinement.xyz)
@@ -678,7 +740,7 @@ class ViewerApp:
         else:
             mean = (accumulation.sums[row0:row1] + xyz) / np.float32(accumulation.samples + 1)
         pixels = self.image.pixels.copy()
-        pixels[row0:row1] = self._display(mean)
+        pixels[row0:row1] = self.display_pixels(mean)
         self.stats.refine_renders += 1
         self.stats.last_kind = f"sample {accumulation.samples + (row1 < height)} rows {row0}-{row1}"
         self.stats.last_sample_s = time.perf_counter() - started
@@ -689,7 +751,8 @@ class ViewerApp:
         (the network runs per covered pixel, not per block of fragments, and a power-of-two band needs no
         padding: :func:`viewer.scheduling.padded_size`); elsewhere a multiple of the policy's."""
         supplied = self.supply.scene(self._supplied(state))
-        deferred = supplied is not None and supplied[0].render_path == "deferred"
+        deferred = (supplied is not None and supplied[0].render_path == "deferred"
+                    and not self.environment_live(state))  # an environment renders forward
         return self.policy.band_rows(row_seconds, 1 if deferred else None, power_of_two=deferred)
 
     def _row_seconds(self, width: int, height: int) -> np.ndarray:
@@ -707,51 +770,12 @@ class ViewerApp:
             return self.image.pixels
         xyz = self._timed_render(self.state, self.full_size())[0]
         self._picture_complete(xyz)
-        pixels = self._display(xyz)
+        pixels = self.display_pixels(xyz)
         self.stats.last_kind = "full"
         self._refinement = None
         self._accumulation = None if self.state.slice_mode else Accumulation(key, np.array(xyz, dtype=np.float32))
         self._publish(key, pixels, self.full_size(), True, 1.0)
         return pixels
-
-    def save_screenshot(self, path: str | Path) -> Path:
-        """Write the current picture at full resolution as a display-sRGB PNG (atomically), and beside it
-        ``NAME.config.json`` with the ``gratnet render`` settings that reproduce it. Returns the path."""
-        from PIL import Image
-
-        from gratnet.atomic import atomic_path
-        from gratnet.config import save_config
-
-        path = Path(path)
-        if path.suffix.lower() != ".png":
-            raise GratNetError(f"a screenshot is a .png file, got {path}")
-        pixels = self.render_full()
-        samples = self.samples
-        accumulated = self.accumulated_xyz() if samples > 1 else None
-        if accumulated is not None:  # the complete samples only (a sample being added band by band is left out)
-            pixels = self._display(accumulated)
-        with atomic_path(path) as temporary:
-            Image.fromarray(pixels).save(temporary, format="PNG")
-        width, height = self.full_size()
-        config = self.state.render_config(width, height, samples)
-        shading = self.state.shading if self.reference_available() else "network"
-        if shading != "network" and self.reference is not None:  # gratnet render --reference draws the truth
-            config = dataclasses.replace(config, reference=self.reference.loaded.path,
-                                         reference_precision=self.reference.loaded.precision)
-        model_file, quality = self.point()
-        config = dataclasses.replace(config, quality=quality)
-        save_config(path, render=config, model_file=str(model_file),
-                    view={"shading": shading, "flip_mean_covered": self.flip_mean})
-        return path
-
-    def next_screenshot_path(self, folder: str | Path) -> Path:
-        """``folder/gratnet-view-NNN.png``, the first number not taken."""
-        folder = Path(folder)
-        for number in range(1, 100000):
-            candidate = folder / f"gratnet-view-{number:03d}.png"
-            if not candidate.exists():
-                return candidate
-        raise GratNetError(f"no free screenshot name in {folder}")
 
     def _warm_up(self) -> None:
         """Check the state's material and mesh (GratNetError if unusable). When not in the background, also
@@ -774,27 +798,3 @@ class ViewerApp:
 def _wrap(degrees: float) -> float:
     """An angle in [−180, 180)."""
     return (degrees + 180.0) % 360.0 - 180.0
-
-
-class HasApp(Protocol):
-    """A shell around a :class:`ViewerApp` (``viewer.window.ViewerWindow``)."""
-
-    @property
-    def app(self) -> ViewerApp: ...
-
-    def frame(self) -> bool: ...
-
-
-def drive_slider(target: ViewerApp | HasApp, name: str, values: Iterable[float], frame: bool = True) -> int:
-    """Move slider ``name`` through ``values`` as a user dragging it would: set each value and, with
-    ``frame``, run one frame after each (``target.frame()``: a window frame or an app step). Returns the
-    number of values that changed the state."""
-    app = target if isinstance(target, ViewerApp) else target.app
-    if name not in SLIDERS:
-        raise GratNetError(f"unknown slider {name!r}: choose {', '.join(SLIDERS)}")
-    changed = 0
-    for value in values:
-        changed += bool(app.set(**{name: value}))
-        if frame:
-            target.frame()
-    return changed

@@ -18,7 +18,11 @@ the main thread for 25.5 s. In the child the same compile takes 4 s (link) + 21�
 the window's compile afterwards takes 0.1 s (link) + tens of ms (first draw).
 
 Groups: ``surface`` (the ``surface`` program and its depth pre-pass program, drawn as
-:meth:`SceneRenderer.render` draws them) and ``slice`` (``brdf_slice``). Rendering only: no glfw, no imgui.
+:meth:`SceneRenderer.render` draws them), ``slice`` (``brdf_slice``) and, for ``gratnet view --environment``,
+``environment`` (the ``surface`` program's ``ENVIRONMENT`` variant, always on the forward path, drawn with the
+viewer's environment; the child first builds the material's importance table, which gratnet.importance caches on
+disk, so that the window loads it in milliseconds instead of building it for seconds). Rendering only: no glfw, no
+imgui.
 """
 
 from __future__ import annotations
@@ -36,10 +40,13 @@ from typing import Any
 
 from gratnet.errors import GratNetError
 
-__all__ = ["GROUPS", "CompileWorker", "shader_cache_enabled", "warm_group"]
+__all__ = ["ENVIRONMENT_GROUP", "GROUPS", "CompileWorker", "shader_cache_enabled", "warm_group"]
 
-#: Program groups, each warmed and reported as one.
+#: Program groups, each warmed and reported as one (a viewer without an environment warms these).
 GROUPS = ("surface", "slice")
+#: The group of the surface program's environment-light variant (gratnet view --environment).
+ENVIRONMENT_GROUP = "environment"
+_ALL_GROUPS = (*GROUPS, ENVIRONMENT_GROUP)
 #: Niceness the child adds before the long (baked) compiles: on a 2-core machine the window's thread
 #: then wins the CPU whenever both want it.
 _BAKED_NICENESS = 10
@@ -68,15 +75,21 @@ def window_render_path(requested: str, software: bool) -> str:
     return "deferred" if requested == "auto" and software else requested
 
 
-def warm_group(scene: Any, group: str, buffers: Any = None) -> None:
+def warm_group(scene: Any, group: str, buffers: Any = None, environment: Any = None) -> None:
     """Compile ``group``'s programs on ``scene`` (a :class:`~viewer.scene.SceneRenderer`) and draw them once
     at 1×1 pixel, as the viewer draws them (llvmpipe compiles a program's draw code at its first draw).
-    ``buffers``: an uploaded mesh for the surface draw (default: a plane, uploaded and freed here)."""
+    ``buffers``: an uploaded mesh for the surface draw (default: a plane, uploaded and freed here).
+    ``environment``: the :class:`gratnet.environment.Environment` of the ``environment`` group's draws (default:
+    a constant one: every map has the same texture formats, hence the same draw code)."""
     from viewer.camera import Camera, Light
 
     if group == "slice":
         scene.render_brdf_slice(20.0, 90.0, 1, 1.0, 1.5)
-    elif group == "surface":
+    elif group in ("surface", ENVIRONMENT_GROUP):
+        if group == ENVIRONMENT_GROUP and environment is None:
+            from gratnet.environment import load_environment
+
+            environment = load_environment("1")
         uploaded = buffers
         if uploaded is None:
             from viewer.meshes import plane
@@ -86,12 +99,13 @@ def warm_group(scene: Any, group: str, buffers: Any = None) -> None:
             # Twice: on the deferred path the first render at a size above 1×1 still cost 0.35 s of JIT work
             # (measured, tiny net on llvmpipe) when only a 1×1 render had warmed it; a 2×2 one takes it.
             for size in ((1, 1), (2, 2)):
-                scene.render_rgba(uploaded, Camera(0.18, -90.0, 50.0), Light.directional(20.0, 90.0), size, 1.0, 1.5)
+                scene.render_rgba(uploaded, Camera(0.18, -90.0, 50.0), Light.directional(20.0, 90.0), size, 1.0, 1.5,
+                                  environment=environment if group == ENVIRONMENT_GROUP else None)
         finally:
             if buffers is None:
                 uploaded.release()
     else:
-        raise GratNetError(f"unknown program group {group!r}: choose {', '.join(GROUPS)}")
+        raise GratNetError(f"unknown program group {group!r}: choose {', '.join(_ALL_GROUPS)}")
     scene.ctx.finish()
 
 
@@ -108,10 +122,12 @@ class CompileWorker:
         label: how status lines name the model.
         niceness: added to the child's niceness at its start (the baked compiles add ``_BAKED_NICENESS``
             more): a child started while the window is on screen yields the CPU to it.
+        environment: the environment spec the ``environment`` group is drawn with (default: a constant one).
     """
 
     def __init__(self, model_path: str | os.PathLike[str], paths: Sequence[str], groups: Sequence[str],
-                 label: str = "", niceness: int = 0, render_path: str = "auto") -> None:
+                 label: str = "", niceness: int = 0, render_path: str = "auto",
+                 environment: str | None = None) -> None:
         self.model_path = Path(model_path)
         self.paths = tuple(paths)
         self.groups = tuple(groups)
@@ -130,14 +146,16 @@ class CompileWorker:
         self._buffer = b""
         self._exited = False
         self._baked_source: str | None = None
-        environment = dict(os.environ)
-        environment["PYTHONPATH"] = os.pathsep.join(
-            [str(_REPOSITORY), *filter(None, environment.get("PYTHONPATH", "").split(os.pathsep))])
+        variables = dict(os.environ)
+        variables["PYTHONPATH"] = os.pathsep.join(
+            [str(_REPOSITORY), *filter(None, variables.get("PYTHONPATH", "").split(os.pathsep))])
         command = [sys.executable, "-m", "viewer.compile_worker", str(self.model_path), "--paths", ",".join(self.paths),
                    "--groups", ",".join(self.groups), "--folder", self._folder.name, "--nice", str(int(niceness)),
                    "--render-path", render_path]
+        if environment is not None:
+            command += ["--environment", environment]
         self._process: subprocess.Popen[bytes] | None = subprocess.Popen(
-            command, stdin=subprocess.DEVNULL, stdout=subprocess.PIPE, stderr=self._stderr, env=environment,
+            command, stdin=subprocess.DEVNULL, stdout=subprocess.PIPE, stderr=self._stderr, env=variables,
             cwd=str(_REPOSITORY))
         assert self._process.stdout is not None
         os.set_blocking(self._process.stdout.fileno(), False)
@@ -217,7 +235,7 @@ class CompileWorker:
 
 
 def _warm(model_path: Path, paths: Sequence[str], groups: Sequence[str], folder: Path,
-          render_path: str = "auto") -> None:
+          render_path: str = "auto", environment_spec: str | None = None) -> None:
     """The child: warm every group of every path, reporting each on stdout once it is on disk; then, for
     ``render_path`` ``auto`` on a GPU with no cached verdict, time the two render paths (viewer.deferred) so
     that the window (which never measures) finds the verdict from its next material or start on."""
@@ -228,9 +246,11 @@ def _warm(model_path: Path, paths: Sequence[str], groups: Sequence[str], folder:
     from viewer.scene import SceneRenderer
 
     model = load_model(model_path)
+    environment = None  # read before the environment group's first draw (not before the quick surface group)
     ctx = None
     done: set[str] = set()
     software = False
+    yielded = False  # the environment group lowered the child's priority
     for requested in paths:
         ctx = ctx or create_headless_context()
         software = is_software_rasterizer(ctx)
@@ -251,7 +271,18 @@ def _warm(model_path: Path, paths: Sequence[str], groups: Sequence[str], folder:
                     Path(temporary).write_text(source, encoding="utf-8")
                 with contextlib.suppress(OSError):
                     os.nice(_BAKED_NICENESS)
-            warm_group(scene, group)
+            if group == ENVIRONMENT_GROUP:
+                if not yielded:  # the window is up by now: its first picture waits on a default-view worker at +5,
+                    yielded = True  # which the table's seconds of numpy starved by 2.5 s at niceness 0 (measured)
+                    with contextlib.suppress(OSError):
+                        os.nice(_BAKED_NICENESS)
+                scene.importance_table()  # built (seconds of numpy) and cached on disk for the window
+                if environment is None:
+                    from gratnet.environment import load_environment
+
+                    environment = (load_environment(environment_spec or "1", what="--environment")
+                                   or load_environment("1"))
+            warm_group(scene, group, environment=environment)
             scene.release()
             # Mesa writes the cache entries on a thread: reported only once they are on disk (the window's
             # compile would otherwise miss them and take the full compile time).
@@ -279,13 +310,14 @@ def main(argv: Sequence[str] | None = None) -> int:
     parser.add_argument("--folder", required=True, help="where to write the baked mlp.glsl")
     parser.add_argument("--nice", type=int, default=0, help="niceness to add at start")
     parser.add_argument("--render-path", default="auto", help="the viewer's render path (auto: measure it here)")
+    parser.add_argument("--environment", default=None, help="the environment the environment group is drawn with")
     arguments = parser.parse_args(argv)
     if arguments.nice > 0:
         with contextlib.suppress(OSError):
             os.nice(arguments.nice)
     try:
         _warm(Path(arguments.model), arguments.paths.split(","), arguments.groups.split(","), Path(arguments.folder),
-              arguments.render_path)
+              arguments.render_path, arguments.environment)
     except GratNetError as error:
         print(f"compile worker: {error}", file=sys.stderr)
         return 2

@@ -14,18 +14,48 @@ uploaded mesh for a :class:`~viewer.state.ViewerState`, in one of two modes:
   being waited for ("compiling the shader for cd… 12 s"). (colour-science is not needed: the window's
   display conversion is :mod:`viewer.srgb`'s.)
 
+Environment light (``gratnet view --environment``; ``environment`` set): the child also warms the ``environment``
+group (the surface program's ``ENVIRONMENT`` variant on the forward path, and the material's importance table,
+which lands in its disk cache). A state with an environment renders with it only once that group is linked and
+drawn here (:meth:`SceneSupply.environment_live`); until then :meth:`SceneSupply.scene` hands the ``surface``
+group's renderer, the caller shows the scene without the environment, and :meth:`SceneSupply.status` says so.
+
 Rendering only: no glfw, no imgui.
+
+Never blocking (issue 11; measured in docs/benchmarks.md "Viewer: a window that never blocks"): the window
+never compiles a shader that has not been compiled already. :class:`~viewer.scene_supply.SceneSupply`
+(background mode, the window's default) has a child process (:mod:`viewer.compile_worker`) compile each
+material's programs on its own EGL context, which fills Mesa's disk shader cache; the window then links
+the same program text as a cache hit, one short step per frame. The quick texture path (about a second
+to compile) gives the first picture; on a CPU rasterizer the faster baked program (25–60 s to compile)
+takes over when its compile is done; while idle, a child at a low priority warms the other shipped
+materials' quick programs, so that a switch to one links them at once. Until then the panel's status line
+says what is compiling ("compiling the shader for cd… 12 s") and the picture on show stays. Meshes are
+built on a thread, the first frame (imgui's own shaders) is drawn before the window is shown, and a
+switch's (or a start's) default view is guessed in a worker process and refined in another
+(:mod:`viewer.default_view`; a new picture waits up to 2 s for the guess). Each frame's work, the figure the
+panel shows as "frame", is its events, panel, at most one preview or band, and drawing; the idle wait for
+input is not counted.
 """
 
 from __future__ import annotations
 
+import sys
+import threading
 from collections.abc import Callable
 from concurrent.futures import Future, ThreadPoolExecutor
 from typing import Any
 
 from gratnet.errors import GratNetError
 from viewer.catalog import build_mesh, check_mesh_spec, resolve_material
-from viewer.compile_worker import GROUPS, CompileWorker, shader_cache_enabled, warm_group, window_render_path
+from viewer.compile_worker import (
+    ENVIRONMENT_GROUP,
+    GROUPS,
+    CompileWorker,
+    shader_cache_enabled,
+    warm_group,
+    window_render_path,
+)
 
 __all__ = ["PREVIEW_MESHES", "SceneSupply", "load_material"]
 
@@ -86,10 +116,13 @@ class SceneSupply:
         worker: a child already warming the first material's programs (:meth:`start_worker`, called
             before the window and its context exist, so that the compile starts at once); adopted when the
             first material selected is its model, else stopped.
+        environment: an environment spec (``gratnet view --environment``; ``None``: none): every material's
+            child also warms the ``environment`` group, drawn with this environment (see the module docstring).
     """
 
     def __init__(self, ctx: Any, weights_path: str = "auto", background: bool = False,
-                 worker: CompileWorker | None = None, render_path: str = "auto") -> None:
+                 worker: CompileWorker | None = None, render_path: str = "auto",
+                 environment: str | None = None) -> None:
         from viewer.renderer import WEIGHTS_PATHS
         from viewer.scene import check_render_path
 
@@ -100,6 +133,18 @@ class SceneSupply:
         #: ``--render-path``: ``auto`` takes the cached verdict (forward until the compile child measured it).
         self.render_path = check_render_path(render_path)
         self.background = background
+        #: The environment the ``environment`` group is warmed with (None: that group is never warmed or used).
+        self.environment = environment
+        #: The Environment of this window's first draw of the ``environment`` group (loaded from ``environment``
+        #: there when None; the viewer hands its own, already read, so that no frame reads a map).
+        self.warm_environment: Any = None
+        # EnvironmentLighting.set_uniforms takes its XYZ → sRGB matrix from colour-science, whose import took 2.6–5.2 s
+        # in the window's first environment draw (measured, llvmpipe, load 7 on 2 cores): imported on a thread once
+        # the first picture is on show (from the start, its share of the GIL delayed the first picture by 3 s), and
+        # the environment group is not linked before it is done (else the draw would wait on the import).
+        self._colour: threading.Thread | None = None
+        if environment is not None and background and "colour" not in sys.modules:
+            self._colour = threading.Thread(target=_import_colour, name="gratnet-colour", daemon=True)
         #: Problems found in the background (a mesh that failed to load, a failed child), for the panel.
         self.errors: dict[str, str] = {}
         self._models: dict[str, Any] = {}
@@ -124,15 +169,16 @@ class SceneSupply:
         self._executor = ThreadPoolExecutor(1, thread_name_prefix="gratnet-mesh") if background else None
 
     @staticmethod
-    def start_worker(state: Any, weights_path: str = "auto", render_path: str = "auto") -> CompileWorker | None:
+    def start_worker(state: Any, weights_path: str = "auto", render_path: str = "auto",
+                     environment: str | None = None) -> CompileWorker | None:
         """A child warming ``state``'s material (``None`` when Mesa's shader cache is off), started before
-        any context exists: the quick texture path first, then what ``weights_path`` picks there."""
+        any context exists: the quick texture path first, then what ``weights_path`` picks there; with
+        ``environment`` the ``environment`` group too."""
         if not shader_cache_enabled():
             return None
         paths = ("texture", weights_path) if weights_path == "auto" else (weights_path,)
-        groups = ("slice", "surface") if state.slice_mode else GROUPS
-        return CompileWorker(resolve_material(state.material), paths, groups, state.material,
-                             render_path=render_path)
+        return CompileWorker(resolve_material(state.material), paths, _worker_groups(state, environment),
+                             state.material, render_path=render_path, environment=environment)
 
     # -- checks (cheap, on the caller's thread) ----------------------------------------------------
 
@@ -173,20 +219,22 @@ class SceneSupply:
             if prestarted is not None and prestarted.model_path == model_path:
                 self._worker, prestarted = prestarted, None
             else:
-                groups = ("slice", "surface") if state.slice_mode else GROUPS
+                groups = _worker_groups(state, self.environment)
                 # The window is on screen: the child yields the CPU to it (the first child, started before
                 # the window shows, runs at full priority).
                 self._worker = CompileWorker(model_path, self._paths, groups, state.material, niceness=5,
-                                             render_path=self.render_path)
+                                             render_path=self.render_path, environment=self.environment)
         if prestarted is not None:
             prestarted.close()
         if self._worker is None:  # a child's compile would not spare ours: the first path only, compiled here
             self._paths = self._paths[:1]
 
     def _ready(self, path: str, group: str) -> bool:
-        """Whether the program group can be linked here without a long compile."""
+        """Whether the program group can be linked here without a long compile (or a long import)."""
         if not self.background:
             return True
+        if group == ENVIRONMENT_GROUP and self._colour is not None and not self._colour_imported():
+            return False
         if self._material is not None and (str(resolve_material(self._material)), path, group) in self._warm:
             return True
         if self._worker is None:  # no disk cache, or the child failed: the first path, compiled here
@@ -211,23 +259,48 @@ class SceneSupply:
                 self._paths = self._paths[:1]
                 worker.close()
             elif worker.finished and not worker.running:  # its context chose otherwise: keep what it made
-                made = tuple(path for path in self._paths if any((path, g) in worker.ready for g in GROUPS))
+                made = tuple(path for path in self._paths if any((path, g) in worker.ready for g in worker.groups))
                 self._paths = made or self._paths[:1]
         self._collect_meshes()
-        group = _group(state)
-        self._advance_prefetch(group, idle)
-        best = self._best_active(group)
-        for path in reversed(self._paths):
-            if best is not None and (not idle or _SPEED_ORDER.index(path) <= _SPEED_ORDER.index(best)):
+        self._advance_prefetch(_group(state, self.environment), idle)
+        for group in self._groups(state):
+            best = self._best_active(group)
+            for path in reversed(self._paths):
+                if best is not None and (not idle or _SPEED_ORDER.index(path) <= _SPEED_ORDER.index(best)):
+                    break
+                if not self._ready(path, group):
+                    continue
+                if (path, group) not in self._linked:
+                    self._link(path, group, every_step=False)
+                    return "linked"
+                self._first_draw(path, group)
+                return "took over" if best is not None else "drawn"
+            if best is not None:  # the group on show needs no fallback
                 break
-            if not self._ready(path, group):
-                continue
-            if (path, group) not in self._linked:
-                self._link(path, group, every_step=False)
-                return "linked"
-            self._first_draw(path, group)
-            return "took over" if best is not None else "drawn"
         return None
+
+    def _groups(self, state: Any) -> tuple[str, ...]:
+        """The program groups that can render ``state``, the one it wants first: an environment state falls
+        back to ``surface`` (the scene without the environment) until its own group is ready."""
+        group = _group(state, self.environment)
+        return (group, "surface") if group == ENVIRONMENT_GROUP else (group,)
+
+    def _best_for(self, state: Any) -> str | None:
+        """The fastest active path of the first of :meth:`_groups` that has one."""
+        for group in self._groups(state):
+            best = self._best_active(group)
+            if best is not None:
+                return best
+        return None
+
+    def environment_live(self, state: Any) -> bool:
+        """Whether ``state`` renders with its environment now: it has one, the supply warms environments, and the
+        ``environment`` group is ready (else :meth:`scene` is the scene without the environment). In blocking
+        mode :meth:`scene` links that group when first asked."""
+        if _group(state, self.environment) != ENVIRONMENT_GROUP:
+            return False
+        return not self.background or (state.material == self._material
+                                       and self._best_active(ENVIRONMENT_GROUP) is not None)
 
     def _note_warm(self, worker: CompileWorker) -> None:
         """Read ``worker``'s reports; what it warmed is linked from the cache from now on."""
@@ -275,12 +348,15 @@ class SceneSupply:
             return False
         if self._worker is not None:
             self._worker.poll()
-        best = self._best_active(_group(state))
-        for path in reversed(self._paths):
-            if best is not None and (not idle or _SPEED_ORDER.index(path) <= _SPEED_ORDER.index(best)):
-                return False
-            if self._ready(path, _group(state)):
-                return True
+        for group in self._groups(state):
+            best = self._best_active(group)
+            for path in reversed(self._paths):
+                if best is not None and (not idle or _SPEED_ORDER.index(path) <= _SPEED_ORDER.index(best)):
+                    break
+                if self._ready(path, group):
+                    return True
+            if best is not None:
+                break
         return False
 
     def pending(self, state: Any) -> bool:
@@ -290,7 +366,7 @@ class SceneSupply:
         key = _mesh_key(state.mesh, False)
         if not state.slice_mode and isinstance(self._meshes.get(key), Future):
             return True
-        group = _group(state)
+        group = _group(state, self.environment)
         return state.material != self._material or self._best_active(group) != self._paths[-1]
 
     def status(self, state: Any) -> str:
@@ -300,8 +376,11 @@ class SceneSupply:
             return ""
         worker = self._worker
         elapsed = f"{worker.elapsed():.0f} s" if worker is not None else ""
-        group = _group(state)
+        group = _group(state, self.environment)
         best = self._best_active(group)
+        if best is None and group == ENVIRONMENT_GROUP and self._best_active("surface") is not None:
+            return (f"compiling the environment light for {state.material}... {elapsed} (showing it without the "
+                    "environment)")
         if best is None:
             return f"compiling the shader for {state.material}... {elapsed}".rstrip()
         if best != self._paths[-1]:
@@ -321,7 +400,7 @@ class SceneSupply:
         """The weights path that renders ``state`` now (``None``: nothing ready yet)."""
         if state.material != self._material:
             return None
-        return self._best_active(_group(state))
+        return self._best_for(state)
 
     def _best_active(self, group: str) -> str | None:
         for path in reversed(self._paths):
@@ -349,6 +428,11 @@ class SceneSupply:
         if group == "slice":
             return [lambda: network.program("brdf_slice")]
         steps: list[Callable[[], object]] = [lambda: network.program("surface")]  # the mesh buffers bind to it
+        if group == ENVIRONMENT_GROUP:  # always the forward path; the table from the child's disk cache (~16 ms)
+            from viewer.environment_light import ENVIRONMENT_DEFINES
+
+            return [*steps, lambda: network.variant_program("surface", ENVIRONMENT_DEFINES),
+                    lambda: network.depth_only_program("surface"), scene.importance_table]
         if scene.render_path == "deferred":  # the window's path on a CPU, or the cached verdict on a GPU
             return steps + scene.deferred.compile_steps()
         return [*steps, lambda: network.depth_only_program("surface")]  # the forward path's depth pre-pass
@@ -367,9 +451,28 @@ class SceneSupply:
         self._linked.add((path, group))
         return True
 
+    def _colour_imported(self) -> bool:
+        """Whether the import of colour-science (see ``_colour``) is done; starts it if it has not started."""
+        thread = self._colour
+        if thread is None:
+            return True
+        if thread.ident is None:
+            thread.start()
+        return not thread.is_alive()
+
     def _first_draw(self, path: str, group: str) -> None:
-        warm_group(self._scenes[path], group)  # llvmpipe compiles (here: loads) the draw code at the first draw
+        environment = None
+        if group == ENVIRONMENT_GROUP:  # drawn with the environment the child drew (the same texture formats)
+            if self.warm_environment is None:
+                from gratnet.environment import load_environment
+
+                self.warm_environment = load_environment(self.environment or "1")
+            environment = self.warm_environment
+        # llvmpipe compiles (here: loads) the draw code at the first draw
+        warm_group(self._scenes[path], group, environment=environment)
         self._active.add((path, group))
+        if group != ENVIRONMENT_GROUP:
+            self._colour_imported()  # a picture is on show: the import may start
 
     # -- what renders ------------------------------------------------------------------------------
 
@@ -377,11 +480,11 @@ class SceneSupply:
         """``(SceneRenderer, MeshBuffers or None in slice mode)`` for ``state`` (with ``preview``: the mesh's
         coarser preview tessellation where it has one), or ``None`` while they are not ready (background)."""
         self._select(state)
-        group = _group(state)
+        group = _group(state, self.environment)
         if not self.background and (self._paths[-1], group) not in self._active:
             self._link(self._paths[-1], group)
             self._first_draw(self._paths[-1], group)
-        path = self._best_active(group)
+        path = self._best_for(state)
         if path is None:
             return None
         scene = self._scenes[path]
@@ -405,7 +508,7 @@ class SceneSupply:
         the background). Asks for both tessellations of the mesh, so that the full one is built meanwhile."""
         if not self.background:
             return True
-        if state.material != self._material or self._best_active(_group(state)) is None:
+        if state.material != self._material or self._best_for(state) is None:
             return False
         if state.slice_mode:
             return True
@@ -473,8 +576,26 @@ class SceneSupply:
             self._executor.shutdown(wait=False, cancel_futures=True)
 
 
-def _group(state: Any) -> str:
-    return "slice" if state.slice_mode else "surface"
+def _import_colour() -> None:
+    import contextlib
+
+    with contextlib.suppress(Exception):  # a failed import fails again, with its message, where it is used
+        import colour  # noqa: F401 - for viewer.environment_light's matrix (see SceneSupply.__init__)
+
+
+def _group(state: Any, environment: str | None = None) -> str:
+    """The program group that renders ``state`` (``environment``: the supply warms environments)."""
+    if state.slice_mode:
+        return "slice"
+    return ENVIRONMENT_GROUP if environment is not None and getattr(state, "has_environment", False) else "surface"
+
+
+def _worker_groups(state: Any, environment: str | None) -> tuple[str, ...]:
+    """The groups a material's child warms, the one on show first; the environment variant right after the
+    surface group (the scene without the environment shows first, while the variant compiles)."""
+    if state.slice_mode:
+        return ("slice", "surface", ENVIRONMENT_GROUP) if environment is not None else ("slice", "surface")
+    return ("surface", ENVIRONMENT_GROUP, "slice") if environment is not None else GROUPS
 
 
 def _mesh_key(spec: str, preview: bool) -> str:

@@ -6,6 +6,37 @@ stands still (:meth:`ResolutionPolicy.band_rows`, :class:`BandCamera`, :class:`R
 sub-pixel samples band by band (:class:`Accumulation`). The cost model predicts a render's seconds from
 the measured seconds per "effective pixel": a covered pixel counts 1, an uncovered one
 :data:`UNCOVERED_COST` (the network runs only where the mesh covers). Pure numpy: no GL, no glfw, no imgui.
+
+## How the viewer spends its frames (viewer.app)
+
+Staying responsive on a CPU rasterizer (issue 35: Mesa llvmpipe, 2 cores; a covered pixel of a shipped
+feature-grid network costs 30–75 µs, so a 512² disc holds ~9 s of work):
+
+- The window renders on the deferred path there (:func:`viewer.compile_worker.window_render_path`: the
+  network once per covered pixel), its renders padded to power-of-two sizes
+  (:func:`viewer.scheduling.padded_size`: the compute kernels' variant the compile child warmed).
+- While the state keeps changing (a slider or the mouse moving, and for ``idle_seconds`` after the last
+  change), every new state is rendered at a reduced resolution: the smallest of 1/2 … 1/32 whose
+  predicted cost fits ``interactive_budget_s`` (the cost model: measured seconds per covered pixel × the
+  covered pixels of the last preview; before any measurement a preview of at most 1024 pixels).
+  Previews of the built-in disc and sphere use coarser tessellations (on the forward path llvmpipe's
+  cost per triangle dominates at low resolution).
+- Once the state has stood still, the full-resolution picture is built in horizontal bands (the same
+  camera with clip space cropped to the band's rows: the same pixel centres as one full render), one
+  band per frame sized to ``refine_budget_s``; the window keeps handling input between bands, the
+  preview stays on show under the bands not yet done, and any change abandons the refinement.
+  (BRDF-slice mode doubles the resolution per level up to full, each level in bands of rows that fit
+  ``refine_budget_s``: a scissor box limits the slice render to the band's rows.)
+- Progressive anti-aliasing (issue 12; ``max_samples``, the panel's "samples" choice): once a mesh view's
+  full-resolution picture is complete and the view stands still, each further step adds the next sub-pixel
+  sample (:func:`viewer.antialias.sample_offsets`, the offsets of ``gratnet render --spp``) in bands of rows
+  sized like the refinement's, into float32 sums, and shows their mean, until ``max_samples`` (not while a
+  faster program for the view still compiles in the background: that compile gets the CPU); any change
+  of the view starts again from the 1-sample preview. Previews and refinement bands are 1 sample (the pixel
+  centre), so interaction costs what it did. The mean of k samples equals ``SceneRenderer.render(...,
+  samples=k)`` (tests/runtime/test_viewer.py). BRDF-slice mode stays at 1 sample.
+- When the picture is complete (and has its samples) and nothing changes, nothing is rendered, and the
+  window sleeps in ``glfw.wait_events_timeout`` instead of spinning.
 """
 
 from __future__ import annotations

@@ -37,6 +37,14 @@ class ViewerState:
     ior: float = 1.5
     slice_mode: bool = False
     shading: str = "network"  # viewer.reference_view.SHADINGS: network, reference (a loaded volume) or flip
+    # The lighting flags of `gratnet render` (viewer.scene_config.LightingConfig), resolved: the light's intensity
+    # (0 by default under an environment), the environment's spec (none, sky, studio, a radiance, R,G,B or a map's
+    # path), its turn about +z and factor, and the seed of its light samples.
+    light_intensity: float = 1.0
+    environment: str = "none"
+    environment_rotation: float = 0.0
+    environment_scale: float = 1.0
+    seed: int = 0
 
     def key(self) -> tuple[Any, ...]:
         """The values that decide the pixels (two states with equal keys render the same picture)."""
@@ -50,7 +58,12 @@ class ViewerState:
         return Camera(self.camera_distance, self.camera_azimuth, self.camera_elevation, fov_deg=self.fov)
 
     def light(self) -> Light:
-        return Light.directional(self.light_theta, self.light_phi)
+        return Light.directional(self.light_theta, self.light_phi, self.light_intensity)
+
+    @property
+    def has_environment(self) -> bool:
+        """Whether :attr:`environment` names an environment light (``none``, 0 and 0,0,0 do not)."""
+        return _names_environment(self.environment)
 
     def render_config(self, width: int, height: int, spp: int = 1) -> RenderConfig:
         """The ``gratnet render`` config that reproduces this view at ``width`` × ``height`` with ``spp``
@@ -60,8 +73,21 @@ class ViewerState:
             light_phi_degrees=self.light_phi, camera_distance=self.camera_distance,
             camera_azimuth_degrees=self.camera_azimuth, camera_elevation_degrees=self.camera_elevation,
             fov_degrees=self.fov, exposure=self.exposure, width=width, height=height, ior=self.ior,
-            fresnel=self.fresnel, slice=self.slice_mode, spp=spp,
+            fresnel=self.fresnel, slice=self.slice_mode, spp=spp, light_intensity=self.light_intensity,
+            environment=self.environment, environment_rotation=self.environment_rotation,
+            environment_scale=self.environment_scale, seed=self.seed,
         )
+
+
+def _names_environment(spec: str) -> bool:
+    """``gratnet.environment.load_environment``'s rule for "no environment", without reading a map."""
+    text = str(spec).strip().lower()
+    if text in ("", "none"):
+        return False
+    try:
+        return any(float(part) != 0.0 for part in text.split(","))
+    except ValueError:
+        return True  # a name or a path
 
 
 @dataclasses.dataclass(frozen=True)
@@ -93,5 +119,9 @@ SLIDERS: dict[str, Slider] = {
         Slider("camera_distance", "distance (m)", 0.02, 5.0, log=True, format="%.3f"),
         Slider("exposure", "exposure", 1e-3, 1e7, log=True, format="%.4g"),
         Slider("ior", "IOR", 1.05, 3.0, format="%.2f"),  # n = 1 has no Fresnel reflection: R0 = 0
+        # Under an environment (gratnet view --environment): the panel's lighting controls.
+        Slider("light_intensity", "light intensity", 0.0, 100.0, format="%.3g"),
+        Slider("environment_rotation", "env. rotation (°)", -180.0, 180.0),
+        Slider("environment_scale", "env. scale", 1e-5, 1e5, log=True, format="%.4g"),
     )
 }

@@ -24,6 +24,14 @@
   150 ms a frame may take); on a GPU it takes the verdict cached for this GPU and network shape, and while
   there is none renders forward and lets the compile process time both.
 
+- ``--environment none|sky|studio|RADIANCE|R,G,B|MAP.exr|MAP.hdr``, ``--environment-rotation``,
+  ``--environment-scale``, ``--light-intensity``, ``--seed``: the lighting flags of ``gratnet render``
+  (viewer.scene_config.LightingConfig), with the same meanings and defaults (with an environment the light is off
+  unless ``--light-intensity`` is given). A still view then keeps adding passes of the environment's estimator, up
+  to ``--environment-spp`` (default 256); without ``--exposure`` the exposure comes from the first picture under
+  the environment. The panel then offers none, sky, studio and the given environment, its rotation and scale.
+  ``--render-path deferred`` with an environment is refused (it renders forward), as in ``gratnet render``.
+
 Mouse: drag over the picture to orbit (in BRDF-slice mode: to move the light), wheel to zoom. The
 Screenshot button writes ``gratnet-view-NNN.png`` (display sRGB, full resolution) and its
 ``.config.json`` (the ``gratnet render`` settings) into ``--screenshot-dir``.
@@ -44,15 +52,17 @@ import contextlib
 import math
 from typing import TYPE_CHECKING, Any
 
-from gratnet.config import add_quiet_flag, parse_float, parse_int
+from gratnet.config import add_arguments, add_quiet_flag, parse_float, parse_int
 from gratnet.errors import GratNetError
 from gratnet.quality import ACCURATE, AUTO, QUALITY_HELP, VIEW_QUALITIES
 from viewer.scene_config import (
     RENDER_PATH_HELP,
     RENDER_PATHS,
     WEIGHT_PATHS,
+    LightingConfig,
     add_scene_arguments,
     fill_scene_defaults,
+    lighting_help,
     with_fallback,
 )
 
@@ -96,6 +106,10 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                         "as gratnet render --spp; 1: off; typical: 4 to 64; the panel changes it; default: 16)")
     parser.add_argument("--render-path", choices=RENDER_PATHS, default="auto", help=f"{RENDER_PATH_HELP}; "
                         "default: auto")
+    lighting_help(add_arguments(parser, LightingConfig))  # gratnet render's lighting flags, the same meanings
+    parser.add_argument("--environment-spp", type=parse_int, default=None, metavar="N",
+                        help="passes of the environment's estimator accumulated while the view stands still (1 … "
+                        "4096; the panel changes it; default: 256)")
     parser.add_argument("--reference", metavar="VOLUME.exr",
                         help="the material's ground-truth volume (gratnet groundtruth's EXR): the panel then shows "
                         "the network, the volume looked up per pixel, or the FLIP heat map between them")
@@ -194,6 +208,7 @@ def starting_view(arguments: argparse.Namespace, exact: bool = False) -> tuple[V
     load_material(view_point(arguments)[1])
     if arguments.mesh not in MESHES:  # an .obj file: built now (a built-in mesh cannot fail)
         build_mesh(arguments.mesh)
+    lighting = lighting_of(arguments)
     guessed: tuple[str, ...] = ()  # the unset --light, --camera, --exposure, from the material and mesh:
     if exact:
         fill_scene_defaults(arguments)
@@ -210,8 +225,28 @@ def starting_view(arguments: argparse.Namespace, exact: bool = False) -> tuple[V
     for name, value in values.items():
         values[name] = SLIDERS[name].clamp(value)
     state = ViewerState(material=arguments.material, mesh=arguments.mesh, fresnel=fresnel,
-                        slice_mode=arguments.slice, **values)
+                        slice_mode=arguments.slice, light_intensity=lighting.effective_light_intensity,
+                        environment=str(lighting.environment).strip() if lighting.has_environment else "none",
+                        environment_rotation=lighting.environment_rotation,
+                        environment_scale=lighting.environment_scale, seed=lighting.seed, **values)
     return state, guessed
+
+
+def lighting_of(arguments: argparse.Namespace) -> LightingConfig:
+    """The lighting flags checked as ``gratnet render`` checks them (one line if bad, the map read), before any
+    window: ``--environment`` with ``--render-path deferred`` is refused (an environment renders forward)."""
+    from gratnet.config import from_arguments
+    from viewer.antialias import MAX_SAMPLES
+    from viewer.scene_config import check_lighting
+
+    lighting = from_arguments(LightingConfig, arguments)
+    check_lighting(lighting)
+    if lighting.has_environment and getattr(arguments, "render_path", "auto") == "deferred":
+        raise GratNetError("--environment renders on the forward path (--render-path auto or forward)")
+    passes = getattr(arguments, "environment_spp", None)
+    if passes is not None and not 1 <= passes <= MAX_SAMPLES:
+        raise GratNetError(f"--environment-spp must be an integer in 1 … {MAX_SAMPLES}, got {passes}")
+    return lighting
 
 
 def starting_state(arguments: argparse.Namespace) -> ViewerState:
@@ -224,18 +259,23 @@ def open_window(arguments: argparse.Namespace, **window_options: Any) -> ViewerW
     """The window of a ``gratnet view`` command line, open (the caller closes it): the compile child started
     first, the flags checked, the first view (:func:`starting_view`), the ``--reference`` volume read.
     ``window_options``: further :class:`~viewer.window.ViewerWindow` arguments (benchmarks/viewer_latency.py)."""
+    from viewer.environment_view import ENVIRONMENT_SAMPLES
     from viewer.scene_config import parse_size
     from viewer.scene_supply import SceneSupply
     from viewer.state import ViewerState
     from viewer.window import ViewerWindow
 
     size = parse_size(arguments.size_text)
+    # Before the defaults fill --exposure: under an environment its default comes from the first picture.
+    environment = str(arguments.environment).strip()
+    exposure_given = arguments.exposure is not None
     # The compile child first: its Python start-up and the first shader overlap the checks, the first view and
-    # the window's set-up (a bad material is reported by the checks below).
+    # the window's set-up (a bad material or environment is reported by the checks below).
     worker = None
     with contextlib.suppress(GratNetError):  # the model of the starting point (--quality), as the app asks for it
-        worker = SceneSupply.start_worker(ViewerState(material=view_point(arguments)[1], slice_mode=arguments.slice),
-                                          arguments.weights_path, arguments.render_path)
+        start = ViewerState(material=view_point(arguments)[1], slice_mode=arguments.slice, environment=environment)
+        worker = SceneSupply.start_worker(start, arguments.weights_path, arguments.render_path,
+                                          environment if start.has_environment else None)
     try:
         state, guessed = starting_view(arguments)
         reference = None
@@ -255,7 +295,8 @@ def open_window(arguments: argparse.Namespace, **window_options: Any) -> ViewerW
     window = ViewerWindow(state, size, screenshot_dir=arguments.screenshot_dir, extra_meshes=extra,
                           weights_path=arguments.weights_path, max_samples=arguments.spp,
                           render_path=arguments.render_path, reference=reference, worker=worker, refine_view=guessed,
-                          quality=quality, **window_options)
+                          quality=quality, auto_exposure=state.has_environment and not exposure_given,
+                          environment_samples=arguments.environment_spp or ENVIRONMENT_SAMPLES, **window_options)
     return window
 
 

@@ -28,8 +28,10 @@ import numpy as np
 from gratnet.errors import GratNetError
 from gratnet.quality import AUTO
 from viewer.app import ViewerApp
+from viewer.environment_view import ENVIRONMENT_SAMPLES
 from viewer.reference_view import SHADINGS
 from viewer.scheduling import ResolutionPolicy
+from viewer.screenshot import next_screenshot_path, save_screenshot
 from viewer.state import SLIDERS, ViewerState
 
 __all__ = ["ViewerWindow"]
@@ -58,6 +60,8 @@ class ViewerWindow:
         worker: a compile child started earlier for ``state`` (``SceneSupply.start_worker``; ``gratnet view``
             starts it first thing), adopted (closed if the window cannot open); else the window starts one.
         refine_view: as :class:`ViewerApp` (the fields of ``state`` that are a guess at the default view).
+        environments, environment_samples, auto_exposure: as :class:`ViewerApp` (environment light: the panel then
+            has an environment chooser, its rotation and scale, and the light's intensity).
 
     Raises:
         GratNetError: no display, or no OpenGL 4.3 core context for a window.
@@ -66,6 +70,8 @@ class ViewerWindow:
     PANEL_WIDTH = 300
     #: The panel's choices of samples per pixel accumulated while the view stands still.
     SAMPLE_CHOICES = (1, 4, 16, 64)
+    #: … and of passes under an environment (its noise needs many).
+    ENVIRONMENT_SAMPLE_CHOICES = (16, 64, 256, 1024, 4096)
 
     def __init__(self, state: ViewerState | None = None, size: tuple[int, int] = (512, 512),
                  policy: ResolutionPolicy | None = None, clock: Callable[[], float] = time.perf_counter,
@@ -73,7 +79,8 @@ class ViewerWindow:
                  weights_path: str = "auto", background: bool = True,
                  visible: bool = True, title: str = "GratNet viewer", max_samples: int = 16,
                  render_path: str = "auto", reference: Any = None, worker: Any = None,
-                 refine_view: Iterable[str] = (), quality: str = AUTO) -> None:
+                 refine_view: Iterable[str] = (), quality: str = AUTO, environments: Iterable[str] = (),
+                 environment_samples: int = ENVIRONMENT_SAMPLES, auto_exposure: bool = False) -> None:
         from viewer.context import context_from_current
         from viewer.scene_supply import SceneSupply
         from viewer.surface import check_size
@@ -82,7 +89,9 @@ class ViewerWindow:
         # The compile child first: its Python start-up and the quick shader overlap the window's set-up.
         if background and worker is None:
             with contextlib.suppress(GratNetError):  # a bad material is reported by ViewerApp below
-                worker = SceneSupply.start_worker(state or ViewerState(), weights_path, render_path)
+                start = state or ViewerState()
+                warmed = start.environment if start.has_environment else next(iter(environments), None)
+                worker = SceneSupply.start_worker(start, weights_path, render_path, warmed)
         glfw, imgui = self._glfw, self._imgui = _shell_modules()
         self.screenshot_dir = Path(screenshot_dir)
         self.idle_wait_s = float(idle_wait_s)
@@ -147,7 +156,9 @@ class ViewerWindow:
             self._gl = _GLFunctions(glfw)
             self._texture = self._picture_texture(1, 1)  # drawn by the first frame: see there
             self._app = ViewerApp(self.ctx, state, self._area_pixels(), policy, clock, extra_meshes, weights_path,
-                                  background, worker, max_samples, render_path, reference, refine_view, quality)
+                                  background, worker, max_samples, render_path, reference, refine_view, quality,
+                                  environments=environments, environment_samples=environment_samples,
+                                  auto_exposure=auto_exposure)
             worker = None  # the app owns it now
             # The first frame compiles imgui's own shaders and, drawing the 1×1 picture texture, their variant
             # for its format (0.3–0.5 s on llvmpipe with an empty shader cache): drawn while the window is
@@ -414,8 +425,10 @@ class ViewerWindow:
         imgui.separator_text("display")
         self._slider("exposure")
         # Progressive anti-aliasing while the view stands still (1: off); the count shows under "performance".
-        choices = sorted({*self.SAMPLE_CHOICES, app.max_samples})
-        changed, index = imgui.combo("samples (still)", choices.index(app.max_samples), [str(c) for c in choices])
+        # Under an environment: its passes (the estimator's noise needs many).
+        cap = app.sample_cap
+        choices = sorted({*(self.ENVIRONMENT_SAMPLE_CHOICES if app.environment_live() else self.SAMPLE_CHOICES), cap})
+        changed, index = imgui.combo("samples (still)", choices.index(cap), [str(c) for c in choices])
         if changed:
             app.set_max_samples(choices[index])
         changed, value = imgui.checkbox("Fresnel", state.fresnel)
@@ -428,6 +441,20 @@ class ViewerWindow:
         self._slider("ior")
         imgui.pop_item_width()
         imgui.end_disabled()
+
+        if app.environments:  # gratnet view --environment: the chooser, its turn and factor, the light's intensity
+            imgui.separator_text("environment")
+            self._mark("environment")
+            spec = state.environment if state.environment in app.environments else "none"
+            names = [Path(choice).name if ("/" in choice or "\\" in choice) else choice for choice in app.environments]
+            changed, index = imgui.combo("environment", app.environments.index(spec), names)
+            if changed:
+                app.set(environment=app.environments[index])
+            imgui.begin_disabled(not state.has_environment)
+            self._slider("environment_rotation")
+            self._slider("environment_scale")
+            imgui.end_disabled()
+            self._slider("light_intensity")
 
         imgui.separator_text("performance")
         self._mark("performance")
@@ -454,7 +481,7 @@ class ViewerWindow:
             lines.append("; ".join(parts))
         if image is not None:
             progress = "complete" if image.complete else f"refining {image.progress:.0%}"
-            samples = "" if state.slice_mode else f", {image.samples}/{app.max_samples} samples"
+            samples = "" if state.slice_mode else f", {image.samples}/{app.sample_cap} samples"
             lines.append(f"{image.full_size[0]}×{image.full_size[1]}: {progress}{samples}")
         in_use = app.weights_path_in_use()
         lines.append(f"{in_use} weights, {stats.renders} renders" if in_use else f"{stats.renders} renders")
@@ -465,7 +492,7 @@ class ViewerWindow:
         (and its ``.config.json``), written atomically; the outcome is shown in the panel."""
         app = self.app
         try:
-            self.last_screenshot = app.save_screenshot(app.next_screenshot_path(self.screenshot_dir))
+            self.last_screenshot = save_screenshot(app, next_screenshot_path(self.screenshot_dir))
         except GratNetError as error:
             app.message = str(error)
             return None

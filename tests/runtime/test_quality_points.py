@@ -20,6 +20,7 @@ from gratnet.errors import GratNetError
 from gratnet.quality import ACCURATE, DEFAULT_QUALITY, FAST, POINT_FOLDERS, QUALITIES, VIEW_QUALITIES
 from tests.helpers import ASSETS, two_point_material
 from viewer import catalog
+from viewer.screenshot import save_screenshot
 
 #: A view of the plane that needs no default view (nothing reads a model before the render).
 SCENE = ["--mesh", "plane", "--light", "30,90", "--camera", "0.15,-90,50", "--exposure", "5000", "--size", "16,16"]
@@ -229,7 +230,7 @@ def test_the_viewer_renders_the_point_of_its_quality(ctx, assets, tmp_path):
         assert supplied is not None and supplied[0].model.layer_sizes[1] == 8  # the fast net's hidden width
         assert app.state.material == "duo"
         fast = app.render_full().copy()
-        shot = app.save_screenshot(tmp_path / "fast.png")
+        shot = save_screenshot(app, tmp_path / "fast.png")
         saved = json.loads(shot.with_name("fast.config.json").read_text())
         assert saved["render"]["quality"] == FAST and saved["model_file"].endswith("duo/fast/model.npz")
 

@@ -26,6 +26,7 @@ from gratnet.reference import (
 )
 from gratnet.volume import Volume, read_volume_header, volume_axes, write_volume
 from tests.helpers import REPO
+from viewer.screenshot import save_screenshot
 
 CD_MODEL = REPO / "assets" / "cd" / "model.npz"
 SCHEMES = ("regular", "simple", "simple-max")
@@ -329,7 +330,7 @@ def test_viewer_shows_the_reference_and_the_flip_heat_map(ctx, tmp_path):
         heat = viewer.render_full().copy()
         assert heat.shape == (32, 40, 3) and not np.array_equal(heat, shown)
         assert 0.0 < viewer.flip_mean <= 1.0  # a random volume is not the network's truth
-        screenshot = viewer.save_screenshot(tmp_path / "flip.png")
+        screenshot = save_screenshot(viewer, tmp_path / "flip.png")
         assert '"shading": "flip"' in screenshot.with_suffix(".config.json").read_text()
         with pytest.raises(GratNetError, match="shading must be one of"):
             viewer.set(shading="truth")

@@ -30,9 +30,10 @@ from PIL import Image
 from gratnet.cli import main
 from gratnet.errors import GratNetError
 from tests.helpers import ASSETS, PLANE, REPO, FakeClock
-from viewer.app import ViewerApp, drive_slider
+from viewer.app import ViewerApp
 from viewer.meshes import plane
 from viewer.scheduling import ResolutionPolicy
+from viewer.screenshot import drive_slider, next_screenshot_path, save_screenshot
 from viewer.state import SLIDERS, ViewerState
 
 BLAZED = ASSETS / "blazed" / "model.npz"
@@ -219,7 +220,7 @@ def test_screenshot_of_an_accumulated_view_records_its_samples(ctx, tmp_path):
         clock.advance(1.0)
         run_until_complete(viewer)
         assert viewer.samples == 2
-        path = viewer.save_screenshot(tmp_path / "shot.png")
+        path = save_screenshot(viewer, tmp_path / "shot.png")
     finally:
         viewer.release()
     config = json.loads(path.with_name("shot.config.json").read_text())["render"]
@@ -322,9 +323,9 @@ def test_a_default_view_worked_out_in_the_background_yields_to_the_user(tmp_path
 
 def test_screenshot_is_full_resolution_png_with_its_render_config(app, tmp_path):
     app.frame()  # only a preview so far: the screenshot renders the full picture itself
-    path = app.save_screenshot(app.next_screenshot_path(tmp_path))
+    path = save_screenshot(app, next_screenshot_path(tmp_path))
     assert path == tmp_path / "gratnet-view-001.png"
-    assert app.next_screenshot_path(tmp_path).name == "gratnet-view-002.png"
+    assert next_screenshot_path(tmp_path).name == "gratnet-view-002.png"
     image = np.asarray(Image.open(path))
     assert image.shape == (48, 64, 3) and np.count_nonzero(image.max(axis=2) > 16) > 5
     np.testing.assert_array_equal(image, app.image.pixels)
@@ -333,7 +334,7 @@ def test_screenshot_is_full_resolution_png_with_its_render_config(app, tmp_path)
     assert config["render"]["exposure"] == EXPOSURE and config["model_file"].endswith("model.npz")
     assert sorted(p.name for p in tmp_path.iterdir()) == ["gratnet-view-001.config.json", "gratnet-view-001.png"]
     with pytest.raises(GratNetError, match=".png"):
-        app.save_screenshot(tmp_path / "x.jpg")
+        save_screenshot(app, tmp_path / "x.jpg")
 
 
 # --------------------------------------------------------------------------------------------------
