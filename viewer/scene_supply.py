@@ -40,8 +40,6 @@ input is not counted.
 
 from __future__ import annotations
 
-import sys
-import threading
 from collections.abc import Callable
 from concurrent.futures import Future, ThreadPoolExecutor
 from typing import Any
@@ -138,13 +136,6 @@ class SceneSupply:
         #: The Environment of this window's first draw of the ``environment`` group (loaded from ``environment``
         #: there when None; the viewer hands its own, already read, so that no frame reads a map).
         self.warm_environment: Any = None
-        # EnvironmentLighting.set_uniforms takes its XYZ → sRGB matrix from colour-science, whose import took 2.6–5.2 s
-        # in the window's first environment draw (measured, llvmpipe, load 7 on 2 cores): imported on a thread once
-        # the first picture is on show (from the start, its share of the GIL delayed the first picture by 3 s), and
-        # the environment group is not linked before it is done (else the draw would wait on the import).
-        self._colour: threading.Thread | None = None
-        if environment is not None and background and "colour" not in sys.modules:
-            self._colour = threading.Thread(target=_import_colour, name="gratnet-colour", daemon=True)
         #: Problems found in the background (a mesh that failed to load, a failed child), for the panel.
         self.errors: dict[str, str] = {}
         self._models: dict[str, Any] = {}
@@ -230,11 +221,9 @@ class SceneSupply:
             self._paths = self._paths[:1]
 
     def _ready(self, path: str, group: str) -> bool:
-        """Whether the program group can be linked here without a long compile (or a long import)."""
+        """Whether the program group can be linked here without a long compile."""
         if not self.background:
             return True
-        if group == ENVIRONMENT_GROUP and self._colour is not None and not self._colour_imported():
-            return False
         if self._material is not None and (str(resolve_material(self._material)), path, group) in self._warm:
             return True
         if self._worker is None:  # no disk cache, or the child failed: the first path, compiled here
@@ -451,15 +440,6 @@ class SceneSupply:
         self._linked.add((path, group))
         return True
 
-    def _colour_imported(self) -> bool:
-        """Whether the import of colour-science (see ``_colour``) is done; starts it if it has not started."""
-        thread = self._colour
-        if thread is None:
-            return True
-        if thread.ident is None:
-            thread.start()
-        return not thread.is_alive()
-
     def _first_draw(self, path: str, group: str) -> None:
         environment = None
         if group == ENVIRONMENT_GROUP:  # drawn with the environment the child drew (the same texture formats)
@@ -471,8 +451,6 @@ class SceneSupply:
         # llvmpipe compiles (here: loads) the draw code at the first draw
         warm_group(self._scenes[path], group, environment=environment)
         self._active.add((path, group))
-        if group != ENVIRONMENT_GROUP:
-            self._colour_imported()  # a picture is on show: the import may start
 
     # -- what renders ------------------------------------------------------------------------------
 
@@ -574,13 +552,6 @@ class SceneSupply:
             self._prestarted = None
         if self._executor is not None:
             self._executor.shutdown(wait=False, cancel_futures=True)
-
-
-def _import_colour() -> None:
-    import contextlib
-
-    with contextlib.suppress(Exception):  # a failed import fails again, with its message, where it is used
-        import colour  # noqa: F401 - for viewer.environment_light's matrix (see SceneSupply.__init__)
 
 
 def _group(state: Any, environment: str | None = None) -> str:
