@@ -25,19 +25,11 @@ from typing import Any
 
 import numpy as np
 
+from viewer.scene_config import read_render_exr
+
 REPO = Path(__file__).resolve().parents[1]
 DEFAULT_JSON = REPO / "docs" / "data" / "environment_agreement.json"
 DEFAULT_FIGURE = REPO / "docs" / "images" / "environment_agreement.png"
-
-
-def _read_exr(path: Path) -> np.ndarray:
-    import OpenEXR
-
-    with OpenEXR.File(str(path)) as exr:
-        channels = exr.channels()
-        if "RGB" in channels:
-            return np.asarray(channels["RGB"].pixels, dtype=np.float64)
-        return np.stack([np.asarray(channels[name].pixels, dtype=np.float64) for name in "RGB"], axis=-1)
 
 
 def _timed(argv: list[str]) -> float:
@@ -73,7 +65,7 @@ def main(argv: list[str] | None = None) -> int:
         exposure = json.loads(gl_path.with_suffix(".config.json").read_text())["render"]["exposure"]
         mitsuba_seconds = _timed(["mitsuba-render", *common, "--integrator", "direct", "--exposure", repr(exposure),
                                   "--out", str(mitsuba_path)])
-        gl, mitsuba = _read_exr(gl_path), _read_exr(mitsuba_path)  # linear sRGB, exposure applied
+        gl, mitsuba = read_render_exr(gl_path), read_render_exr(mitsuba_path)  # linear sRGB, exposure applied
 
     def display(linear: np.ndarray) -> np.ndarray:
         from gratnet.display import xyz_to_display_srgb8

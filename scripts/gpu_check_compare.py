@@ -30,6 +30,8 @@ from typing import Any
 
 import numpy as np
 
+from viewer.scene_config import read_render_exr
+
 REPO = Path(__file__).resolve().parents[1]
 if str(REPO) not in sys.path:  # run as a script from anywhere: the checkout's packages first
     sys.path.insert(0, str(REPO))
@@ -88,17 +90,6 @@ def render_all(out: Path, materials: list[str], meshes: list[str], paths: list[s
     return records
 
 
-def read_exr(path: Path) -> np.ndarray:
-    """An RGB EXR as float64 ``(H, W, 3)`` (``gratnet render``'s: channels R, G, B, or one RGB channel)."""
-    import OpenEXR
-
-    with OpenEXR.File(str(path)) as file:
-        channels = file.channels()
-        if "RGB" in channels:
-            return np.asarray(channels["RGB"].pixels, dtype=np.float64)
-        return np.stack([np.asarray(channels[c].pixels, dtype=np.float64) for c in "RGB"], axis=-1)
-
-
 def display(linear: np.ndarray) -> np.ndarray:
     """Linear sRGB (exposure applied) → display sRGB in [0, 1] (clipped, the sRGB transfer function)."""
     import colour
@@ -131,7 +122,7 @@ def compare_dirs(reference_dir: Path, test_dir: Path) -> list[dict[str, Any]]:
         if not test.is_file():
             rows.append({"name": reference.stem, "missing": True})
             continue
-        rows.append({"name": reference.stem, **compare_images(read_exr(reference), read_exr(test))})
+        rows.append({"name": reference.stem, **compare_images(read_render_exr(reference), read_render_exr(test))})
     return rows
 
 

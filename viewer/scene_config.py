@@ -45,7 +45,7 @@ __all__ = ["DEFAULT_MATERIAL", "DEFERRED_WEIGHTS", "DEFERRED_WEIGHTS_HELP", "ENV
            "MAX_SAMPLES", "RENDER_PATHS", "RENDER_PATH_HELP", "WEIGHT_PATHS", "LightingConfig", "RenderConfig",
            "check_lighting", "environment_of", "lighting_help",
            "SceneConfig", "add_scene_arguments", "check_scene", "check_scene_numbers", "fill_scene_defaults",
-           "load_reference", "parse_size", "quality_help", "resolve_point",
+           "load_reference", "parse_size", "quality_help", "read_render_exr", "resolve_point",
            "resolve_scene_command", "scene_fields", "warn_if_black", "with_fallback", "write_render"]
 _OUTPUT_SUFFIXES = (".png", ".exr")
 #: Largest --spp of ``gratnet render``: viewer.antialias.MAX_SAMPLES (repeated: this module defers numpy).
@@ -388,6 +388,19 @@ def load_reference(path: str | Path, precision: str, material: str | None = None
         trained_on = load_model(resolve_material(material)).metadata.get("volume")
         check_volume_matches(header.metadata, trained_on if isinstance(trained_on, dict) else {}, name, material)
     return read_volume(path)
+
+
+def read_render_exr(path: str | Path) -> Any:
+    """An EXR that :func:`write_render` (or ``gratnet mitsuba-render``) wrote: linear sRGB, float64 ``(H, W, 3)``
+    (channels R, G, B, or one RGB channel)."""
+    import numpy as np
+    import OpenEXR
+
+    with OpenEXR.File(str(path)) as file:
+        channels = file.channels()
+        if "RGB" in channels:
+            return np.asarray(channels["RGB"].pixels, dtype=np.float64)
+        return np.stack([np.asarray(channels[name].pixels, dtype=np.float64) for name in "RGB"], axis=-1)
 
 
 def write_render(out: Path, xyz: Any, *, linear_srgb: Any = None, **documents: Any) -> None:
