@@ -181,6 +181,19 @@ class Environment:
         bottom = (1.0 - fx) * m[j0 + 1, i0] + fx * m[j0 + 1, i1]
         return ((1.0 - fy) * top + fy * bottom) * self.scale
 
+    def brightest_azimuth_degrees(self) -> float:
+        """The world azimuth (degrees from +x towards +y, in (−180, 180]) of the map's brightest texel (CIE Y of the
+        linear sRGB radiance) above the horizon, as the map is turned now: where its sun or key light stands."""
+        import numpy as np
+
+        luminance = self.radiance_map.astype(np.float64) @ np.asarray(LUMINANCE_WEIGHTS)
+        height, width = self.shape
+        x, y = texel_coordinates(height, width)
+        luminance = np.where(y < 0.5, luminance, -1.0)  # above the horizon: a light that can reach a surface
+        row, column = np.unravel_index(int(np.argmax(luminance)), luminance.shape)
+        direction = self.directions(x[row, column], y[row, column])
+        return float(np.degrees(np.arctan2(direction[1], direction[0])))
+
     def distribution(self) -> PiecewiseConstant2D:
         """The importance distribution over ``(x, y)``: ``(H − 1) × W`` cells, weights of the module docstring."""
         return self._distribution

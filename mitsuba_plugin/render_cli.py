@@ -38,6 +38,7 @@ from viewer.scene_config import (
     add_scene_arguments,
     check_lighting,
     environment_of,
+    environment_rotation,
     lighting_help,
     quality_help,
     resolve_point,
@@ -143,6 +144,7 @@ def run(arguments: argparse.Namespace) -> int:
     model_path, config = resolve_point(config)  # the saved config records the point that renders
     load_model(model_path)  # a corrupt model file: one line now, not a Mitsuba traceback later
     mesh = build_mesh(config.mesh)
+    config = dataclasses.replace(config, environment_rotation=environment_rotation(config))  # saved as resolved
     environment = environment_of(config)
     # Under an environment the unit light's default exposure means nothing: the exposure comes from the picture
     # (gratnet render's rule).

@@ -63,6 +63,7 @@ from viewer.scene_config import (
     check_lighting,
     check_scene,
     environment_of,
+    environment_rotation,
     lighting_help,
     load_reference,
     quality_help,
@@ -223,6 +224,7 @@ def _render(arguments: argparse.Namespace, out: Path) -> int:
         arguments.light_text, arguments.camera_text, arguments.exposure = (probe.light_text, probe.camera_text,
                                                                             probe.exposure)
     config = resolve_scene_command(arguments, resolve_config)
+    config = dataclasses.replace(config, environment_rotation=environment_rotation(config))  # saved as resolved
     environment = environment_of(config)
     # Under an environment the unit light's default exposure means nothing: the exposure comes from the picture.
     auto_exposure = auto_exposure or (environment is not None and not exposure_given)

@@ -43,7 +43,7 @@ SceneT = TypeVar("SceneT", bound="SceneConfig")
 
 __all__ = ["DEFAULT_MATERIAL", "DEFERRED_WEIGHTS", "DEFERRED_WEIGHTS_HELP", "ENVIRONMENT_FORMS", "ENVIRONMENT_HELP",
            "MAX_SAMPLES", "RENDER_PATHS", "RENDER_PATH_HELP", "WEIGHT_PATHS", "LightingConfig", "RenderConfig",
-           "check_lighting", "environment_of", "lighting_help",
+           "check_lighting", "environment_of", "environment_rotation", "lighting_help",
            "SceneConfig", "add_scene_arguments", "check_scene", "check_scene_numbers", "fill_scene_defaults",
            "load_reference", "parse_size", "quality_help", "read_render_exr", "resolve_point",
            "resolve_scene_command", "scene_fields", "warn_if_black", "with_fallback", "write_render"]
@@ -129,9 +129,11 @@ class LightingConfig:
         "0 to 10)")
     environment: str = config_field("none", ENVIRONMENT_HELP)
     environment_scale: float = config_field(1.0, "factor on the environment's radiance (typical: 1e-5 to 1)")
-    environment_rotation: float = config_field(
-        0.0, "turn of the environment about +z, degrees (counter-clockwise seen from above: a feature at azimuth φ "
-        "moves to φ + DEGREES)")
+    # None when not given: turned so that its brightest direction (a sun, a key light) stands at the light's azimuth.
+    environment_rotation: float | None = config_field(
+        None, "turn of the environment about +z, degrees (counter-clockwise seen from above: a feature at azimuth φ "
+        "moves to φ + DEGREES); default: turned so that its brightest direction (the sky's sun, the studio's key "
+        "softbox) stands at the azimuth of --light φ, the material's default light that shows its diffraction")
     seed: int = config_field(0, "random seed of the light samples (an environment's; Mitsuba's sampler)")
 
     @property
@@ -148,20 +150,38 @@ class LightingConfig:
 
 
 def environment_of(config: LightingConfig) -> Any:
-    """The :class:`gratnet.environment.Environment` that ``config``'s ``--environment`` names (rotation and scale
-    applied), or None; a one-line GratNetError for a bad one. A file is read once while its size and modification
-    time stay the same (the checks and the render share it)."""
+    """The :class:`gratnet.environment.Environment` that ``config``'s ``--environment`` names (rotation, resolved by
+    :func:`environment_rotation`, and scale applied), or None; a one-line GratNetError for a bad one. A file is read
+    once while its size and modification time stay the same (the checks and the render share it)."""
+    return _environment(config, environment_rotation(config))
+
+
+def environment_rotation(config: LightingConfig, light_phi_degrees: float | None = None) -> float:
+    """``config``'s ``--environment-rotation``, or when it is not given the turn that puts the environment's brightest
+    direction at the azimuth of the light (``light_phi_degrees``, else the config's own; 0 for a config without a
+    light or an environment)."""
+    if config.environment_rotation is not None:
+        return float(config.environment_rotation)
+    phi = getattr(config, "light_phi_degrees", None) if light_phi_degrees is None else light_phi_degrees
+    environment = _environment(config, 0.0)
+    if environment is None or phi is None:
+        return 0.0
+    turn = (float(phi) - environment.brightest_azimuth_degrees() + 180.0) % 360.0 - 180.0
+    return float(f"{turn:.6g}")
+
+
+def _environment(config: LightingConfig, rotation_degrees: float) -> Any:
     path = Path(str(config.environment).strip()).expanduser()
     try:
         status = path.stat()
         signature: tuple[int, int] | None = (status.st_mtime_ns, status.st_size)
     except (OSError, ValueError):
         signature = None
-    return _load_environment(str(config.environment), float(config.environment_rotation),
-                             float(config.environment_scale), signature)
+    return _load_environment(str(config.environment), float(rotation_degrees), float(config.environment_scale),
+                             signature)
 
 
-@functools.lru_cache(maxsize=2)
+@functools.lru_cache(maxsize=4)
 def _load_environment(text: str, rotation_degrees: float, scale: float, signature: tuple[int, int] | None) -> Any:
     from gratnet.environment import load_environment
 
@@ -178,7 +198,7 @@ def check_lighting(config: LightingConfig) -> None:
         raise GratNetError(f"--seed must be an integer in 0 … {2**32 - 1}, got {config.seed!r}")
     if not (math.isfinite(config.environment_scale) and 0.0 <= config.environment_scale < 3e38):
         raise GratNetError(f"--environment-scale must be a finite number ≥ 0, got {config.environment_scale!r}")
-    if not math.isfinite(config.environment_rotation):
+    if config.environment_rotation is not None and not math.isfinite(config.environment_rotation):
         raise GratNetError(f"--environment-rotation must be a finite number of degrees, got "
                            f"{config.environment_rotation!r}")
     environment_of(config)
@@ -188,6 +208,7 @@ def lighting_help(actions: dict[str, argparse.Action]) -> None:
     """Metavars of the lighting flags (``gratnet.config.add_arguments``' actions)."""
     actions["environment"].metavar = ENVIRONMENT_FORMS
     actions["environment_rotation"].metavar = "DEGREES"
+    actions["environment_rotation"].help = (actions["environment_rotation"].help or "").replace(" (default: None)", "")
     actions["environment_scale"].metavar = "SCALE"
     actions["light_intensity"].metavar = "INTENSITY"
     # The field's None means "not given" (1, or 0 with --environment): its help says so in words, not "None".

@@ -61,6 +61,7 @@ from viewer.scene_config import (
     WEIGHT_PATHS,
     LightingConfig,
     add_scene_arguments,
+    environment_rotation,
     fill_scene_defaults,
     lighting_help,
     with_fallback,
@@ -227,7 +228,7 @@ def starting_view(arguments: argparse.Namespace, exact: bool = False) -> tuple[V
     state = ViewerState(material=arguments.material, mesh=arguments.mesh, fresnel=fresnel,
                         slice_mode=arguments.slice, light_intensity=lighting.effective_light_intensity,
                         environment=str(lighting.environment).strip() if lighting.has_environment else "none",
-                        environment_rotation=lighting.environment_rotation,
+                        environment_rotation=environment_rotation(lighting, phi),
                         environment_scale=lighting.environment_scale, seed=lighting.seed, **values)
     return state, guessed
 

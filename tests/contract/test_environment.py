@@ -382,3 +382,21 @@ def test_a_too_large_exr_is_refused_from_its_header_alone(tmp_path: Path, monkey
     with pytest.raises(GratNetError, match="at most 8×4"):
         load_environment(str(tmp_path / "map.exr"))
     assert opened == [True]  # the header only: no pixel was decoded
+
+
+@pytest.mark.parametrize(("spec", "phi"), [("sky", 30.0), ("studio", -120.0), ("sky", 179.0)])
+def test_the_default_turn_puts_the_brightest_direction_at_the_lights_azimuth(spec, phi):
+    """``--environment-rotation`` left out: the environment turns so that its sun (key softbox) stands at the
+    azimuth of the light that shows the material's diffraction; a given rotation stands as it is."""
+    from viewer.scene_config import RenderConfig, environment_of, environment_rotation
+
+    config = RenderConfig(environment=spec, light_phi_degrees=phi)
+    turned = environment_of(config)
+    assert turned.rotation_degrees == environment_rotation(config)
+    height, width = turned.shape
+    texel = 360.0 / width
+    difference = (turned.brightest_azimuth_degrees() - phi + 180.0) % 360.0 - 180.0
+    assert abs(difference) <= texel
+    given = RenderConfig(environment=spec, light_phi_degrees=phi, environment_rotation=12.5)
+    assert environment_rotation(given) == 12.5 and environment_of(given).rotation_degrees == 12.5
+    assert environment_rotation(RenderConfig(environment="none", light_phi_degrees=phi)) == 0.0
