@@ -47,6 +47,8 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--material", default="paper-cd")
     parser.add_argument("--mesh", default="cd")
     parser.add_argument("--environment", default="sky")
+    parser.add_argument("--environment-rotation", default="0", metavar="DEGREES",
+                        help="as gratnet render's (default 0: the map as it is; the record of docs/benchmarks.md)")
     parser.add_argument("--size", type=int, default=64)
     parser.add_argument("--spp", type=int, default=1024)
     parser.add_argument("--out", type=Path, default=DEFAULT_JSON)
@@ -57,6 +59,7 @@ def main(argv: list[str] | None = None) -> int:
     from gratnet.display import ldr_flip
 
     common = ["--material", arguments.material, "--mesh", arguments.mesh, "--environment", arguments.environment,
+              "--environment-rotation", arguments.environment_rotation,
               "--size", f"{arguments.size},{arguments.size}", "--spp", str(arguments.spp), "--quiet"]
     load_before = os.getloadavg()[0]
     with tempfile.TemporaryDirectory() as folder:

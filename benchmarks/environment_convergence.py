@@ -3,7 +3,8 @@
     python benchmarks/environment_convergence.py                       # paper-cd on the CD under the sky, 64²
     python benchmarks/environment_convergence.py --material paper-snake --environment studio --mesh sphere
 
-For one material, mesh and environment (the camera of the material's default view, ``gratnet render``'s), a
+For one material, mesh and environment (the map as it is, unturned; the camera of the material's default view,
+``gratnet render``'s), a
 reference is rendered with multiple importance sampling at ``--reference-spp`` passes (seed 1000), then each
 strategy of ``--environment-sampling`` (mis, light, material; seed 0) progressively up to ``--max-spp``: after
 1, 2, 4, … passes the mean so far is scored against the reference by FLIP (``gratnet.display.ldr_flip``, both
