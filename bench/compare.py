@@ -12,9 +12,10 @@ exposure of viewer.defaults) and two more that no default aims: the light turned
 and the camera 60° further round and 25° lower (light kept). Every view keeps the default's exposure.
 
 Under ``--environment`` (``gratnet render``'s flags: "error where users look", under real light) both renders are
-lit by it (the light off unless ``--light-intensity``), the light-turned view turns the environment by the same
-90°, and each view's exposure comes from the reference's picture (gratnet.showcase.suggest_exposure); ``--spp`` is
-then also the number of light samples, the same passes and seed for both renders.
+lit by it (the light off unless ``--light-intensity``), each view's environment aimed at its light as ``gratnet
+render`` aims it (or turned by ``--environment-rotation``, and 90° more for the light-turned view), and each view's
+exposure comes from the reference's picture (gratnet.showcase.suggest_exposure); ``--spp`` is then also the number
+of light samples, the same passes and seed for both renders.
 
 ``--quality fast|accurate`` chooses which of a shipped material's points is scored (gratnet.quality; default: the
 accurate one); the views are the material's either way (worked out from its accurate point), so the two points are
@@ -94,12 +95,18 @@ def views(material: str, mesh: str) -> list[View]:
     return [base, turned, camera]
 
 
-def _view_environment(environment: Any, view: View) -> Any:
-    """The environment of ``view`` (None without one): the light-turned view turns the environment instead, by the
-    same angle about +z."""
-    if environment is None or not view.name.startswith("light"):
-        return environment
-    return dataclasses.replace(environment, rotation_degrees=environment.rotation_degrees + LIGHT_TURN_DEGREES)
+def _view_environment(config: CompareConfig, view: View) -> Any:
+    """The environment of ``view`` (None without one), aimed at the view's light unless ``--environment-rotation``
+    is given (then the light-turned view turns it by the same angle as its light)."""
+    from viewer.scene_config import environment_of, environment_rotation
+
+    if not config.has_environment:
+        return None
+    if config.environment_rotation is None:
+        rotation = environment_rotation(config, view.light_phi_degrees)
+    else:
+        rotation = config.environment_rotation + (LIGHT_TURN_DEGREES if view.name.startswith("light") else 0.0)
+    return environment_of(dataclasses.replace(config, environment_rotation=rotation))
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
@@ -157,11 +164,10 @@ def run(arguments: argparse.Namespace) -> int:
     from viewer.catalog import build_mesh
     from viewer.context import create_headless_context
     from viewer.scene import SceneRenderer
-    from viewer.scene_config import environment_of, load_reference
+    from viewer.scene_config import load_reference
 
     config = from_arguments(CompareConfig, arguments)
     model_path, config, meshes = _check(config, arguments.material)
-    environment = environment_of(config)
     out = check_output_folder(arguments.out)
     volume = load_reference(config.reference, config.reference_precision, arguments.material)
     scenes = [view for mesh in meshes for view in views(arguments.material, mesh)]
@@ -178,7 +184,7 @@ def run(arguments: argparse.Namespace) -> int:
                 camera = Camera(view.camera_distance, view.camera_azimuth_degrees, view.camera_elevation_degrees)
                 light = Light.directional(view.light_theta_degrees, view.light_phi_degrees,
                                           config.effective_light_intensity)
-                lit = _view_environment(environment, view)
+                lit = _view_environment(config, view)
                 exposure = 1.0 if lit is not None else view.exposure  # under an environment: from the picture
                 truth, guess = (scene.render_rgba(mesh, camera, light, size, exposure, 1.5, samples=config.spp,
                                                   environment=lit, seed=config.seed)

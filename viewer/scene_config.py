@@ -43,7 +43,8 @@ SceneT = TypeVar("SceneT", bound="SceneConfig")
 
 __all__ = ["DEFAULT_MATERIAL", "DEFERRED_WEIGHTS", "DEFERRED_WEIGHTS_HELP", "ENVIRONMENT_FORMS", "ENVIRONMENT_HELP",
            "MAX_SAMPLES", "RENDER_PATHS", "RENDER_PATH_HELP", "WEIGHT_PATHS", "LightingConfig", "RenderConfig",
-           "check_lighting", "environment_of", "environment_rotation", "lighting_help",
+           "check_lighting", "environment_of", "environment_rotation", "light_flag_given", "lighting_help",
+           "with_given_light",
            "SceneConfig", "add_scene_arguments", "check_scene", "check_scene_numbers", "fill_scene_defaults",
            "load_reference", "parse_size", "quality_help", "read_render_exr", "resolve_point",
            "resolve_scene_command", "scene_fields", "warn_if_black", "with_fallback", "write_render"]
@@ -125,8 +126,8 @@ class LightingConfig:
     # None when not given: 1, or 0 when an environment lights the scene (it replaces the default light).
     light_intensity: float | None = config_field(
         None, "the light's irradiance (directional, on a plane facing it) or intensity (point, W/sr: irradiance "
-        "intensity/d² at d metres); 0: no light but the environment (default: 1, or 0 with --environment; typical: "
-        "0 to 10)")
+        "intensity/d² at d metres); 0: no light but the environment (default: 1, or 0 with --environment unless "
+        "--light or --point-light is given; typical: 0 to 10)")
     environment: str = config_field("none", ENVIRONMENT_HELP)
     environment_scale: float = config_field(1.0, "factor on the environment's radiance (typical: 1e-5 to 1)")
     # None when not given: turned so that its brightest direction (a sun, a key light) stands at the light's azimuth.
@@ -385,8 +386,23 @@ def resolve_scene_command(arguments: argparse.Namespace, resolve: Callable[[argp
     check_output_file(out)
     check_output_file(config_path_for(out))
     resolve(with_fallback(arguments))  # the flags given are checked before the defaults read the model
+    given = light_flag_given(arguments)  # before the defaults fill --light
     fill_scene_defaults(arguments)  # the unset --light, --camera, --exposure, from the material and mesh
-    return resolve(arguments)
+    return with_given_light(resolve(arguments), given)
+
+
+def light_flag_given(arguments: argparse.Namespace) -> bool:
+    """Whether ``--light`` or another light kind's flag (``--point-light``) was given (not filled by the defaults)."""
+    return getattr(arguments, "light_text", None) is not None or any(
+        getattr(arguments, kind.flag.dest, None) is not None for kind in LIGHT_KINDS if kind.flag is not None)
+
+
+def with_given_light(config: ConfigT, given: bool) -> ConfigT:
+    """``config`` with ``light_intensity`` 1 where a light flag was ``given`` and no intensity: a light asked for is
+    on beside an environment (which turns only the default light off)."""
+    if given and isinstance(config, LightingConfig) and config.light_intensity is None:
+        return dataclasses.replace(config, light_intensity=1.0)
+    return config
 
 
 def load_reference(path: str | Path, precision: str, material: str | None = None) -> Any:

@@ -238,9 +238,9 @@ def lighting_of(arguments: argparse.Namespace) -> LightingConfig:
     window: ``--environment`` with ``--render-path deferred`` is refused (an environment renders forward)."""
     from gratnet.config import from_arguments
     from viewer.antialias import MAX_SAMPLES
-    from viewer.scene_config import check_lighting
+    from viewer.scene_config import check_lighting, light_flag_given, with_given_light
 
-    lighting = from_arguments(LightingConfig, arguments)
+    lighting = with_given_light(from_arguments(LightingConfig, arguments), light_flag_given(arguments))
     check_lighting(lighting)
     if lighting.has_environment and getattr(arguments, "render_path", "auto") == "deferred":
         raise GratNetError("--environment renders on the forward path (--render-path auto or forward)")

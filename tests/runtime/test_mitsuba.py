@@ -491,8 +491,14 @@ def test_mitsuba_render_command_takes_an_obj_a_point_light_and_an_exr_environmen
     with OpenEXR.File(str(out)) as exr:
         pixels = next(iter(exr.channels().values())).pixels
     assert pixels.shape == (12, 16, 3) and np.all(np.isfinite(pixels))
-    # The camera looks down 60°: the top corners see the map's lower half (blue, × 0.01) past the quad.
-    np.testing.assert_allclose(pixels[0, 0], [0.0, 0.0, 0.01], atol=1e-4)
+    # The camera looks down 60°: the top corners miss the quad and show black, as gratnet render's background (the
+    # environment is hidden from camera rays); the quad is lit by the point light (given, so on beside the map).
+    np.testing.assert_array_equal(pixels[0, 0], [0.0, 0.0, 0.0])
+    assert float(pixels[6, 8].max()) > 0.0
+    import json
+
+    config = json.loads((tmp_path / "quad.config.json").read_text())["mitsuba_render"]
+    assert config["light_intensity"] == 1.0 and config["point_light"] == [0.0, -0.1, 0.2]
 
 
 def test_without_mitsuba_the_command_says_how_to_install_it(tmp_path: object, capsys: pytest.CaptureFixture,
