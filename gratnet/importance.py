@@ -113,7 +113,6 @@ __all__ = [
     "luminance_table",
     "luminance_weights",
     "material_table",
-    "model_digest",
     "model_luminance",
     "volume_luminance",
     "volume_table",
@@ -389,11 +388,6 @@ def volume_luminance(xyz: np.ndarray, scheme: str) -> Luminance:
     return luminance
 
 
-def model_digest(model: ModelFile) -> str:
-    """Hash of a model's content (gratnet.modelfile.content_digest)."""
-    return content_digest(model)
-
-
 def _volume_digest(xyz: np.ndarray, scheme: str) -> str:
     digest = hashlib.sha256(np.ascontiguousarray(xyz, dtype=np.float32).tobytes())
     digest.update(json.dumps({"shape": list(np.shape(xyz)), "scheme": scheme}).encode("utf-8"))
@@ -478,7 +472,7 @@ def material_table(model: ModelFile, resolution: int = DEFAULT_RESOLUTION, *, su
                    progress: bool = True) -> MaterialTable:
     """The importance table of a trained network (its CIE Y in float32), cached in memory and on disk
     (:func:`importance_cache_folder`) by the model's content hash and the parameters."""
-    return _cached_table(model_digest(validated(model)), "model", lambda: model_luminance(model), resolution,
+    return _cached_table(content_digest(validated(model)), "model", lambda: model_luminance(model), resolution,
                          subsamples, w_range, combine, cache, progress)
 
 

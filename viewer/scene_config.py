@@ -172,21 +172,27 @@ def environment_rotation(config: LightingConfig, light_phi_degrees: float | None
 
 
 def _environment(config: LightingConfig, rotation_degrees: float) -> Any:
+    """``config``'s environment turned by ``rotation_degrees`` and scaled: one read of its map (the checks, the
+    default turn and the render share it), then turned and scaled in memory."""
     path = Path(str(config.environment).strip()).expanduser()
     try:
         status = path.stat()
         signature: tuple[int, int] | None = (status.st_mtime_ns, status.st_size)
     except (OSError, ValueError):
         signature = None
-    return _load_environment(str(config.environment), float(rotation_degrees), float(config.environment_scale),
-                             signature)
+    base = _load_environment(str(config.environment), signature)
+    if base is None or (float(rotation_degrees), float(config.environment_scale)) == (0.0, 1.0):
+        return base
+    return dataclasses.replace(base, rotation_degrees=float(rotation_degrees), scale=float(config.environment_scale))
 
 
 @functools.lru_cache(maxsize=4)
-def _load_environment(text: str, rotation_degrees: float, scale: float, signature: tuple[int, int] | None) -> Any:
+def _load_environment(text: str, signature: tuple[int, int] | None) -> Any:
+    """The environment ``text`` names, as its map is (unturned, unscaled); cached while a file's size and
+    modification time (``signature``) stay the same."""
     from gratnet.environment import load_environment
 
-    return load_environment(text, rotation_degrees, scale, what="--environment")
+    return load_environment(text, what="--environment")
 
 
 def check_lighting(config: LightingConfig) -> None:
