@@ -58,10 +58,15 @@ declare -A candidates=(
     [ln8-L4-h48]="--hidden 48,32,16 --grid-levels 3 --grid-resolution 251 --grid-t-resolution 5 --grid-features 8 --frequencies 4 --t-frequencies 2 --grid-lines 1001"
     # More features per grid node at the file limit (10 × 3 levels, ~7.8 MB), the funnel narrowed to stay under 5,940 MACs.
     [g10-L8-h40]="--hidden 40,24,12 --grid-levels 3 --grid-resolution 251 --grid-t-resolution 5 --grid-features 10 --frequencies 8 --t-frequencies 2"
+    # The front beyond a fifth (session 4): the g8 grid with wider funnels and more frequencies, at about 0.3, 0.37
+    # and 0.49 of base's work, to find the work at which the error comes within 1.25x of base's.
+    [g8-L8-h64]="--hidden 64,32,16 --grid-levels 3 --grid-resolution 251 --grid-t-resolution 5 --grid-features 8 --frequencies 8 --t-frequencies 2"
+    [g8-L12-h64]="--hidden 64,32,16 --grid-levels 3 --grid-resolution 251 --grid-t-resolution 5 --grid-features 8 --frequencies 12 --t-frequencies 2"
+    [g8-L19-h64]="--hidden 64,32,16 --grid-levels 3 --grid-resolution 251 --grid-t-resolution 5 --grid-features 8 --t-frequencies 2"
 )
 order=(base g4-b12-h48 g8-b12-h40 ln4-L4-h56 g4-L4-h56 ln4-b12-h48 g4-L19-h28 g4-L12-h40 g8-L8-h44 ln4-L8-h40 g4-L19-h24 ln4-L2-h48
        ln8-L4-h48 g4-b14-h32 g8-L4-h56 g4x4-501-L4-h56 g8-L2-h40 p4-L8-h44 p4a-L8-h44 g8-L8-h44-vis
-       g8r351t3-L8-h44 g8-L8-h52 ln8-L8-h38 g8t6-L8-h44 g10-L8-h40)
+       g8r351t3-L8-h44 g8-L8-h52 ln8-L8-h38 g8t6-L8-h44 g10-L8-h40 g8-L8-h64 g8-L12-h64 g8-L19-h64)
 names=("$@")
 [ ${#names[@]} -gt 0 ] || names=("${order[@]}")
 for name in "${names[@]}"; do
