@@ -11,7 +11,8 @@ Views (:func:`views`): for each mesh, the default view ``gratnet render`` takes 
 exposure of viewer.defaults) and two more that no default aims: the light turned 90° in azimuth about the normal,
 and the camera 60° further round and 25° lower (light kept). Every view keeps the default's exposure.
 
-Under ``--environment`` (``gratnet render``'s flags: "error where users look", under real light) both renders are
+Under ``--environment`` or ``--area-light`` (``gratnet render``'s flags: "error where users look", under real light;
+area lights the same in every view) both renders are
 lit by it (the light off unless ``--light-intensity``), each view's environment aimed at its light as ``gratnet
 render`` aims it (or turned by ``--environment-rotation``, and 90° more for the light-turned view), and each view's
 exposure comes from the reference's picture (gratnet.showcase.suggest_exposure); ``--spp`` is then also the number
@@ -175,6 +176,7 @@ def run(arguments: argparse.Namespace) -> int:
     rows: list[dict[str, Any]] = []
     panels = []
     size = (config.width, config.height)
+    area_lights = config.area_lights  # the same lights in every view (world space)
     ctx = create_headless_context()
     try:
         with (SceneRenderer(ctx, model, weights_path=config.weights_path, render_path="forward") as network,
@@ -185,11 +187,12 @@ def run(arguments: argparse.Namespace) -> int:
                 light = Light.directional(view.light_theta_degrees, view.light_phi_degrees,
                                           config.effective_light_intensity)
                 lit = _view_environment(config, view)
-                exposure = 1.0 if lit is not None else view.exposure  # under an environment: from the picture
+                sampled = lit is not None or bool(area_lights)
+                exposure = 1.0 if sampled else view.exposure  # under sampled light: from the picture
                 truth, guess = (scene.render_rgba(mesh, camera, light, size, exposure, 1.5, samples=config.spp,
-                                                  environment=lit, seed=config.seed)
+                                                  environment=lit, seed=config.seed, area_lights=area_lights)
                                 for scene in (reference, network))
-                if lit is not None:
+                if sampled:
                     exposure = suggest_exposure(truth[..., :3], 1.0) or 1.0
                     truth, guess = (np.concatenate([image[..., :3] * exposure, image[..., 3:]], axis=-1)
                                     for image in (truth, guess))

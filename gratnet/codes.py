@@ -10,8 +10,9 @@ sets those uniforms, binds those buffers and reads those counters. Both sides re
 
 A :class:`Codes` table numbers its names 0, 1, … in order; a name's define is the table's prefix and the name in
 capitals, ``-`` as ``_`` (``simple-max`` → ``SCHEME_SIMPLE_MAX``). The light kinds' codes come from the light
-registry, :mod:`gratnet.lights`. tests/contract/test_shared_codes.py checks that the shaders use the generated names and
-type no code of their own, and that no Python module outside these two types a table again.
+registry, :mod:`gratnet.lights`, the area lights' from :mod:`gratnet.area_lights`. tests/contract/test_shared_codes.py
+checks that the shaders use the generated names and type no code of their own, and that no Python module outside
+these two types a table again.
 
 Weight forms (``--deferred-weights``, ``--weights-path``): :class:`WeightForm`, parsed once from the flag's
 string into typed fields (kernel, weight source, storage and arithmetic precision); :data:`WEIGHT_FORMS` lists
@@ -25,10 +26,12 @@ from __future__ import annotations
 import dataclasses
 import enum
 
+from gratnet.area_lights import AREA_KINDS
 from gratnet.errors import GratNetError
 from gratnet.lights import LIGHT_KINDS
 
 __all__ = [
+    "AREA",
     "BINDINGS",
     "COUNTER",
     "COUNTER_SLOTS",
@@ -136,8 +139,10 @@ LIGHT = Codes("LIGHT", "light kind", tuple(kind.name for kind in LIGHT_KINDS), "
 #: sampling (``mis``, the default), or one alone (``light``: the map's luminance; ``material``: the material's table).
 ENVIRONMENT_SAMPLING = Codes("SAMPLING", "environment sampling", ("mis", "light", "material"),
                              "u_environment_sampling")
+#: Area light kinds, from their registry (gratnet.area_lights): shaders/area_lights.glsl.
+AREA = Codes("AREA", "area light kind", tuple(kind.name for kind in AREA_KINDS), "u_area_kind")
 #: Every table, for the generated defines and the tests.
-TABLES = (SCHEME, HIDDEN, OUTPUT, RANGE, MODE, COUNTER, LIGHT, ENVIRONMENT_SAMPLING)
+TABLES = (SCHEME, HIDDEN, OUTPUT, RANGE, MODE, COUNTER, LIGHT, ENVIRONMENT_SAMPLING, AREA)
 
 #: Slots of the counter buffer (``COUNTER_COUNT``): room for counters to come.
 COUNTER_SLOTS = 8

@@ -262,6 +262,12 @@ def _add_fields(group: Any, config_class: type, prefix: str,
                 help=f"{help_text} (default: {default})",
             )
             continue
+        if get_origin(kind) is tuple:  # a repeatable flag: each use adds one value (None when never given)
+            actions[destination] = group.add_argument(
+                *flags, dest=destination, action="append", type=str, default=None,
+                help=f"{help_text} (default: none)",
+            )
+            continue
         choices = field.metadata.get("choices")
         if get_origin(kind) is Literal:
             choices = list(get_args(kind))

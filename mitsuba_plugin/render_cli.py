@@ -148,7 +148,7 @@ def run(arguments: argparse.Namespace) -> int:
     environment = environment_of(config)
     # Under an environment the unit light's default exposure means nothing: the exposure comes from the picture
     # (gratnet render's rule).
-    auto_exposure = environment is not None and not exposure_given
+    auto_exposure = config.has_sampled_light and not exposure_given
 
     from mitsuba_plugin import scene as mitsuba_scene
     from mitsuba_plugin.runtime import set_variant
@@ -162,7 +162,7 @@ def run(arguments: argparse.Namespace) -> int:
         mitsuba_scene.bsdf_dict(model_path, config.effective_ior, specular_probability=config.specular_probability,
                                 lobe_degrees=config.lobe_degrees, sampler=config.sampler),
         mitsuba_scene.sensor(mi, camera, config.width, config.height, config.spp),
-        mitsuba_scene.emitters(light, environment),  # the environment carries its rotation and scale
+        mitsuba_scene.emitters(light, environment, config.area_lights),  # the environment carries its turn, scale
         integrator=config.integrator, max_depth=config.max_depth, mesh_name=Path(config.mesh).name)
     from tqdm import tqdm
 

@@ -30,6 +30,7 @@ from typing import Any
 
 import numpy as np
 
+from gratnet.area_lights import AreaLight
 from gratnet.environment import Environment, constant_environment, load_environment
 from gratnet.errors import GratNetError
 from gratnet.lights import light_kind
@@ -116,8 +117,9 @@ def sensor(mi: ModuleType, camera: Camera, width: int, height: int, spp: int,
 
 def emitters(light: Light | None,
              environment: Environment | float | tuple[float, float, float] | str | Path | None = None,
-             environment_scale: float = 1.0) -> dict[str, dict[str, Any]]:
-    """Mitsuba emitter entries: the light (if any) and the environment (if any) as :func:`environment_emitter`.
+             area_lights: tuple[AreaLight, ...] = (), environment_scale: float = 1.0) -> dict[str, dict[str, Any]]:
+    """Mitsuba emitter entries: the light (if any), the environment (if any) as :func:`environment_emitter`, and
+    each area light as its shape with an ``area`` emitter (gratnet.area_lights).
 
     ``environment``: an :class:`~gratnet.environment.Environment`, or what ``load_environment`` reads: a grey
     radiance, a linear sRGB triple, a shipped map's name or a map's path. ``environment_scale``: a further factor
@@ -134,6 +136,11 @@ def emitters(light: Light | None,
             environment = None if max(rgb) == 0.0 else constant_environment((rgb[0], rgb[1], rgb[2]))
     if environment is not None:
         result["environment"] = environment_emitter(environment, environment_scale)
+    if area_lights:
+        import mitsuba as mi
+
+        for index, area in enumerate(area_lights):
+            result[f"area_light_{index}"] = area.mitsuba(mi)
     return result
 
 

@@ -1,10 +1,12 @@
-// Environment light (issue 43; docs/physics.md "Environment light"): a lat-long map of linear sRGB radiance
-// integrated over the hemisphere by multiple importance sampling, one sample per fragment and render pass.
+// Sampled light (issue 43; docs/physics.md "Environment light", "Area lights"): a lat-long map of linear sRGB
+// radiance and area lights (area_lights.glsl) integrated over the hemisphere by multiple importance sampling, one
+// sample per fragment and render pass.
 //
 // Compiled into surface.glsl with ENVIRONMENT. Each pass k draws one sample per pixel with one of M
 // strategies, chosen in turn: strategy (k + o) mod M with o a per-pixel offset, so any M consecutive passes
 // use every strategy once at each pixel, and any one pass is an unbiased one-sample estimate:
-//   light sampling: a direction from the environment's luminance distribution (gratnet.environment);
+//   light sampling: a direction from the environment's luminance distribution (gratnet.environment), or
+//      towards one area light by its solid angle (area_lights.glsl), one strategy per emitter;
 //   material sampling: a key (u, v) from the material's own importance table (gratnet.importance),
 //      i.e. a light direction wi.xy = -(u, v) - wo.xy in the tangent frame, with a defensive cosine share;
 //   the delta light (with one of intensity > 0): the directional or point light of lights.glsl.
@@ -19,6 +21,7 @@
 
 #include "codes.glsl"
 #include "sampling.glsl"
+#include "area_lights.glsl"
 
 #define ENVIRONMENT_PI 3.14159265358979
 
@@ -35,6 +38,7 @@ uniform ivec2 u_pixel_origin;                 // this target's place in the whol
 uniform uint u_seed;                          // the render's seed
 uniform int u_environment_sampling;           // SAMPLING_MIS, SAMPLING_LIGHT or SAMPLING_MATERIAL
 uniform bool u_delta_light;                   // the delta light of lights.glsl takes its turn too
+uniform bool u_has_environment;               // false: area lights only (the map's textures are placeholders)
 uniform mat3 u_xyz_to_rgb;                    // CIE XYZ -> linear sRGB (gratnet.display)
 uniform mat3 u_rgb_to_xyz;                    // its inverse
 
@@ -139,48 +143,82 @@ float power_weight(float chosen, float other) {
 
 // This fragment's light for this pass: the world direction towards it, the scalar irradiance and the linear
 // sRGB tint that multiply A * XYZ (tint (1, 1, 1) for the delta light). irradiance 0: no light this pass.
+// Strategies, in this order: light sampling of each emitter (the environment if any, then each area light),
+// material sampling, the delta light. Each emitter's integral is weighed between its own light sampling and
+// material sampling (power heuristic), so a material sample adds every emitter it meets, each with its weight.
 void environment_incidence(vec3 position, mat3 world_to_tangent, vec3 wo, out vec3 wi_world, out float irradiance,
                            out vec3 tint) {
     bool mis = u_environment_sampling == SAMPLING_MIS;
-    uint sampled = mis ? 2u : 1u;  // environment strategies
+    bool by_light = u_environment_sampling != SAMPLING_MATERIAL;
+    bool by_material = u_environment_sampling != SAMPLING_LIGHT;
+    int emitters = (u_has_environment ? 1 : 0) + u_area_count;
+    uint light_strategies = by_light ? uint(emitters) : 0u;
+    uint sampled = light_strategies + (by_material ? 1u : 0u);  // sampling strategies
     uint count = sampled + (u_delta_light ? 1u : 0u);  // M
+    tint = vec3(1.0);
+    irradiance = 0.0;
+    wi_world = vec3(0.0, 0.0, 1.0);
+    if (count == 0u) {
+        return;
+    }
     uvec2 pixel = uvec2(ivec2(gl_FragCoord.xy) + u_pixel_origin);  // the whole picture's pixel: bands agree
     uint offset = pcg3d(uvec3(pixel, u_seed ^ 0x68bc21ebu)).x % count;
     uint strategy = (uint(u_sample_index) + offset) % count;
     float strategies = float(count);
-    tint = vec3(1.0);
     if (strategy == sampled) {  // the delta light, once in every M passes
         light_incidence(position, wi_world, irradiance);
         irradiance *= strategies;
         return;
     }
-    if (!mis) {
-        strategy = u_environment_sampling == SAMPLING_LIGHT ? 0u : 1u;
-    }
     vec3 xi = uniform3(uvec3(pixel, uint(u_sample_index) ^ (u_seed * 0x9e3779b9u)));
     mat3 tangent_to_world = transpose(world_to_tangent);
-    float chosen;
-    float other;
-    irradiance = 0.0;
-    wi_world = vec3(0.0, 0.0, 1.0);
-    if (strategy == 0u) {
-        wi_world = sample_environment(xi.xy, chosen);
-        other = material_pdf(wo, world_to_tangent * wi_world);
-    } else {
+    vec3 light = vec3(0.0);  // sum over emitters of w_e * L_e / p_s
+    if (strategy < light_strategies) {  // light sampling of one emitter
+        int emitter = int(strategy) - (u_has_environment ? 1 : 0);  // -1: the environment, else an area light
+        float chosen;
+        vec3 radiance;
+        if (emitter < 0) {
+            wi_world = sample_environment(xi.xy, chosen);
+            radiance = environment_radiance(wi_world);
+        } else {
+            wi_world = sample_area(emitter, position, xi.xy, chosen);
+            radiance = u_area_radiance[emitter];
+        }
+        if (!(chosen > 0.0)) {
+            return;
+        }
+        float weight = 1.0;
+        if (mis) {
+            weight = power_weight(chosen, material_pdf(wo, world_to_tangent * wi_world));
+        }
+        light = radiance * (weight / chosen);
+    } else {  // material sampling: every emitter the direction meets
         vec3 wi;
         if (!sample_material(wo, xi, wi)) {
             return;
         }
         wi = normalize(wi);
-        chosen = material_pdf(wo, wi);
+        float chosen = material_pdf(wo, wi);
+        if (!(chosen > 0.0)) {
+            return;
+        }
         wi_world = tangent_to_world * wi;
-        other = environment_pdf(wi_world);
+        if (u_has_environment) {
+            float weight = mis ? power_weight(chosen, environment_pdf(wi_world)) : 1.0;
+            light += environment_radiance(wi_world) * weight;
+        }
+        for (int i = 0; i < MAX_AREA_LIGHTS; ++i) {
+            if (i >= u_area_count) {
+                break;
+            }
+            float density = area_pdf(i, position, wi_world);
+            if (density > 0.0) {
+                light += u_area_radiance[i] * (mis ? power_weight(chosen, density) : 1.0);
+            }
+        }
+        light /= chosen;
     }
-    if (!(chosen > 0.0)) {
-        return;
-    }
-    float weight = mis ? power_weight(chosen, other) : 1.0;
-    tint = environment_radiance(wi_world) * (strategies * weight / chosen);
+    tint = light * strategies;
     irradiance = 1.0;
 }
 

@@ -1,12 +1,13 @@
-"""An environment light on the GPU (issue 43): the map, its luminance distribution and the material's importance
-table as textures, and the uniforms of shaders/environment.glsl.
+"""Sampled light on the GPU (issue 43): an environment map, its luminance distribution and the material's
+importance table as textures, area lights as uniforms: shaders/environment.glsl and shaders/area_lights.glsl.
 
-:class:`EnvironmentLighting` holds one :class:`gratnet.environment.Environment` and one
-:class:`gratnet.importance.MaterialTable` on a context. The forward path (viewer.forward) compiles its surface
-program with ``ENVIRONMENT`` when a render has an environment, calls :meth:`EnvironmentLighting.set_uniforms` once
-and :meth:`EnvironmentLighting.set_pass` before each pass (sample) k, and binds :meth:`EnvironmentLighting.textures`
-with the material's. The estimator (one sample per pixel and pass, MIS between the two distributions, the delta
-light in turn) is shaders/environment.glsl's; docs/physics.md "Environment light" is its contract.
+:class:`EnvironmentLighting` holds an optional :class:`gratnet.environment.Environment`, any area lights
+(:class:`gratnet.area_lights.AreaLight`) and one :class:`gratnet.importance.MaterialTable` on a context. The forward
+path (viewer.forward) compiles its surface program with ``ENVIRONMENT`` when a render has sampled light, calls
+:meth:`EnvironmentLighting.set_uniforms` once and :meth:`EnvironmentLighting.set_pass` before each pass (sample) k,
+and binds :meth:`EnvironmentLighting.textures` with the material's. The estimator (one sample per pixel and pass,
+MIS between each emitter's own sampling and the material's, the delta light in turn) is shaders/environment.glsl's;
+docs/physics.md "Environment light" and "Area lights" are its contract.
 
 Rendering only: no glfw, no imgui, no torch.
 """
@@ -19,6 +20,7 @@ import math
 import moderngl
 import numpy as np
 
+from gratnet.area_lights import MAX_AREA_LIGHTS, AreaLight
 from gratnet.codes import ENVIRONMENT_SAMPLING
 from gratnet.environment import Environment
 from gratnet.errors import GratNetError
@@ -58,28 +60,49 @@ class EnvironmentLighting:
 
     Args:
         ctx: the render's context.
-        environment: the map (its rotation and scale applied here as in gratnet.environment).
+        environment: the map (its rotation and scale applied here as in gratnet.environment), or None: area lights
+            only (1 × 1 placeholder textures on the map's units, never read).
         table: the material's importance table (gratnet.importance), built for this material.
+        area_lights: up to :data:`gratnet.area_lights.MAX_AREA_LIGHTS` area lights.
     """
 
-    def __init__(self, ctx: moderngl.Context, environment: Environment, table: MaterialTable) -> None:
+    def __init__(self, ctx: moderngl.Context, environment: Environment | None, table: MaterialTable,
+                 area_lights: tuple[AreaLight, ...] = ()) -> None:
+        if environment is None and not area_lights:
+            raise GratNetError("sampled light needs an environment or an area light")
+        if len(area_lights) > MAX_AREA_LIGHTS:
+            raise GratNetError(f"a render takes at most {MAX_AREA_LIGHTS} area lights, got {len(area_lights)}")
         self.environment = environment
+        self.area_lights = tuple(area_lights)
         self.table = table
-        radiance = np.ascontiguousarray(environment.radiance_map * np.float32(environment.scale), dtype=np.float32)
-        distribution = environment.distribution()
-        rows, columns = distribution.shape
-        self.cells = columns, rows  # (W, H − 1): cells between the map's rows (gratnet.environment)
-        height, width = radiance.shape[:2]
+        self.cells = (1, 1)
         self._textures: list[moderngl.Texture] = []
         try:
-            map_texture = ctx.texture((width, height), 3, radiance.tobytes(), dtype="f4")
-            map_texture.filter = moderngl.NEAREST, moderngl.NEAREST  # texelFetch: bilinear by hand, as Mitsuba
-            self._textures.append(map_texture)
-            self._textures.append(_table_texture(ctx, distribution))
+            if environment is not None:
+                radiance = np.ascontiguousarray(environment.radiance_map * np.float32(environment.scale),
+                                                dtype=np.float32)
+                distribution = environment.distribution()
+                rows, columns = distribution.shape
+                self.cells = columns, rows  # (W, H − 1): cells between the map's rows (gratnet.environment)
+                height, width = radiance.shape[:2]
+                map_texture = ctx.texture((width, height), 3, radiance.tobytes(), dtype="f4")
+                map_texture.filter = moderngl.NEAREST, moderngl.NEAREST  # texelFetch: bilinear by hand, as Mitsuba
+                self._textures.append(map_texture)
+                self._textures.append(_table_texture(ctx, distribution))
+            else:
+                for components in (3, 1):
+                    placeholder = ctx.texture((1, 1), components, np.zeros(components, np.float32).tobytes(),
+                                              dtype="f4")
+                    placeholder.filter = moderngl.NEAREST, moderngl.NEAREST
+                    self._textures.append(placeholder)
             self._textures.append(_table_texture(ctx, table.distribution))
         except BaseException:
             self.release()
             raise
+
+    def matches(self, environment: Environment | None, area_lights: tuple[AreaLight, ...]) -> bool:
+        """Whether this holds ``environment`` (the same object) and ``area_lights`` (equal)."""
+        return self.environment is environment and self.area_lights == tuple(area_lights)
 
     def textures(self) -> tuple[tuple[MaterialTexture, int], ...]:
         """``(texture, unit)`` pairs to bind before a draw."""
@@ -94,7 +117,9 @@ class EnvironmentLighting:
         for name, unit in ENVIRONMENT_UNITS.items():
             set_uniform(program, name, unit)
         rows, columns = self.table.distribution.shape
-        angle = math.radians(self.environment.rotation_degrees)
+        angle = math.radians(self.environment.rotation_degrees if self.environment is not None else 0.0)
+        set_uniform(program, "u_has_environment", self.environment is not None)
+        _set_area_uniforms(program, self.area_lights)
         to_rgb = XYZ_TO_LINEAR_SRGB  # colour-science's matrix, without importing it (viewer.srgb)
         set_uniform(program, "u_environment_cells", self.cells)
         set_uniform(program, "u_material_cells", (columns, rows))
@@ -122,6 +147,23 @@ class EnvironmentLighting:
         for texture in self._textures:
             texture.release()
         self._textures.clear()
+
+
+def _set_area_uniforms(program: moderngl.Program, lights: tuple[AreaLight, ...]) -> None:
+    """shaders/area_lights.glsl's uniforms: the count and the arrays (unused entries zero)."""
+    set_uniform(program, "u_area_count", len(lights))
+    if not lights:
+        return  # the arrays are never read: a compiler may have dropped them
+    kinds = np.zeros(MAX_AREA_LIGHTS, np.int32)
+    vectors = {name: np.zeros((MAX_AREA_LIGHTS, 3), np.float32) for name in
+               ("u_area_centre", "u_area_axis_u", "u_area_axis_v", "u_area_radiance")}
+    for index, light in enumerate(lights):
+        kinds[index] = light.code
+        for name, value in zip(vectors, (light.centre, light.axis_u, light.axis_v, light.radiance), strict=True):
+            vectors[name][index] = value
+    set_uniform(program, "u_area_kind", kinds)
+    for name, values in vectors.items():
+        set_uniform(program, name, values)
 
 
 @dataclasses.dataclass(frozen=True)

@@ -144,14 +144,15 @@ def resolve_config(arguments: argparse.Namespace) -> RenderConfig:
         raise GratNetError("--render-path deferred evaluates the network in a compute pass; a --reference render "
                            "takes the forward path (auto or forward)")
     check_lighting(config)
-    if config.has_environment:
+    if config.has_sampled_light:
+        flag = "--environment" if config.has_environment else "--area-light"
         if config.slice:
-            raise GratNetError("--slice renders the BRDF slice under one directional light; --environment lights "
+            raise GratNetError(f"--slice renders the BRDF slice under one directional light; {flag} lights "
                                "mesh renders")
         if config.render_path == "deferred":
-            raise GratNetError("--environment renders on the forward path (--render-path auto or forward)")
+            raise GratNetError(f"{flag} renders on the forward path (--render-path auto or forward)")
         if config.skip_dark:
-            raise GratNetError("--skip-dark bounds one light's pixel; under --environment every sample counts")
+            raise GratNetError(f"--skip-dark bounds one light's pixel; under {flag} every sample counts")
     return config
 
 
@@ -226,8 +227,9 @@ def _render(arguments: argparse.Namespace, out: Path) -> int:
     config = resolve_scene_command(arguments, resolve_config)
     config = dataclasses.replace(config, environment_rotation=environment_rotation(config))  # saved as resolved
     environment = environment_of(config)
-    # Under an environment the unit light's default exposure means nothing: the exposure comes from the picture.
-    auto_exposure = auto_exposure or (environment is not None and not exposure_given)
+    area_lights = config.area_lights
+    # Under sampled light the unit light's default exposure means nothing: the exposure comes from the picture.
+    auto_exposure = auto_exposure or (config.has_sampled_light and not exposure_given)
     if auto_exposure:
         config = dataclasses.replace(config, exposure=1.0)
     if config.skip_dark and out.suffix.lower() != ".png":
@@ -278,7 +280,7 @@ def _render(arguments: argparse.Namespace, out: Path) -> int:
                     xyz = renderer.render(mesh, camera, light, (config.width, config.height), config.exposure,
                                           config.effective_ior, skip_threshold=skip_threshold, samples=config.spp,
                                           environment=environment, seed=config.seed,
-                                          sampling=config.environment_sampling)
+                                          sampling=config.environment_sampling, area_lights=area_lights)
     finally:
         ctx.release()
     if not np.all(np.isfinite(xyz)):
@@ -307,6 +309,7 @@ def _render(arguments: argparse.Namespace, out: Path) -> int:
             else f"mesh {config.mesh}")
     samples = "" if config.slice else f", {config.spp} spp"
     samples += f", environment {environment.name}" if environment is not None else ""
+    samples += f", {len(area_lights)} area light{'s' if len(area_lights) > 1 else ''}" if area_lights else ""
     if model_path is None:
         source = f"reference {Path(config.reference).name}"
     else:

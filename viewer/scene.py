@@ -48,6 +48,7 @@ from pathlib import Path
 import moderngl
 import numpy as np
 
+from gratnet.area_lights import AreaLight
 from gratnet.atomic import cache_folder
 from gratnet.codes import RENDER_PATHS, WeightForm
 from gratnet.display import xyz_to_display_srgb8, xyz_to_linear_srgb
@@ -200,7 +201,8 @@ class SceneRenderer:
                     depth_prepass: bool = True, statistics: dict[str, int] | None = None, samples: int = 1,
                     first_sample: int = 0, offsets_px: np.ndarray | None = None,
                     render_path: str | None = None, environment: Environment | None = None,
-                    seed: int = 0, sampling: str = "mis", pixel_origin: tuple[int, int] = (0, 0)) -> np.ndarray:
+                    seed: int = 0, sampling: str = "mis", pixel_origin: tuple[int, int] = (0, 0),
+                    area_lights: tuple[AreaLight, ...] = ()) -> np.ndarray:
         """Exposed CIE XYZ and coverage, ``float32`` ``(H, W, 4)``, row 0 at the top.
 
         Channels 0–2: ``exposure · irradiance · A(ωi, ωo) · XYZ(−(ωi + ωo))`` (physics.md eq. 5–7) with
@@ -234,20 +236,23 @@ class SceneRenderer:
         ``pixel_origin``: this image's lower-left pixel in a larger picture (GL pixels, y up), when it is a band of
         one: the light samples are keyed by the whole picture's pixels, so the bands of N passes make the picture of
         one N-pass render of the whole.
+        ``area_lights``: area lights (gratnet.area_lights) besides ``light`` and the environment, sampled by the same
+        estimator (physics.md "Area lights"; forward path only).
         """
         offsets = self._offsets(samples, first_sample, offsets_px)
         path = self.render_path if render_path is None else render_path
-        if environment is not None:
+        if environment is not None or area_lights:
             if render_path == "deferred":
-                raise GratNetError("an environment light renders on the forward path only (--render-path forward "
-                                   "or auto)")
+                raise GratNetError("an environment or area light renders on the forward path only (--render-path "
+                                   "forward or auto)")
             path = "forward"
         if path not in ("forward", "deferred"):
             raise GratNetError(f"a render takes the forward or the deferred path, got {render_path!r}")
         if path == "deferred" and self.deferred is None:
             raise GratNetError("a reference render takes the forward path only")
         return self._render(mesh, camera, light, size, exposure, ior, 1, skip_threshold, depth_prepass,
-                            statistics, offsets, path, first_sample, environment, seed, sampling, pixel_origin)[0]
+                            statistics, offsets, path, first_sample, environment, seed, sampling, pixel_origin,
+                            area_lights)[0]
 
     @staticmethod
     def _offsets(samples: int, first_sample: int, offsets_px: np.ndarray | None) -> np.ndarray:
@@ -259,17 +264,18 @@ class SceneRenderer:
                 exposure: float, ior: float | None, layers: int, skip_threshold: float | None,
                 depth_prepass: bool, statistics: dict[str, int] | None, offsets: np.ndarray,
                 path: str, first_sample: int = 0, environment: Environment | None = None,
-                seed: int = 0, sampling: str = "mis", pixel_origin: tuple[int, int] = (0, 0)) -> list[np.ndarray]:
+                seed: int = 0, sampling: str = "mis", pixel_origin: tuple[int, int] = (0, 0),
+                area_lights: tuple[AreaLight, ...] = ()) -> list[np.ndarray]:
         """Every render method's checks (before any GL work), then ``path``; a :class:`Mesh` is uploaded for
         this render only."""
         width, height = check_size(size)
         skip_threshold_value(skip_threshold)
         lighting = None
-        if environment is not None:
-            if not isinstance(environment, Environment):
+        if environment is not None or area_lights:
+            if environment is not None and not isinstance(environment, Environment):
                 raise GratNetError(f"expected a gratnet.environment.Environment, got {type(environment).__name__}")
-            lighting = EnvironmentPass(self.environment_lighting(environment), light.intensity > 0.0, seed, sampling,
-                                       pixel_origin)
+            lighting = EnvironmentPass(self.environment_lighting(environment, tuple(area_lights)),
+                                       light.intensity > 0.0, seed, sampling, pixel_origin)
             skip_threshold = None  # a pass's sample is not the pixel: the output bound says nothing of the mean
         uploaded = mesh if isinstance(mesh, MeshBuffers) else self.upload(mesh)
         try:
@@ -286,11 +292,12 @@ class SceneRenderer:
                exposure: float = 1.0, ior: float | None = 1.5, *, skip_threshold: float | None = None,
                depth_prepass: bool = True, statistics: dict[str, int] | None = None, samples: int = 1,
                first_sample: int = 0, environment: Environment | None = None, seed: int = 0,
-               sampling: str = "mis") -> np.ndarray:
+               sampling: str = "mis", area_lights: tuple[AreaLight, ...] = ()) -> np.ndarray:
         """Exposed CIE XYZ, ``float32`` ``(H, W, 3)``, row 0 at the top (see :meth:`render_rgba`)."""
         rgba = self.render_rgba(mesh, camera, light, size, exposure, ior, skip_threshold=skip_threshold,
                                 depth_prepass=depth_prepass, statistics=statistics, samples=samples,
-                                first_sample=first_sample, environment=environment, seed=seed, sampling=sampling)
+                                first_sample=first_sample, environment=environment, seed=seed, sampling=sampling,
+                                area_lights=area_lights)
         return np.ascontiguousarray(rgba[..., :3])
 
     def importance_table(self) -> MaterialTable:
@@ -303,16 +310,17 @@ class SceneRenderer:
                 self._importance = material_table(self._source)
         return self._importance
 
-    def environment_lighting(self, environment: Environment) -> EnvironmentLighting:
-        """``environment``'s textures on this context with the material's importance table (kept for the next
-        render with the same environment object)."""
-        if self._lighting is not None and self._lighting.environment is environment:
+    def environment_lighting(self, environment: Environment | None,
+                             area_lights: tuple[AreaLight, ...] = ()) -> EnvironmentLighting:
+        """``environment``'s textures and ``area_lights`` on this context with the material's importance table (kept
+        for the next render with the same environment object and equal area lights)."""
+        if self._lighting is not None and self._lighting.matches(environment, area_lights):
             return self._lighting
         table = self.importance_table()
         if self._lighting is not None:
             self._lighting.release()
             self._lighting = None
-        self._lighting = EnvironmentLighting(self.ctx, environment, table)
+        self._lighting = EnvironmentLighting(self.ctx, environment, table, area_lights)
         return self._lighting
 
     def render_srgb8(self, mesh: Mesh | MeshBuffers, camera: Camera, light: Light,

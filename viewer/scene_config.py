@@ -28,6 +28,7 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, TypeVar
 
+from gratnet.area_lights import AREA_FLAG, AREA_HELP, parse_area_lights
 from gratnet.codes import DEFERRED_WEIGHTS, ENVIRONMENT_SAMPLING, RENDER_PATHS, SCHEME, WEIGHTS_PATHS, WeightForm
 from gratnet.config import config_field, parse_float, parse_numbers
 from gratnet.errors import GratNetError
@@ -136,6 +137,11 @@ class LightingConfig:
         "moves to φ + DEGREES); default: turned so that its brightest direction (the sky's sun, the studio's key "
         "softbox) stands at the azimuth of --light φ, the material's default light that shows its diffraction")
     seed: int = config_field(0, "random seed of the light samples (an environment's; Mitsuba's sampler)")
+    # The flag's values as given (KIND:NUMBERS), parsed by gratnet.area_lights; () when none.
+    area_light: tuple[str, ...] = config_field((), AREA_HELP, flag=AREA_FLAG)
+
+    def __post_init__(self) -> None:
+        self.area_light = tuple(str(text) for text in (self.area_light or ()))  # argparse and saved JSON give lists
 
     @property
     def has_environment(self) -> bool:
@@ -143,11 +149,21 @@ class LightingConfig:
         return environment_of(self) is not None
 
     @property
+    def area_lights(self) -> tuple[Any, ...]:
+        """The ``--area-light`` values parsed (:class:`gratnet.area_lights.AreaLight`), or a one-line GratNetError."""
+        return parse_area_lights(self.area_light)
+
+    @property
+    def has_sampled_light(self) -> bool:
+        """Whether an environment or an area light lights the scene (rendered by passes of the MIS estimator)."""
+        return bool(self.area_light) or self.has_environment
+
+    @property
     def effective_light_intensity(self) -> float:
-        """``light_intensity``, or its default: 1, or 0 when an environment lights the scene."""
+        """``light_intensity``, or its default: 1, or 0 when an environment or an area light lights the scene."""
         if self.light_intensity is not None:
             return self.light_intensity
-        return 0.0 if self.has_environment else 1.0
+        return 0.0 if self.has_sampled_light else 1.0
 
 
 def environment_of(config: LightingConfig) -> Any:
@@ -209,6 +225,7 @@ def check_lighting(config: LightingConfig) -> None:
         raise GratNetError(f"--environment-rotation must be a finite number of degrees, got "
                            f"{config.environment_rotation!r}")
     environment_of(config)
+    config.area_lights  # noqa: B018  (parsed for its checks: one line for a bad light)
 
 
 def lighting_help(actions: dict[str, argparse.Action]) -> None:
@@ -218,6 +235,7 @@ def lighting_help(actions: dict[str, argparse.Action]) -> None:
     actions["environment_rotation"].help = (actions["environment_rotation"].help or "").replace(" (default: None)", "")
     actions["environment_scale"].metavar = "SCALE"
     actions["light_intensity"].metavar = "INTENSITY"
+    actions["area_light"].metavar = "KIND:NUMBERS"
     # The field's None means "not given" (1, or 0 with --environment): its help says so in words, not "None".
     actions["light_intensity"].help = (actions["light_intensity"].help or "").replace(" (default: None)", "")
 

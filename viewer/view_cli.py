@@ -242,6 +242,9 @@ def lighting_of(arguments: argparse.Namespace) -> LightingConfig:
 
     lighting = with_given_light(from_arguments(LightingConfig, arguments), light_flag_given(arguments))
     check_lighting(lighting)
+    if lighting.area_light:  # the window's refinement and compile groups know environments only, for now
+        raise GratNetError("gratnet view does not take --area-light yet; render area lights with gratnet render "
+                           "--area-light … --spp N (or mitsuba-render, compare)")
     if lighting.has_environment and getattr(arguments, "render_path", "auto") == "deferred":
         raise GratNetError("--environment renders on the forward path (--render-path auto or forward)")
     passes = getattr(arguments, "environment_spp", None)

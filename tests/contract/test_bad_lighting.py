@@ -35,6 +35,22 @@ CASES: dict[str, tuple[list[str], str]] = {
     "render light intensity negative": ([*RENDER, "--light-intensity", "-1"], "--light-intensity"),
     "render environment sampling unknown": ([*RENDER, "--environment", "sky", "--environment-sampling", "uniform"],
                                             "--environment-sampling"),
+    # Area lights (gratnet.area_lights): degenerate, unknown, malformed, too many, and the paths that refuse them.
+    "render area light unknown kind": ([*RENDER, "--area-light", "disc:0,0,1,0.1,1"], "--area-light"),
+    "render area light no kind": ([*RENDER, "--area-light", "0,0,1,0.1,1"], "KIND:NUMBERS"),
+    "render area light count": ([*RENDER, "--area-light", "sphere:0,0,1,0.1"], "sphere"),
+    "render area light zero radius": ([*RENDER, "--area-light", "sphere:0,0,1,0,1"], "radius"),
+    "render area light zero normal": ([*RENDER, "--area-light", "rect:0,0,1,0,0,0,1,1,1"], "normal"),
+    "render area light zero width": ([*RENDER, "--area-light", "rect:0,0,1,0,0,-1,0,1,1"], "width"),
+    "render area light negative radiance": ([*RENDER, "--area-light", "rect:0,0,1,0,0,-1,1,1,-1"], "radiance"),
+    "render area light zero radiance": ([*RENDER, "--area-light", "sphere:0,0,1,0.1,0,0,0"], "radiance"),
+    "render area light nan": ([*RENDER, "--area-light", "sphere:nan,0,1,0.1,1"], "--area-light"),
+    "render area light far": ([*RENDER, "--area-light", "sphere:1e9,0,1,0.1,1"], "centre"),
+    "render area light too many": ([*RENDER, *(["--area-light", "sphere:0,0,1,0.1,1"] * 9)], "at most 8"),
+    "render area light slice": ([*RENDER, "--area-light", "sphere:0,0,1,0.1,1", "--slice"], "--slice"),
+    "render area light deferred": ([*RENDER, "--area-light", "sphere:0,0,1,0.1,1", "--render-path", "deferred"],
+                                   "forward path"),
+    "mitsuba-render area light zero radius": ([*MITSUBA, "--area-light", "sphere:0,0,1,0,1"], "radius"),
 }
 
 
@@ -47,6 +63,14 @@ def test_bad_lighting_is_one_line_before_any_work(tmp_path, capsys, monkeypatch,
                         lambda *a, **k: pytest.fail("work started before the lighting was checked"))
     code, stderr = run_cli([*argv, "--out", "out.png"], capsys)
     assert_one_clear_error(code, stderr, argv[0], needle)
+    assert_nothing_written(tmp_path, set())
+
+
+def test_the_viewer_refuses_area_lights_in_one_line(tmp_path, capsys, monkeypatch):
+    """gratnet view does not take area lights yet: one line that says where they render, before any window."""
+    monkeypatch.chdir(tmp_path)
+    code, stderr = run_cli(["view", "--area-light", "sphere:0,0,1,0.1,1", "--max-frames", "1"], capsys)
+    assert_one_clear_error(code, stderr, "view", "gratnet render --area-light")
     assert_nothing_written(tmp_path, set())
 
 

@@ -174,7 +174,7 @@ def test_every_code_uniform_is_declared_and_every_activation_is_what_mlp_glsl_co
     text = "\n".join(sources.values())
     for table in TABLES:
         if table.uniform:
-            assert re.search(rf"\buniform\s+int\s+{table.uniform}\s*;", text), table.uniform
+            assert re.search(rf"\buniform\s+int\s+{table.uniform}\s*(\[\w+\])?\s*;", text), table.uniform
     for table in (codes.HIDDEN, codes.OUTPUT):
         for name in table.names:
             assert f"return {table.expression(name)};" in sources["mlp.glsl"], name
