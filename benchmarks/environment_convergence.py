@@ -2,6 +2,9 @@
 
     python benchmarks/environment_convergence.py                       # paper-cd on the CD under the sky, 64²
     python benchmarks/environment_convergence.py --material paper-snake --environment studio --mesh sphere
+    python benchmarks/environment_convergence.py --volume out/volumes/paper-cd.exr --size 256 --max-spp 64 \
+        --reference-spp 4096 --out docs/data/environment_convergence_256.json \
+        --figure docs/images/environment_convergence_256.png
 
 For one material, mesh and environment (the map as it is, unturned; the camera of the material's default view,
 ``gratnet render``'s), a
@@ -12,6 +15,10 @@ at the exposure the reference's picture calls for: gratnet.showcase.suggest_expo
 RMSE of the lit pixels. Each pass is timed (wall, this machine's GL: llvmpipe on a CPU machine; the load
 average is recorded). Writes a JSON record (atomically) and a figure (FLIP against spp and against seconds,
 log-log), and prints one line per point. docs/benchmarks.md shows the figure of the shipped run.
+
+``--volume``: shade with the material's ground-truth volume looked up per pixel (``gratnet render --reference``)
+instead of its network: the same estimator and the same noise at a small fraction of the network's cost per pass,
+so that larger pictures and 4,096-pass references fit this machine.
 """
 
 from __future__ import annotations
@@ -39,6 +46,7 @@ from viewer.catalog import build_mesh, resolve_material
 from viewer.context import create_headless_context
 from viewer.defaults import resolve_defaults
 from viewer.scene import SceneRenderer
+from viewer.scene_config import load_reference
 
 REPO = Path(__file__).resolve().parents[1]
 DEFAULT_JSON = REPO / "docs" / "data" / "environment_convergence.json"
@@ -54,6 +62,8 @@ def _arguments(argv: list[str] | None) -> argparse.Namespace:
     parser.add_argument("--size", type=int, default=64, help="square image side, pixels")
     parser.add_argument("--max-spp", type=int, default=256)
     parser.add_argument("--reference-spp", type=int, default=1024)
+    parser.add_argument("--volume", default="", help="a ground-truth volume of the material (gratnet groundtruth's "
+                        "EXR) to shade with instead of the network (gratnet render --reference)")
     parser.add_argument("--out", type=Path, default=DEFAULT_JSON)
     parser.add_argument("--figure", type=Path, default=DEFAULT_FIGURE)
     arguments = parser.parse_args(argv)
@@ -83,9 +93,12 @@ def main(argv: list[str] | None = None) -> int:
         "date": time.strftime("%Y-%m-%d"), "command": shlex.join(["python", *sys.argv]),
         "material": arguments.material, "mesh": arguments.mesh, "environment": environment.name,
         "size": list(size), "reference_spp": arguments.reference_spp, "gl_renderer": None,
+        "shading": f"reference volume {Path(arguments.volume).name}" if arguments.volume else "network",
         "load_average_before": round(load_before, 2), "strategies": {}}
     try:
-        with SceneRenderer(ctx, load_model(resolve_material(arguments.material)), render_path="forward") as scene:
+        source: Any = (load_reference(arguments.volume, "float16", arguments.material) if arguments.volume
+                       else load_model(resolve_material(arguments.material)))
+        with SceneRenderer(ctx, source, render_path="forward") as scene:
             record["gl_renderer"] = ctx.info.get("GL_RENDERER")
             uploaded = scene.upload(mesh)
 
@@ -153,7 +166,8 @@ def _write(record: dict[str, Any], out: Path, figure: Path) -> None:
         axis.set_ylabel(f"FLIP vs {record['reference_spp']}-spp MIS")
         axis.grid(True, which="both", alpha=0.3)
         axis.legend()
-    fig.suptitle(f"{record['material']} on the {record['mesh']} under {record['environment']}, "
+    shading = "" if record.get("shading", "network") == "network" else " (ground-truth look-up)"
+    fig.suptitle(f"{record['material']}{shading} on the {record['mesh']} under {record['environment']}, "
                  f"{record['size'][0]}², {record['gl_renderer']}", fontsize=9)
     fig.tight_layout()
     out.parent.mkdir(parents=True, exist_ok=True)
