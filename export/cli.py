@@ -8,7 +8,9 @@
   model, ``NAME.grid<k>.bin`` per grid texture; one ``README.md`` (the usage note) and ``export.config.json``
   (what was exported, from which files). ``--format hlsl``: the same with ``NAME.hlsl`` (export/hlsl.py: the GLSL
   module through glslangValidator and spirv-cross, which must be installed). ``--format web``: ``index.html``,
-  ``gratnet.js``, ``meshes.bin`` and per material ``NAME.weights.bin`` (export/web.py; pure-MLP models only).
+  ``gratnet.js``, ``meshes.bin`` and per material ``NAME.weights.bin`` (export/web.py). ``--format wgsl``: per
+  material ``NAME.wgsl`` (export/wgsl.py: a WebGPU shader module), ``NAME.weights.bin`` and, for a feature-grid
+  model, ``NAME.grids.bin`` (one storage buffer for every level).
 - ``--out DIR``: a folder that does not exist yet or is empty.
 
 Bad input (an unknown material, a format a material cannot be exported to, an ``--out`` that exists with files in
@@ -38,7 +40,7 @@ if TYPE_CHECKING:
 __all__ = ["FORMATS", "Material", "check_out_folder", "export_name", "register", "run"]
 
 #: The formats ``--format`` takes, in its help's order.
-FORMATS = ("glsl", "hlsl", "web")
+FORMATS = ("glsl", "hlsl", "web", "wgsl")
 _NAME = re.compile(r"[^A-Za-z0-9_.-]+")
 
 
@@ -146,6 +148,16 @@ def _usage_note(export_format: str, materials: list[Material], single_file: bool
                 f"{opening}. URL parameters (gratnet render's meanings): "
                 f"material, mesh=cd|sphere|plane, slice=1, light=THETA,PHI, camera=DIST,AZIMUTH,ELEVATION, exposure, "
                 f"ior, size=N or W,H, ui=0. Docs: docs/export.md in the GratNet repository.\n")
+    if export_format == "wgsl":
+        return (f"# GratNet export (wgsl)\n\nMaterials: {names}. Written by `gratnet export` (GratNet "
+                f"{__version__}).\n\nEach `NAME.wgsl` is one WGSL shader module for WebGPU, without an entry point: "
+                f"put it before your WGSL. Its header says how to bind `NAME.weights.bin` (and a feature-grid model's "
+                f"`NAME.grids.bin`) as read-only storage buffers and what its functions compute:\n\n"
+                f"- `gratnet_reflectance(wi: vec3<f32>, wo: vec3<f32>) -> vec3<f32>`: CIE XYZ reflectance, unit "
+                f"vectors in the tangent frame;\n"
+                f"- `gratnet_shade(wi, wo, ior: f32, exposure: f32) -> vec3<f32>`: exposure · A · reflectance.\n\n"
+                f"`export.config.json` lists every file, its bindings and the model it came from. Docs: "
+                f"docs/export.md in the GratNet repository.\n")
     vec, kind = ("vec3", "GLSL") if export_format == "glsl" else ("float3", "HLSL (shader model 5.0)")
     return (f"# GratNet export ({export_format})\n\nMaterials: {names}. Written by `gratnet export` (GratNet "
             f"{__version__}).\n\nEach `NAME.{export_format}` is one {kind} function module; its header says how to "
@@ -177,6 +189,10 @@ def run(arguments: argparse.Namespace) -> int:
             from export.web import write_web
 
             entries = write_web([(m.name, m.given, m.model) for m in materials], folder, arguments.single_file)
+        elif export_format == "wgsl":
+            from export.wgsl import write_wgsl
+
+            entries = write_wgsl([(m.name, m.model) for m in materials], folder)
         else:
             entries = _write_shaders(export_format, materials, folder)
         (folder / "README.md").write_text(_usage_note(export_format, materials, arguments.single_file),
@@ -198,10 +214,10 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     from gratnet.config import add_quiet_flag
 
     parser = subparsers.add_parser(
-        "export", help="write materials as shader modules for other engines (GLSL, HLSL) or a WebGL2 page",
+        "export", help="write materials as shader modules for other engines (GLSL, HLSL, WGSL) or a WebGL2 page",
         description="Write each material's network as a GLSL function module made from the runtime's own shaders "
-        "(or that module cross-compiled to HLSL), with its weights as binary files, or a WebGL2 viewer page "
-        "(docs/export.md).",
+        "(or that module cross-compiled to HLSL, or its hand-written WGSL twin for WebGPU), with its weights as binary "
+        "files, or a WebGL2 viewer page (docs/export.md).",
         epilog="typical use:\n  gratnet export cd snake --format glsl --out exported",
     )
     parser.add_argument("material", metavar="MATERIAL", nargs="+", help="shipped material names or model-file paths")
