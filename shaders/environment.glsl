@@ -170,7 +170,13 @@ void environment_incidence(vec3 position, mat3 world_to_tangent, vec3 wo, out ve
         irradiance *= strategies;
         return;
     }
-    vec3 xi = uniform3(uvec3(pixel, uint(u_sample_index) ^ (u_seed * 0x9e3779b9u)));
+    // The strategy's own passes at this pixel draw its directions from one Sobol sequence under a per-pixel,
+    // per-strategy random shift (stratified over passes, each pass still uniform); the first number chooses
+    // material sampling's branch (table or cosine) and stays independent.
+    uint turn = (uint(u_sample_index) + offset) / count;  // this strategy's 0th, 1st, ... pass here
+    uvec3 shift = pcg3d(uvec3(pixel, (u_seed * 0x9e3779b9u) ^ ((strategy + 1u) * 0x85ebca6bu)));
+    vec3 xi = vec3(uniform3(uvec3(pixel, uint(u_sample_index) ^ (u_seed * 0x9e3779b9u))).x,
+                   stratified2(turn, shift.yz));
     mat3 tangent_to_world = transpose(world_to_tangent);
     vec3 light = vec3(0.0);  // sum over emitters of w_e * L_e / p_s
     if (strategy < light_strategies) {  // light sampling of one emitter
@@ -178,10 +184,10 @@ void environment_incidence(vec3 position, mat3 world_to_tangent, vec3 wo, out ve
         float chosen;
         vec3 radiance;
         if (emitter < 0) {
-            wi_world = sample_environment(xi.xy, chosen);
+            wi_world = sample_environment(xi.yz, chosen);
             radiance = environment_radiance(wi_world);
         } else {
-            wi_world = sample_area(emitter, position, xi.xy, chosen);
+            wi_world = sample_area(emitter, position, xi.yz, chosen);
             radiance = u_area_radiance[emitter];
         }
         if (!(chosen > 0.0)) {

@@ -25,6 +25,36 @@ vec3 uniform3(uvec3 v) {
     return vec3(pcg3d(v) >> 8u) * (1.0 / 16777216.0);
 }
 
+// x with its 32 bits in reverse order (GLSL ES 3.00 has no bitfieldReverse).
+uint reverse_bits(uint x) {
+    x = ((x >> 1u) & 0x55555555u) | ((x & 0x55555555u) << 1u);
+    x = ((x >> 2u) & 0x33333333u) | ((x & 0x33333333u) << 2u);
+    x = ((x >> 4u) & 0x0f0f0f0fu) | ((x & 0x0f0f0f0fu) << 4u);
+    x = ((x >> 8u) & 0x00ff00ffu) | ((x & 0x00ff00ffu) << 8u);
+    return (x >> 16u) | (x << 16u);
+}
+
+// Point `index` of Sobol's sequence in its first two dimensions (van der Corput in base 2 and Sobol's second),
+// as 32-bit fractions: every 2^m consecutive points from a multiple of 2^m put one point in each of 2^m equal
+// boxes of the unit square (a (0, 2)-sequence), so the first N points stratify the square for every N.
+uvec2 sobol2(uint index) {
+    uint first = reverse_bits(index);
+    uint second = 0u;
+    for (uint v = 1u << 31u; index != 0u; index >>= 1u) {
+        if ((index & 1u) != 0u) {
+            second ^= v;
+        }
+        v ^= v >> 1u;
+    }
+    return uvec2(first, second);
+}
+
+// Two numbers in [0, 1) (24 bits each): Sobol point `index` shifted by `shift` modulo 1 (Cranley-Patterson
+// rotation: with a uniformly random shift each point is uniform, and the points keep their stratification).
+vec2 stratified2(uint index, uvec2 shift) {
+    return vec2((sobol2(index) + shift) >> 8u) * (1.0 / 16777216.0);
+}
+
 // The largest index i in [0, count - 1] of row `row` whose CDF value (texel i) is <= xi; the CDF has
 // count + 1 values, the first 0 and the last 1 (gratnet.sampling2d: numpy's searchsorted(..., "right") - 1).
 int cdf_search(highp sampler2D table, int row, int count, float xi) {
