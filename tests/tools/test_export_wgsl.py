@@ -42,6 +42,7 @@ from gratnet.encoding import EncodingSpec, RangeSpec, network_coordinates
 from gratnet.modelfile import ModelFile, evaluate_keys, load_model, pack_texture, save_model
 from gratnet.precision import DriverErrors, assert_within, driver_bound
 from tests.helpers import RELATIVE, parity_keys, random_model
+from viewer.catalog import shipped_materials
 
 CHROMIUM = shutil.which("chromium") or ("/usr/bin/chromium" if Path("/usr/bin/chromium").exists() else None)
 try:
@@ -60,7 +61,10 @@ SWIFTSHADER = DriverErrors(key_error=0.0, sinusoid_error=2.0**-10)
 EXPOSURE = 3.0
 IOR = 1.5
 PAIRS = 256
-MATERIALS = ("cd", "paper-cd", "random0", "random1", "random2", "random-grid16", "random-grid32")
+#: Every shipped material (issue 44: parity "for every shipped material") and random models that cover every
+#: activation, output activation, scheme, range kind and grid storage.
+SHIPPED = tuple(shipped_materials())
+MATERIALS = (*SHIPPED, "random0", "random1", "random2", "random-grid16", "random-grid32")
 
 #: The host's compute shader after the module: per pair, reflectance, shade, linear and display sRGB.
 HOST = f"""
@@ -199,7 +203,7 @@ def exported(tmp_path_factory) -> tuple[Path, dict]:
         save_model(folder / f"{name}.npz", model)
         paths.append(str(folder / f"{name}.npz"))
     out = folder / "out"
-    assert main(["export", "cd", "paper-cd", *paths, "--format", "wgsl", "--out", str(out), "--quiet"]) == 0
+    assert main(["export", *SHIPPED, *paths, "--format", "wgsl", "--out", str(out), "--quiet"]) == 0
     return out, json.loads((out / "export.config.json").read_text(encoding="utf-8"))
 
 
