@@ -11,11 +11,14 @@
 //            list entries, each layer's weights staged in shared memory once per tile, the activations kept
 //            there between layers; the same texels written. With TILED_HALF, half-precision arithmetic
 //            (GL_NV_gpu_shader5 or GL_AMD_gpu_shader_half_float, enabled here: TILED_HALF_NV / TILED_HALF_AMD).
+//   TINT     under sampled light (surface.glsl's GBUFFER with ENVIRONMENT), after SHADE / SHADE_TILED: every
+//            texel's exposed XYZ under its pass's linear sRGB tint (a second texture stacked as the G-buffer, 0
+//            where the pixel is not lit), as the forward path's environment_tint (environment.glsl).
 //   RESOLVE  per pixel: the mean of its u_samples texels (sample k at row y + k * u_height) times u_scale,
 //            added to the output when u_accumulate is set (samples in several chunks).
 //
-// COMPACT and RESOLVE run in bands of rows from u_first_row (a multiple of DEFERRED_TILE: no texel twice), SHADE in
-// pieces of the list (viewer/deferred.py binds it from an entry on): no dispatch runs long (issue 36).
+// COMPACT, TINT and RESOLVE run in bands of rows from u_first_row (a multiple of DEFERRED_TILE: no texel twice),
+// SHADE in pieces of the list (viewer/deferred.py binds it from an entry on): no dispatch runs long (issue 36).
 //
 // So background, A = 0 and bound-dark pixels never reach the MLP: the skip rules of the forward path
 // become the list's length. Needs the defines of mlp.glsl and encoding.glsl (SHADE), skip.glsl's (COMPACT),
@@ -140,6 +143,26 @@ void main() {
         tiled_encode(g_tile_first, entry_count);
         tiled_layers();
     }
+}
+#endif
+
+#ifdef TINT
+layout(local_size_x = DEFERRED_TILE, local_size_y = DEFERRED_TILE) in;
+layout(rgba32f, binding = GBUFFER_IMAGE_BINDING) uniform restrict image2D u_gbuffer;
+layout(rgba32f, binding = RESOLVED_IMAGE_BINDING) uniform restrict readonly image2D u_tint;  // unit free till RESOLVE
+uniform mat3 u_xyz_to_rgb;  // CIE XYZ -> linear sRGB (gratnet.display)
+uniform mat3 u_rgb_to_xyz;  // its inverse
+uniform int u_first_row;    // as COMPACT's
+
+void main() {
+    ivec2 texel = ivec2(gl_GlobalInvocationID.xy) + ivec2(0, u_first_row);
+    if (any(greaterThanEqual(texel, imageSize(u_gbuffer)))) {
+        return;
+    }
+    vec4 value = imageLoad(u_gbuffer, texel);
+    vec3 tint = imageLoad(u_tint, texel).rgb;
+    // environment.glsl's environment_tint, term for term (it reads gl_FragCoord: not includable here).
+    imageStore(u_gbuffer, texel, vec4(u_rgb_to_xyz * (tint * (u_xyz_to_rgb * value.xyz)), value.w));
 }
 #endif
 

@@ -14,7 +14,8 @@
 // program, not a uniform and an early return: llvmpipe runs straight-line code such as the baked MLP even
 // for fragments that have returned, so a uniform-selected depth pass cost a full shading pass.
 // Deferred path (issue 12): compiled with GBUFFER, the fragment stage stops before the network and writes
-// (key, exposure * irradiance * A) for shaders/deferred.glsl to evaluate; see surface_inputs below.
+// (key, exposure * irradiance * A) for shaders/deferred.glsl to evaluate; see surface_inputs below. With
+// ENVIRONMENT too, output 1 takes the pass's tint (deferred.glsl's TINT applies it after the network).
 // Reference renders (gratnet render --reference): compiled with REFERENCE, the ground-truth volume's look-up
 // (reference.glsl) takes the network's place; everything else is the same code.
 // Needs the defines of mlp.glsl and encoding.glsl; the codes (COUNTER_*, LIGHT_*) come from codes.glsl.
@@ -80,7 +81,7 @@ in vec3 v_normal;
 in vec3 v_tangent;
 
 layout(location = 0) out vec4 out_exposed;
-layout(location = 1) out vec4 out_key;  // (key, A)
+layout(location = 1) out vec4 out_key;  // (key, A); GBUFFER with ENVIRONMENT: (tint, 0)
 
 // A unit tangent perpendicular to unit n (Duff et al. 2017; viewer.meshes.arbitrary_tangents).
 vec3 arbitrary_tangent(vec3 n) {
@@ -141,13 +142,18 @@ bool surface_inputs(out vec3 key, out float a, out float factor, out vec3 tint) 
 #ifdef GBUFFER
 // The deferred path's G-buffer (viewer/deferred.py): (key, factor) per covered pixel; the renderer clears
 // to (0, 0, 0, -1), so factor < 0 marks the background. No network here: deferred.glsl evaluates it.
+// Under sampled light, output 1 holds the tint where the pixel is lit, else 0 (the forward path tints only
+// lit pixels: an unlit one's tint may be anything, even inf, and 0 keeps TINT's product 0).
 void main() {
     vec3 key;
     float a;
     float factor;
     vec3 tint;
-    surface_inputs(key, a, factor, tint);
+    bool lit = surface_inputs(key, a, factor, tint);
     out_exposed = vec4(key, factor);
+#ifdef ENVIRONMENT
+    out_key = vec4(lit ? tint : vec3(0.0), 0.0);
+#endif
 }
 #else
 void main() {

@@ -21,13 +21,25 @@ XYZ and coverage, ``float32`` ``(H, W, 4)``, row 0 at the top):
      Ctrl-C is answered; each texel is computed as in one dispatch, bit for bit). The G-buffer pass, the
      compaction and the resolve run in bands of rows for the same reason (sized by the rows' costs estimated
      from the mesh's projected triangles).
-  4. **Resolve** (``RESOLVE``, only for several samples): the mean of a pixel's samples.
+  4. **Tint** (``TINT``, only under sampled light; below), then **resolve** (``RESOLVE``, only for several
+     samples): the mean of a pixel's samples.
 
 Samples: ``offsets_px`` (``(N, 2)`` pixels, :func:`viewer.antialias.sample_offsets`) renders N G-buffers
 stacked in one texture (sample k in rows ``k·H … k·H + H − 1``, each drawn with
 ``view_projection @ jitter_matrix(offset)``), then one compaction and one MLP dispatch over the N-times-longer
 list, then the per-pixel mean (coverage averaged too). N = 1 at offset (0, 0) is the un-jittered render.
 Where ``N · H`` exceeds the largest texture, the samples are taken in chunks, each accumulated.
+
+Sampled light (issue 43: an environment and/or area lights, :class:`~viewer.environment_light.EnvironmentPass`):
+the G-buffer pass is ``surface.glsl`` compiled with ``GBUFFER`` and ``ENVIRONMENT``: it runs the forward path's
+estimator (``environment_incidence``), sample k as pass ``first_sample + k`` with ``u_pixel_origin`` lowered by
+``k·H`` rows, so its random numbers are keyed by the picture's pixel as the forward path's are, not by the stacked
+row. It writes the pass's linear sRGB tint (0 where the pixel is not lit) into a second RGBA32F texture stacked
+alike (16 bytes more per stacked texel); after the shading kernel, whichever it is, ``TINT`` turns each texel's
+``factor · XYZ`` into ``environment_tint``'s value. Skipping by the bound stays off (the caller's). Deferred equals
+forward per pixel to the float32 differences of the stacked samples (tests/runtime/test_environment_light.py).
+A scene takes this path under sampled light only for a render that asks for it
+(:meth:`viewer.scene.SceneRenderer.path_for_render`).
 
 Weights of the compute pass (:data:`DEFERRED_WEIGHTS`, each parsed into a :class:`gratnet.codes.WeightForm`):
 ``texture`` (the packed RGBA32F texture, as the forward path), ``ssbo`` (the same texels in a std430 buffer),
@@ -76,6 +88,7 @@ from gratnet.codes import (
 from gratnet.errors import GratNetError
 from viewer.antialias import check_offsets, jitter_matrix
 from viewer.camera import Camera, Light
+from viewer.environment_light import ENVIRONMENT_DEFINES, EnvironmentLighting, EnvironmentPass
 from viewer.forward import SURFACE_PROGRAM
 from viewer.glsl import compile_compute, compile_program
 from viewer.pacing import BLOCK, Pacer, Progress, projected_row_costs, read_rows
@@ -106,6 +119,7 @@ _PIECE_ENTRIES = 256  # SHADE pieces start at multiples of 256 list entries: 1 K
 _FIRST_GBUFFER_PIXELS = 1 << 16  # the first band of the G-buffer pass (no MLP; covered pixels, estimated)
 _FIRST_COMPACT_PIXELS = 1 << 16  # ... of the compaction (covered texels, estimated)
 _FIRST_RESOLVE_ROWS = 64  # ... of the resolve (rows; every pixel costs alike)
+_FIRST_TINT_ROWS = 64  # ... of the tint under sampled light (texel rows of the stacked G-buffer; alike too)
 _FIRST_SHADE_ENTRIES = 4096  # the first SHADE piece (entries: ~0.1 s of the texture-weights net on llvmpipe)
 _GBUFFER_SHARE = 0.1  # the share of a chunk's progress given to its G-buffer and compaction
 
@@ -164,12 +178,14 @@ class DeferredRenderer:
             self.tile_plan = plan_for_context(network.ctx, network.layout,
                                               half=self._half_extension not in (None, _HALF_AS_FLOAT))
             _LOG.debug("deferred weights %s: %s", form.name, self.tile_plan.describe(network.layout))
-        self._gbuffer_compiled: moderngl.Program | None = None
+        self._gbuffer_programs: dict[bool, moderngl.Program] = {}  # by tinted: compiled with ENVIRONMENT
         self._programs: dict[str, moderngl.ComputeShader] = {}
         self._weight_buffer: moderngl.Buffer | None = None
+        self._weight_texture: moderngl.Texture | None = None  # texture weights beside a baked network
         self._list: moderngl.Buffer | None = None
-        self._targets: tuple[tuple[int, int], moderngl.Texture, moderngl.Renderbuffer, moderngl.Framebuffer] | None
-        self._targets = None
+        # ((width, rows, tinted), colour textures (the G-buffer, then the tint's), depth, framebuffer)
+        self._targets: tuple[tuple[int, int, bool], list[moderngl.Texture], moderngl.Renderbuffer,
+                             moderngl.Framebuffer] | None = None
         self._output: moderngl.Texture | None = None
         #: Called with the fraction of the render done (0 … 1) after each band and piece; None: not reported.
         self.progress: Progress | None = None
@@ -179,6 +195,7 @@ class DeferredRenderer:
         self.compact_pacer = Pacer(self.ctx, first_cost=_FIRST_COMPACT_PIXELS)
         self.shade_pacer = Pacer(self.ctx, first_cost=_FIRST_SHADE_ENTRIES)
         self.resolve_pacer = Pacer(self.ctx, first_cost=_FIRST_RESOLVE_ROWS)
+        self.tint_pacer = Pacer(self.ctx, first_cost=_FIRST_TINT_ROWS)
 
     # ---------------------------------------------------------------------------------------------
     # Programs
@@ -186,11 +203,13 @@ class DeferredRenderer:
     def _defines(self) -> dict[str, int | float]:
         return {**self.network.defines, "SHADE_GROUP": _SHADE_GROUP}
 
-    def _gbuffer_program(self) -> moderngl.Program:
-        if self._gbuffer_compiled is None:
-            defines = {**self.network.defines, "GBUFFER": 1}
-            self._gbuffer_compiled = compile_program(self.ctx, SURFACE_PROGRAM, defines, self.network.shader_root)
-        return self._gbuffer_compiled
+    def _gbuffer_program(self, tinted: bool = False) -> moderngl.Program:
+        """The G-buffer's program; ``tinted``: with ``ENVIRONMENT`` (sampled light: it writes the tint too)."""
+        if tinted not in self._gbuffer_programs:
+            defines = {**self.network.defines, "GBUFFER": 1, **(ENVIRONMENT_DEFINES if tinted else {})}
+            self._gbuffer_programs[tinted] = compile_program(self.ctx, SURFACE_PROGRAM, defines,
+                                                             self.network.shader_root)
+        return self._gbuffer_programs[tinted]
 
     def _compute(self, kernel: str, counting: bool = False) -> moderngl.ComputeShader:
         key = kernel + ("#count" if counting else "")
@@ -238,6 +257,14 @@ class DeferredRenderer:
     def _bind_weights(self) -> None:
         if self.form.source is WeightSource.TEXTURE or self.network.model.grids:
             self.network.use_weights(0)  # the weight texture, and a feature-grid model's grids on their units
+        if self.form.source is WeightSource.TEXTURE and self.network.weights_path != "texture":
+            # A baked network holds a 1-texel placeholder (it read as a black picture): the texels in our own.
+            if self._weight_texture is None:
+                texels = self.network.packed_weights
+                self._weight_texture = self.ctx.texture((texels.shape[1], texels.shape[0]), 4, texels.tobytes(),
+                                                        dtype="f4")
+                self._weight_texture.filter = moderngl.NEAREST, moderngl.NEAREST
+            self._weight_texture.use(location=0)
         if self.form.buffer:
             if self._weight_buffer is None:
                 texels = self.network.packed_weights
@@ -261,13 +288,14 @@ class DeferredRenderer:
     # ---------------------------------------------------------------------------------------------
     # Buffers (kept between renders of the same size: a view renders many frames)
 
-    def _gbuffer(self, width: int, rows: int) -> tuple[moderngl.Texture, moderngl.Framebuffer]:
-        if self._targets is None or self._targets[0] != (width, rows):
+    def _gbuffer(self, width: int, rows: int, tinted: bool) -> tuple[list[moderngl.Texture], moderngl.Framebuffer]:
+        """The G-buffer's textures (``tinted``: and the tint's, stacked alike) and their framebuffer."""
+        if self._targets is None or self._targets[0] != (width, rows, tinted):
             self._release_targets()
-            texture = self.ctx.texture((width, rows), 4, dtype="f4")
+            textures = [self.ctx.texture((width, rows), 4, dtype="f4") for _ in range(2 if tinted else 1)]
             depth = self.ctx.depth_renderbuffer((width, rows))
-            framebuffer = self.ctx.framebuffer(color_attachments=[texture], depth_attachment=depth)
-            self._targets = ((width, rows), texture, depth, framebuffer)
+            framebuffer = self.ctx.framebuffer(color_attachments=textures, depth_attachment=depth)
+            self._targets = ((width, rows, tinted), textures, depth, framebuffer)
         return self._targets[1], self._targets[3]
 
     def _list_buffer(self, entries: int) -> moderngl.Buffer:
@@ -290,30 +318,46 @@ class DeferredRenderer:
 
     def render(self, uploaded: MeshBuffers, camera: Camera, light: Light, size: tuple[int, int], exposure: float,
                ior: float | None, skip_threshold: float | None = None, statistics: dict[str, int] | None = None,
-               offsets_px: np.ndarray | None = None) -> np.ndarray:
+               offsets_px: np.ndarray | None = None, first_sample: int = 0,
+               environment: EnvironmentPass | None = None) -> np.ndarray:
         """Exposed CIE XYZ and coverage, ``float32`` ``(H, W, 4)``, row 0 at the top: the mean over the
         samples at ``offsets_px`` (``(N, 2)`` pixels, x right, y up; ``None``: one sample at the centre).
 
         ``statistics`` receives the counters of ``viewer.renderer.STATISTICS_KEYS`` summed over the samples
-        (``evaluations`` = the list's length)."""
+        (``evaluations`` = the list's length).
+
+        ``environment``: sampled light (shaders/environment.glsl), as :meth:`viewer.forward.ForwardRenderer.render`
+        takes it: sample k is pass ``first_sample + k`` of the estimator, its random numbers keyed by the picture's
+        pixel (``environment.pixel_origin`` added), not by its row in the stacked G-buffer; the G-buffer pass writes
+        each pass's tint beside it, and the TINT kernel applies it after the network. The caller turns the skip
+        bound off (a pass's sample is not the pixel)."""
         width, height = size
         offsets = np.zeros((1, 2)) if offsets_px is None else check_offsets(offsets_px)
         threshold = skip_threshold_value(skip_threshold)
         max_rows = int(self.ctx.info.get("GL_MAX_TEXTURE_SIZE", 16384))
         per_chunk = max(1, min(len(offsets), max_rows // height, CHUNK_TEXELS // (width * height)))
-        gbuffer_program = self._gbuffer_program()
+        tinted = environment is not None
+        gbuffer_program = self._gbuffer_program(tinted)
         set_surface_uniforms(gbuffer_program, camera, light, width, height, float(exposure), ior)
+        tint = None
+        if environment is not None:
+            environment.lighting.set_uniforms(gbuffer_program, environment.delta_light, environment.seed,
+                                              environment.sampling, tinted=False)
+            tint = self._compute("TINT")
+            EnvironmentLighting.set_colour_uniforms(tint)
         compact = self._compute("COMPACT", counting=statistics is not None)
         bound, unit = self.network.skip_uniforms(compact, threshold)
         shade, resolve = self._compute("SHADE"), self._compute("RESOLVE")
-        view_projection = np.ascontiguousarray(camera.view_projection(width / height), dtype=np.float32)
+        # float64, as the forward path jitters it before its float32 cast: the same matrix per sample, bit for bit.
+        view_projection = camera.view_projection(width / height)
         vertex_array = None
         if not uploaded.empty:
             vertex_array = uploaded.vertex_array_for(gbuffer_program)
         if statistics is not None:
             self.network.reset_counters()
         chunks = [offsets[k:k + per_chunk] for k in range(0, len(offsets), per_chunk)]
-        texture, framebuffer = self._gbuffer(width, height * len(chunks[0]))
+        textures, framebuffer = self._gbuffer(width, height * len(chunks[0]), tinted)
+        texture = textures[0]
         list_buffer = self._list_buffer(width * height * len(chunks[0]))
         several = len(offsets) > 1
         output = self._output_texture(width, height) if several else None
@@ -332,8 +376,12 @@ class DeferredRenderer:
                         if self.progress is not None:
                             self.progress(min(1.0, (number + fraction) / len(chunks)))
 
+                    passes = None
+                    if environment is not None:  # this chunk's first pass: the samples before it numbered on
+                        environment.lighting.bind()
+                        passes = environment, first_sample + number * per_chunk
                     self._draw_gbuffer(framebuffer, gbuffer_program, vertex_array, view_projection, chunk, row_costs,
-                                       lambda done: report(_GBUFFER_SHARE * done))
+                                       lambda done: report(_GBUFFER_SHARE * done), passes)
                     list_buffer.write(np.array([0, 1, 1, 0], dtype=np.uint32).tobytes())
                     list_buffer.bind_to_storage_buffer(_LIST_BINDING)
                     texture.bind_to_image(_GBUFFER_IMAGE, read=True, write=True)
@@ -354,6 +402,8 @@ class DeferredRenderer:
                     for first, end in self.shade_pacer.pieces(entries, multiple=_PIECE_ENTRIES, done=shaded):
                         self._shade(shade, list_buffer, first, end)
                     self.ctx.memory_barrier()
+                    if tint is not None:
+                        self._tint(tint, texture, textures[1], width, height * len(chunk))
                     if output is not None:
                         set_uniform(resolve, "u_samples", len(chunk))
                         set_uniform(resolve, "u_height", height)
@@ -446,14 +496,27 @@ class DeferredRenderer:
             texture.release()
         return result[:count, :3].copy()
 
+    def _tint(self, tint: moderngl.ComputeShader, texture: moderngl.Texture, tints: moderngl.Texture, width: int,
+              rows: int) -> None:
+        """The TINT kernel over the chunk's ``rows`` texel rows, in bands (sampled light, after the shading)."""
+        texture.bind_to_image(_GBUFFER_IMAGE, read=True, write=True)
+        tints.bind_to_image(_RESOLVED_IMAGE, read=True, write=False)
+        for first, end in self.tint_pacer.pieces(rows, multiple=DEFERRED_TILE):
+            set_uniform(tint, "u_first_row", first)
+            tint.run(_groups(width, DEFERRED_TILE), _groups(end - first, DEFERRED_TILE))
+        self.ctx.memory_barrier()
+
     def _draw_gbuffer(self, framebuffer: moderngl.Framebuffer, program: moderngl.Program,
                       vertex_array: moderngl.VertexArray | None, view_projection: np.ndarray, chunk: np.ndarray,
-                      row_costs: np.ndarray, done: Callable[[float], None]) -> None:
-        """Sample k of ``chunk`` into rows ``k·height …`` of the G-buffer, with its jittered projection, in bands
-        of rows (a scissor box inside the sample's viewport; :mod:`viewer.pacing`) sized by ``row_costs`` (per
-        GL row of one sample). ``done``: the fraction of the chunk's G-buffer drawn, after each band."""
+                      row_costs: np.ndarray, done: Callable[[float], None],
+                      passes: tuple[EnvironmentPass, int] | None = None) -> None:
+        """Sample k of ``chunk`` into rows ``k·height …`` of the G-buffer, with its jittered projection
+        (``view_projection``: float64, cast after jittering as the forward path does), in bands of rows (a scissor
+        box inside the sample's viewport; :mod:`viewer.pacing`) sized by ``row_costs`` (per GL row of one sample).
+        ``done``: the fraction of the chunk's G-buffer drawn, after each band. ``passes``: sampled light and the
+        pass index of the chunk's first sample."""
         framebuffer.use()
-        framebuffer.clear(0.0, 0.0, 0.0, -1.0, depth=1.0)  # factor −1: background
+        framebuffer.clear(0.0, 0.0, 0.0, -1.0, depth=1.0)  # factor −1: background (and tint 0)
         if vertex_array is None:
             return
         width, height = framebuffer.width, len(row_costs)
@@ -461,8 +524,12 @@ class DeferredRenderer:
             for k, offset in enumerate(chunk):
                 matrix = view_projection
                 if offset[0] != 0.0 or offset[1] != 0.0:  # (0, 0): the forward path's matrix, bit for bit
-                    matrix = np.ascontiguousarray(view_projection @ jitter_matrix(offset, width, height))
-                set_uniform(program, "u_view_projection", matrix.astype(np.float32))
+                    matrix = view_projection @ jitter_matrix(offset, width, height)
+                set_uniform(program, "u_view_projection", np.ascontiguousarray(matrix, dtype=np.float32))
+                if passes is not None:  # sample k lies k·height rows up: key its pixels as the picture's
+                    environment, first = passes
+                    origin_x, origin_y = environment.pixel_origin
+                    environment.lighting.set_pass(program, first + k, (origin_x, origin_y - k * height))
                 self.ctx.viewport = (0, k * height, width, height)
                 def drawn(end: int, k: int = k) -> None:
                     done((k + end / height) / len(chunk))
@@ -476,22 +543,23 @@ class DeferredRenderer:
 
     def release(self) -> None:
         """Free the GL objects (the programs, buffers and targets of this path)."""
-        if self._gbuffer_compiled is not None:
-            self._gbuffer_compiled.release()
-            self._gbuffer_compiled = None
+        for gbuffer_program in self._gbuffer_programs.values():
+            gbuffer_program.release()
+        self._gbuffer_programs.clear()
         for program in self._programs.values():
             program.release()
         self._programs.clear()
         self._release_targets()
-        for resource in (self._weight_buffer, self._list, self._output):
+        for resource in (self._weight_buffer, self._list, self._output, self._weight_texture):
             if resource is not None:
                 resource.release()
-        self._weight_buffer = self._list = self._output = None
+        self._weight_buffer = self._list = self._output = self._weight_texture = None
 
     def _release_targets(self) -> None:
         if self._targets is not None:
-            _, texture, depth, framebuffer = self._targets
+            _, textures, depth, framebuffer = self._targets
             framebuffer.release()
             depth.release()
-            texture.release()
+            for texture in textures:
+                texture.release()
             self._targets = None

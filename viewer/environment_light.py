@@ -5,7 +5,8 @@ importance table as textures, area lights as uniforms: shaders/environment.glsl 
 (:class:`gratnet.area_lights.AreaLight`) and one :class:`gratnet.importance.MaterialTable` on a context. The forward
 path (viewer.forward) compiles its surface program with ``ENVIRONMENT`` when a render has sampled light, calls
 :meth:`EnvironmentLighting.set_uniforms` once and :meth:`EnvironmentLighting.set_pass` before each pass (sample) k,
-and binds :meth:`EnvironmentLighting.textures` with the material's. The estimator (one sample per pixel and pass,
+and binds :meth:`EnvironmentLighting.textures` with the material's; the deferred path (viewer.deferred) does the
+same for its G-buffer pass and applies the tint after its compute pass. The estimator (one sample per pixel and pass,
 MIS between each emitter's own sampling and the material's, the delta light in turn) is shaders/environment.glsl's;
 docs/physics.md "Environment light" and "Area lights" are its contract.
 
@@ -109,9 +110,12 @@ class EnvironmentLighting:
         units = list(ENVIRONMENT_UNITS.values())
         return tuple(zip(self._textures, units, strict=True))
 
-    def set_uniforms(self, program: moderngl.Program, delta_light: bool, seed: int, sampling: str = "mis") -> None:
+    def set_uniforms(self, program: moderngl.Program, delta_light: bool, seed: int, sampling: str = "mis",
+                     tinted: bool = True) -> None:
         """The uniforms of shaders/environment.glsl but the pass index: ``delta_light``: the light of lights.glsl
-        takes its turn too; ``sampling``: :data:`gratnet.codes.ENVIRONMENT_SAMPLING`."""
+        takes its turn too; ``sampling``: :data:`gratnet.codes.ENVIRONMENT_SAMPLING`; ``tinted``: the program
+        applies the tint (False: the deferred path's G-buffer, whose compiler drops the colour matrices; its TINT
+        kernel takes them, :meth:`set_colour_uniforms`)."""
         set_uniform(program, ENVIRONMENT_SAMPLING.uniform_name, ENVIRONMENT_SAMPLING.code(sampling))
         set_uniform(program, "u_delta_light", bool(delta_light))
         for name, unit in ENVIRONMENT_UNITS.items():
@@ -120,13 +124,19 @@ class EnvironmentLighting:
         angle = math.radians(self.environment.rotation_degrees if self.environment is not None else 0.0)
         set_uniform(program, "u_has_environment", self.environment is not None)
         _set_area_uniforms(program, self.area_lights)
-        to_rgb = XYZ_TO_LINEAR_SRGB  # colour-science's matrix, without importing it (viewer.srgb)
         set_uniform(program, "u_environment_cells", self.cells)
         set_uniform(program, "u_material_cells", (columns, rows))
         set_uniform(program, "u_environment_rotation", (math.cos(angle), math.sin(angle)))
         set_uniform(program, "u_material_key_range", (float(self.table.key_min), float(self.table.key_max)))
         set_uniform(program, "u_defensive_share", float(DEFENSIVE_SHARE))
         set_uniform(program, "u_seed", check_seed(seed))
+        if tinted:
+            self.set_colour_uniforms(program)
+
+    @staticmethod
+    def set_colour_uniforms(program: moderngl.Program | moderngl.ComputeShader) -> None:
+        """The tint's matrices ``u_xyz_to_rgb`` and ``u_rgb_to_xyz`` (environment_tint, deferred.glsl's TINT)."""
+        to_rgb = XYZ_TO_LINEAR_SRGB  # colour-science's matrix, without importing it (viewer.srgb)
         # GLSL mat3 uniforms are column-major: the transpose of the row-major numpy matrix.
         set_uniform(program, "u_xyz_to_rgb", np.ascontiguousarray(to_rgb.T, dtype=np.float32))
         set_uniform(program, "u_rgb_to_xyz", np.ascontiguousarray(np.linalg.inv(to_rgb).T, dtype=np.float32))
@@ -168,9 +178,10 @@ def _set_area_uniforms(program: moderngl.Program, lights: tuple[AreaLight, ...])
 
 @dataclasses.dataclass(frozen=True)
 class EnvironmentPass:
-    """What a forward render needs of an environment: the textures, whether the delta light takes its turn, the seed
-    of the random numbers, the sampling (:data:`gratnet.codes.ENVIRONMENT_SAMPLING`) and where the render target
-    lies in the whole picture (``pixel_origin``: GL pixels of its lower-left corner; a band of a larger picture)."""
+    """What a render (either path) needs of an environment: the textures, whether the delta light takes its turn,
+    the seed of the random numbers, the sampling (:data:`gratnet.codes.ENVIRONMENT_SAMPLING`) and where the render
+    target lies in the whole picture (``pixel_origin``: GL pixels of its lower-left corner; a band of a larger
+    picture)."""
 
     lighting: EnvironmentLighting
     delta_light: bool

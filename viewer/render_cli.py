@@ -149,8 +149,6 @@ def resolve_config(arguments: argparse.Namespace) -> RenderConfig:
         if config.slice:
             raise GratNetError(f"--slice renders the BRDF slice under one directional light; {flag} lights "
                                "mesh renders")
-        if config.render_path == "deferred":
-            raise GratNetError(f"{flag} renders on the forward path (--render-path auto or forward)")
         if config.skip_dark:
             raise GratNetError(f"--skip-dark bounds one light's pixel; under {flag} every sample counts")
     return config
@@ -263,8 +261,10 @@ def _render(arguments: argparse.Namespace, out: Path) -> int:
                            deferred_weights=config.weight_form,
                            reference_precision=config.reference_precision) as renderer:
             # A BRDF slice has one path (a full-screen fragment pass); a mesh takes the one chosen.
-            resolved = ({"path": "forward", "reason": "BRDF slices are rendered by the fragment pass only"}
-                        if config.slice else {"path": renderer.render_path, "reason": renderer.render_path_reason})
+            asked = None if config.render_path == "auto" or config.reference else config.render_path
+            path, reason = renderer.path_for_render(config.has_sampled_light, asked) if not config.slice else (
+                "forward", "BRDF slices are rendered by the fragment pass only")
+            resolved = {"path": path, "reason": reason}
             # The deferred path's kernel and weights as resolved (auto: by the rasterizer), beside the path.
             deferred_weights = (renderer.deferred.weights if resolved["path"] == "deferred"
                                 and renderer.deferred is not None else None)
@@ -280,7 +280,8 @@ def _render(arguments: argparse.Namespace, out: Path) -> int:
                     xyz = renderer.render(mesh, camera, light, (config.width, config.height), config.exposure,
                                           config.effective_ior, skip_threshold=skip_threshold, samples=config.spp,
                                           environment=environment, seed=config.seed,
-                                          sampling=config.environment_sampling, area_lights=area_lights)
+                                          sampling=config.environment_sampling, area_lights=area_lights,
+                                          render_path=path)
     finally:
         ctx.release()
     if not np.all(np.isfinite(xyz)):
@@ -382,7 +383,8 @@ def render_bytes(config: RenderConfig, width: int, height: int, software: bool) 
     (the read-back, its flip, the XYZ and the float64 conversions of the writer: :data:`_CPU_BYTES_PER_PIXEL`)
     and, on a software rasterizer, whose "GPU" memory is this memory, the render targets of the path that
     takes the most (forward: RGBA32F targets, a sum per layer for several samples, float32 depth; deferred:
-    the stacked G-buffer, its depth and list, the resolved mean; a slice: two RGBA32F targets)."""
+    the stacked G-buffer, its depth and list, the tint's stack under sampled light, the resolved mean; a slice:
+    two RGBA32F targets)."""
     from viewer.deferred import CHUNK_TEXELS
 
     pixels = width * height
@@ -392,7 +394,7 @@ def render_bytes(config: RenderConfig, width: int, height: int, software: bool) 
     else:
         stacked = max(1, min(config.spp, CHUNK_TEXELS // max(1, pixels)))
         forward = 16 * (2 if several else 1) + 4
-        deferred = 24 * stacked + (16 if several else 0)
+        deferred = (24 + (16 if config.has_sampled_light else 0)) * stacked + (16 if several else 0)
         targets = max(forward, deferred)
     return pixels * (_CPU_BYTES_PER_PIXEL + (targets if software else 0))
 

@@ -168,6 +168,16 @@ class SceneRenderer:
                 self._render_path = choose_render_path(self, self._requested_path, self._measure_render_path)
         return self._render_path
 
+    def path_for_render(self, sampled_light: bool, render_path: str | None = None) -> tuple[str, str]:
+        """``(path, reason)`` of a mesh render: ``render_path`` if it names one; else :attr:`render_path`, but
+        ``forward`` with sampled light (an environment or area lights): the scene's path (``auto``'s measured verdict,
+        the viewer window's choice) was chosen for one light, and the window's environment passes are forward ones."""
+        if render_path is not None:
+            return render_path, "requested"  # render_rgba refuses deferred in a reference scene
+        if sampled_light and self.reference is None:
+            return "forward", "sampled light renders forward unless the render asks for deferred"
+        return self._resolved_path()
+
     @property
     def program(self) -> moderngl.Program:
         """The forward path's ``surface`` program, compiled on first use (the buffers of :meth:`upload` bind to it)."""
@@ -231,21 +241,17 @@ class SceneRenderer:
         ``environment``: an environment light besides ``light`` (issue 43; a ``light`` of intensity 0 is none),
         integrated by shaders/environment.glsl: each sample is one pass of its estimator, pass
         ``first_sample + k`` for sample k, with random numbers from ``seed``; the mean over samples converges to
-        the integral (physics.md "Environment light"), so more samples mean less noise. Forward path only.
+        the integral (physics.md "Environment light"), so more samples mean less noise. Both paths give the same
+        estimate; it renders forward unless this call's ``render_path`` is ``deferred`` (:meth:`path_for_render`).
         ``sampling``: ``mis`` (default), or ``light`` / ``material`` alone (gratnet.codes.ENVIRONMENT_SAMPLING).
         ``pixel_origin``: this image's lower-left pixel in a larger picture (GL pixels, y up), when it is a band of
         one: the light samples are keyed by the whole picture's pixels, so the bands of N passes make the picture of
         one N-pass render of the whole.
         ``area_lights``: area lights (gratnet.area_lights) besides ``light`` and the environment, sampled by the same
-        estimator (physics.md "Area lights"; forward path only).
+        estimator (physics.md "Area lights"; either path, as ``environment``).
         """
         offsets = self._offsets(samples, first_sample, offsets_px)
-        path = self.render_path if render_path is None else render_path
-        if environment is not None or area_lights:
-            if render_path == "deferred":
-                raise GratNetError("an environment or area light renders on the forward path only (--render-path "
-                                   "forward or auto)")
-            path = "forward"
+        path = self.path_for_render(environment is not None or bool(area_lights), render_path)[0]
         if path not in ("forward", "deferred"):
             raise GratNetError(f"a render takes the forward or the deferred path, got {render_path!r}")
         if path == "deferred" and self.deferred is None:
@@ -281,7 +287,7 @@ class SceneRenderer:
         try:
             if path == "deferred" and self.deferred is not None:  # all samples in one list; render_layers: forward
                 return [self.deferred.render(uploaded, camera, light, (width, height), exposure, ior, skip_threshold,
-                                             statistics, offsets)]
+                                             statistics, offsets, first_sample, lighting)]
             return self.forward.render(uploaded, camera, light, (width, height), exposure, ior, layers,
                                        skip_threshold, depth_prepass, statistics, offsets, first_sample, lighting)
         finally:
@@ -292,12 +298,13 @@ class SceneRenderer:
                exposure: float = 1.0, ior: float | None = 1.5, *, skip_threshold: float | None = None,
                depth_prepass: bool = True, statistics: dict[str, int] | None = None, samples: int = 1,
                first_sample: int = 0, environment: Environment | None = None, seed: int = 0,
-               sampling: str = "mis", area_lights: tuple[AreaLight, ...] = ()) -> np.ndarray:
+               sampling: str = "mis", area_lights: tuple[AreaLight, ...] = (),
+               render_path: str | None = None) -> np.ndarray:
         """Exposed CIE XYZ, ``float32`` ``(H, W, 3)``, row 0 at the top (see :meth:`render_rgba`)."""
         rgba = self.render_rgba(mesh, camera, light, size, exposure, ior, skip_threshold=skip_threshold,
                                 depth_prepass=depth_prepass, statistics=statistics, samples=samples,
                                 first_sample=first_sample, environment=environment, seed=seed, sampling=sampling,
-                                area_lights=area_lights)
+                                area_lights=area_lights, render_path=render_path)
         return np.ascontiguousarray(rgba[..., :3])
 
     def importance_table(self) -> MaterialTable:

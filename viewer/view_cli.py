@@ -30,7 +30,8 @@
   unless ``--light-intensity`` is given). A still view then keeps adding passes of the environment's estimator, up
   to ``--environment-spp`` (default 256); without ``--exposure`` the exposure comes from the first picture under
   the environment. The panel then offers none, sky, studio and the given environment, its rotation and scale.
-  ``--render-path deferred`` with an environment is refused (it renders forward), as in ``gratnet render``.
+  ``--render-path deferred`` with an environment is refused: the window renders it forward (its refinement and
+  compile groups know that path only; ``gratnet render --render-path deferred`` takes an environment).
 
 Mouse: drag over the picture to orbit (in BRDF-slice mode: to move the light), wheel to zoom. The
 Screenshot button writes ``gratnet-view-NNN.png`` (display sRGB, full resolution) and its
@@ -235,7 +236,8 @@ def starting_view(arguments: argparse.Namespace, exact: bool = False) -> tuple[V
 
 def lighting_of(arguments: argparse.Namespace) -> LightingConfig:
     """The lighting flags checked as ``gratnet render`` checks them (one line if bad, the map read), before any
-    window: ``--environment`` with ``--render-path deferred`` is refused (an environment renders forward)."""
+    window: ``--environment`` with ``--render-path deferred`` is refused (the window renders an environment
+    forward)."""
     from gratnet.config import from_arguments
     from viewer.antialias import MAX_SAMPLES
     from viewer.scene_config import check_lighting, light_flag_given, with_given_light
@@ -246,7 +248,8 @@ def lighting_of(arguments: argparse.Namespace) -> LightingConfig:
         raise GratNetError("gratnet view does not take --area-light yet; render area lights with gratnet render "
                            "--area-light … --spp N (or mitsuba-render, compare)")
     if lighting.has_environment and getattr(arguments, "render_path", "auto") == "deferred":
-        raise GratNetError("--environment renders on the forward path (--render-path auto or forward)")
+        raise GratNetError("gratnet view renders --environment on the forward path (--render-path auto or forward; "
+                           "gratnet render --render-path deferred takes it)")
     passes = getattr(arguments, "environment_spp", None)
     if passes is not None and not 1 <= passes <= MAX_SAMPLES:
         raise GratNetError(f"--environment-spp must be an integer in 1 … {MAX_SAMPLES}, got {passes}")

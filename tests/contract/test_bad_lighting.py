@@ -27,15 +27,13 @@ CASES: dict[str, tuple[list[str], str]] = {
     "render environment rotation inf": ([*RENDER, "--environment", "sky", "--environment-rotation", "inf"],
                                         "--environment-rotation"),
     "render environment with slice": ([*RENDER, "--environment", "sky", "--slice"], "--slice"),
-    "render environment deferred": ([*RENDER, "--environment", "sky", "--render-path", "deferred"],
-                                    "forward path"),
     "render environment skip dark": ([*RENDER, "--environment", "studio", "--skip-dark"], "--skip-dark"),
     "render environment spp 0": ([*RENDER, "--environment", "studio", "--spp", "0"], "--spp"),
     "render seed negative": ([*RENDER, "--environment", "studio", "--seed", "-1"], "--seed"),
     "render light intensity negative": ([*RENDER, "--light-intensity", "-1"], "--light-intensity"),
     "render environment sampling unknown": ([*RENDER, "--environment", "sky", "--environment-sampling", "uniform"],
                                             "--environment-sampling"),
-    # Area lights (gratnet.area_lights): degenerate, unknown, malformed, too many, and the paths that refuse them.
+    # Area lights (gratnet.area_lights): degenerate, unknown, malformed, too many, and --slice, which refuses them.
     "render area light unknown kind": ([*RENDER, "--area-light", "disc:0,0,1,0.1,1"], "--area-light"),
     "render area light no kind": ([*RENDER, "--area-light", "0,0,1,0.1,1"], "KIND:NUMBERS"),
     "render area light count": ([*RENDER, "--area-light", "sphere:0,0,1,0.1"], "sphere"),
@@ -48,8 +46,6 @@ CASES: dict[str, tuple[list[str], str]] = {
     "render area light far": ([*RENDER, "--area-light", "sphere:1e9,0,1,0.1,1"], "centre"),
     "render area light too many": ([*RENDER, *(["--area-light", "sphere:0,0,1,0.1,1"] * 9)], "at most 8"),
     "render area light slice": ([*RENDER, "--area-light", "sphere:0,0,1,0.1,1", "--slice"], "--slice"),
-    "render area light deferred": ([*RENDER, "--area-light", "sphere:0,0,1,0.1,1", "--render-path", "deferred"],
-                                   "forward path"),
     "mitsuba-render area light zero radius": ([*MITSUBA, "--area-light", "sphere:0,0,1,0,1"], "radius"),
 }
 

@@ -109,6 +109,24 @@ def test_fp16_weights_stay_within_the_documented_bound(ctx, model, scenes, weigh
     np.testing.assert_array_equal(half == 0, reference == 0)
 
 
+def test_texture_weights_beside_a_baked_network(ctx, model, scenes):
+    """``deferred_weights='texture'`` in a scene whose fragment programs bake the weights: the compute pass reads
+    the packed texels (the baked network's weight texture is a 1-texel placeholder: it once rendered black)."""
+    from viewer.scene import SceneRenderer
+
+    expected = scenes["texture"].render(compact_disc(), DISC_CAMERA, DISC_LIGHT, (24, 20), EXPOSURE)
+    other = ctx.texture((1, 1), 4, np.zeros(4, np.float32).tobytes(), dtype="f4")
+    other.use(location=0)  # unit 0 is global state: not the texture scene's weights, left by its render
+    try:
+        with SceneRenderer(ctx, model, weights_path="baked", render_path="deferred",
+                           deferred_weights="texture") as scene:
+            image = scene.render(compact_disc(), DISC_CAMERA, DISC_LIGHT, (24, 20), EXPOSURE)
+    finally:
+        other.release()
+    assert expected.max() > 0
+    np.testing.assert_array_equal(image, expected)  # the same programs, the same texels
+
+
 def test_disc_with_background_and_back_faces_equals_forward_with_the_same_counters(scenes):
     for light in (DISC_LIGHT, Light.directional(100.0, 0.0)):  # lit; light below the horizon: A = 0 everywhere
         counts_forward: dict[str, int] = {}
