@@ -132,12 +132,13 @@ class ViewerApp:
         self.auto_exposure = bool(auto_exposure)
         # The automatic exposure (auto_exposure): "preview" from the first preview under the environment, then "full"
         # from its first full-resolution pass (a 16² preview's one pass is too noisy to trust alone); "": none due.
-        self._exposure_stage = "preview" if self.auto_exposure and self.state.has_environment else ""
+        self._exposure_stage = "preview" if self.auto_exposure and self.state.has_sampled_light else ""
         if self._exposure_stage:
             import gratnet.showcase  # noqa: F401 - the exposure rule, imported now rather than in a frame
-        self.supply = SceneSupply(ctx, weights_path, background, worker, render_path, environment=self.choices.warmed)
-        if self.choices.warmed is not None:
-            self.supply.warm_environment = self.choices.map(self.choices.warmed)
+        warmed = self.choices.warmed or ("1" if self.state.area_light else None)  # area lights: the same program
+        self.supply = SceneSupply(ctx, weights_path, background, worker, render_path, environment=warmed)
+        if warmed is not None:
+            self.supply.warm_environment = self.choices.map(warmed)
         # A switch of material, mesh or mode brings that pair's default view (viewer.default_view): remembered, or
         # a quick guess at once and the exact one from a worker process (started now in the background mode).
         self._defaults = DefaultViewRequests(background)
@@ -274,7 +275,7 @@ class ViewerApp:
             raise GratNetError(f"switch() takes material, mesh and slice_mode, not {', '.join(sorted(unknown))}")
         changed = self.set(**changes) if changes else False
         if changed or not changes:
-            self._exposure_stage = "preview" if self.auto_exposure and self.state.has_environment else ""
+            self._exposure_stage = "preview" if self.auto_exposure and self.state.has_sampled_light else ""
             self._defaults.request(self.state)
             self._take_default_view()  # remembered, or computed at once (blocking mode)
         return changed
@@ -284,7 +285,7 @@ class ViewerApp:
         quick guess, then the exact one), unless the user moved the view since."""
         ready = self._defaults.take(self.state)
         if ready is not None:
-            if self.auto_exposure and self.state.has_environment and self._exposure_stage != "preview":
+            if self.auto_exposure and self.state.has_sampled_light and self._exposure_stage != "preview":
                 ready = {name: value for name, value in ready.items() if name != "exposure"}  # the picture's stays
             self._applying_view = True
             try:
@@ -323,20 +324,18 @@ class ViewerApp:
         return self.environment_samples if self.environment_live() else self.max_samples
 
     def environment_live(self, state: ViewerState | None = None) -> bool:
-        """Whether ``state`` (default: the one on show) renders with its environment now: a network mesh view
-        with one, and the environment variant ready (the compile child's; before that the view is shown without
-        the environment)."""
+        """Whether ``state`` (default: the one on show) renders with its environment or area lights now: a network
+        mesh view with them, the variant ready (the compile child's; until then the view shows without them)."""
         state = self.state if state is None else state
-        return (state.has_environment and bool(self.environments) and not state.slice_mode
+        return ((state.has_environment and bool(self.environments) or bool(state.area_light)) and not state.slice_mode
                 and state.shading == "network" and self.supply.environment_live(self._supplied(state)))
 
     def environment(self, state: ViewerState | None = None) -> Any:
         """The :class:`gratnet.environment.Environment` of ``state`` (default: the one on show; turned and scaled) or
         ``None`` (:class:`viewer.environment_view.EnvironmentChoices`)."""
         state = self.state if state is None else state
-        if not state.has_environment:
-            return None
-        return self.choices.environment(state.environment, state.environment_rotation, state.environment_scale)
+        return (self.choices.environment(state.environment, state.environment_rotation, state.environment_scale)
+                if state.has_environment else None)
 
     @property
     def samples(self) -> int:
@@ -538,9 +537,10 @@ class ViewerApp:
         if supplied is None:
             raise GratNetError(f"the shader for {state.material} is still compiling; try again in a moment")
         renderer, buffers = supplied
-        environment = self.environment(state) if self.environment_live(state) else None
+        live = self.environment_live(state)
+        environment, area_lights = (self.environment(state), state.area_lights()) if live else (None, ())
         light = state.light()
-        if environment is None and state.has_environment and state.light_intensity == 0.0:
+        if not live and state.has_sampled_light and state.light_intensity == 0.0:
             light = Light.directional(state.light_theta, state.light_phi)  # the view without it: not black
         # A band of rows keys its light samples by the whole picture's pixels (GL rows count from the bottom).
         origin = (0, camera.height - camera.row1) if isinstance(camera, BandCamera) else (0, 0)
@@ -557,12 +557,12 @@ class ViewerApp:
                     xyz = xyz[rows[0]:rows[1]]
             else:  # the reference draws the network's mesh buffers: the same geometry, preview or full
                 target, view = size, camera or state.camera()
-                lit = environment if scene is renderer else None
-                if scene.render_path == "deferred" and lit is None:  # power-of-two sides: the warm variant
+                lit, lamps = (environment, area_lights) if scene is renderer else (None, ())
+                if scene.render_path == "deferred" and lit is None and not lamps:  # power-of-two: the warm variant
                     target, view = self._padded(view, size)
                 rgba = scene.render_rgba(buffers, view, light, target, state.exposure, state.effective_ior,
                                          first_sample=sample, environment=lit, seed=state.seed,
-                                         pixel_origin=origin)[:size[1], :size[0]]
+                                         pixel_origin=origin, area_lights=lamps)[:size[1], :size[0]]
                 xyz, coverage = rgba[..., :3], rgba[..., 3]
             pictures.append(xyz)
         if shading == "flip":  # network XYZ, reference XYZ, coverage: _display shows the FLIP heat map

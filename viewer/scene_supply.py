@@ -558,7 +558,8 @@ def _group(state: Any, environment: str | None = None) -> str:
     """The program group that renders ``state`` (``environment``: the supply warms environments)."""
     if state.slice_mode:
         return "slice"
-    return ENVIRONMENT_GROUP if environment is not None and getattr(state, "has_environment", False) else "surface"
+    sampled = getattr(state, "has_sampled_light", getattr(state, "has_environment", False))  # or area lights
+    return ENVIRONMENT_GROUP if environment is not None and sampled else "surface"
 
 
 def _worker_groups(state: Any, environment: str | None) -> tuple[str, ...]:

@@ -45,6 +45,8 @@ class ViewerState:
     environment_rotation: float = 0.0
     environment_scale: float = 1.0
     seed: int = 0
+    # `--area-light` values as given (gratnet.area_lights): fixed for the session, lit by the same estimator.
+    area_light: tuple[str, ...] = ()
 
     def key(self) -> tuple[Any, ...]:
         """The values that decide the pixels (two states with equal keys render the same picture)."""
@@ -65,6 +67,17 @@ class ViewerState:
         """Whether :attr:`environment` names an environment light (``none``, 0 and 0,0,0 do not)."""
         return _names_environment(self.environment)
 
+    @property
+    def has_sampled_light(self) -> bool:
+        """Whether an environment or an area light lights the view (the passes of shaders/environment.glsl)."""
+        return self.has_environment or bool(self.area_light)
+
+    def area_lights(self) -> tuple[Any, ...]:
+        """:attr:`area_light` parsed (:class:`gratnet.area_lights.AreaLight`), or a one-line GratNetError."""
+        from gratnet.area_lights import parse_area_lights
+
+        return parse_area_lights(self.area_light)
+
     def render_config(self, width: int, height: int, spp: int = 1) -> RenderConfig:
         """The ``gratnet render`` config that reproduces this view at ``width`` × ``height`` with ``spp``
         samples per pixel."""
@@ -75,7 +88,7 @@ class ViewerState:
             fov_degrees=self.fov, exposure=self.exposure, width=width, height=height, ior=self.ior,
             fresnel=self.fresnel, slice=self.slice_mode, spp=spp, light_intensity=self.light_intensity,
             environment=self.environment, environment_rotation=self.environment_rotation,
-            environment_scale=self.environment_scale, seed=self.seed,
+            environment_scale=self.environment_scale, seed=self.seed, area_light=self.area_light,
         )
 
 

@@ -30,8 +30,9 @@
   unless ``--light-intensity`` is given). A still view then keeps adding passes of the environment's estimator, up
   to ``--environment-spp`` (default 256); without ``--exposure`` the exposure comes from the first picture under
   the environment. The panel then offers none, sky, studio and the given environment, its rotation and scale.
-  ``--render-path deferred`` with an environment is refused: the window renders it forward (its refinement and
-  compile groups know that path only; ``gratnet render --render-path deferred`` takes an environment).
+  ``--area-light`` (repeatable) adds area lights, fixed for the session, accumulated the same way.
+  ``--render-path deferred`` with an environment or area lights is refused: the window renders them forward (its
+  refinement and compile groups know that path only; ``gratnet render --render-path deferred`` takes them).
 
 Mouse: drag over the picture to orbit (in BRDF-slice mode: to move the light), wheel to zoom. The
 Screenshot button writes ``gratnet-view-NNN.png`` (display sRGB, full resolution) and its
@@ -230,7 +231,8 @@ def starting_view(arguments: argparse.Namespace, exact: bool = False) -> tuple[V
                         slice_mode=arguments.slice, light_intensity=lighting.effective_light_intensity,
                         environment=str(lighting.environment).strip() if lighting.has_environment else "none",
                         environment_rotation=environment_rotation(lighting, phi),
-                        environment_scale=lighting.environment_scale, seed=lighting.seed, **values)
+                        environment_scale=lighting.environment_scale, seed=lighting.seed,
+                        area_light=lighting.area_light, **values)
     return state, guessed
 
 
@@ -244,11 +246,9 @@ def lighting_of(arguments: argparse.Namespace) -> LightingConfig:
 
     lighting = with_given_light(from_arguments(LightingConfig, arguments), light_flag_given(arguments))
     check_lighting(lighting)
-    if lighting.area_light:  # the window's refinement and compile groups know environments only, for now
-        raise GratNetError("gratnet view does not take --area-light yet; render area lights with gratnet render "
-                           "--area-light … --spp N (or mitsuba-render, compare)")
-    if lighting.has_environment and getattr(arguments, "render_path", "auto") == "deferred":
-        raise GratNetError("gratnet view renders --environment on the forward path (--render-path auto or forward; "
+    if lighting.has_sampled_light and getattr(arguments, "render_path", "auto") == "deferred":
+        flag = "--environment" if lighting.has_environment else "--area-light"
+        raise GratNetError(f"gratnet view renders {flag} on the forward path (--render-path auto or forward; "
                            "gratnet render --render-path deferred takes it)")
     passes = getattr(arguments, "environment_spp", None)
     if passes is not None and not 1 <= passes <= MAX_SAMPLES:
@@ -280,9 +280,10 @@ def open_window(arguments: argparse.Namespace, **window_options: Any) -> ViewerW
     # the window's set-up (a bad material or environment is reported by the checks below).
     worker = None
     with contextlib.suppress(GratNetError):  # the model of the starting point (--quality), as the app asks for it
-        start = ViewerState(material=view_point(arguments)[1], slice_mode=arguments.slice, environment=environment)
-        worker = SceneSupply.start_worker(start, arguments.weights_path, arguments.render_path,
-                                          environment if start.has_environment else None)
+        start = ViewerState(material=view_point(arguments)[1], slice_mode=arguments.slice, environment=environment,
+                            area_light=tuple(getattr(arguments, "area_light", None) or ()))
+        warmed = environment if start.has_environment else ("1" if start.area_light else None)  # as ViewerApp
+        worker = SceneSupply.start_worker(start, arguments.weights_path, arguments.render_path, warmed)
     try:
         state, guessed = starting_view(arguments)
         reference = None
@@ -302,7 +303,7 @@ def open_window(arguments: argparse.Namespace, **window_options: Any) -> ViewerW
     window = ViewerWindow(state, size, screenshot_dir=arguments.screenshot_dir, extra_meshes=extra,
                           weights_path=arguments.weights_path, max_samples=arguments.spp,
                           render_path=arguments.render_path, reference=reference, worker=worker, refine_view=guessed,
-                          quality=quality, auto_exposure=state.has_environment and not exposure_given,
+                          quality=quality, auto_exposure=state.has_sampled_light and not exposure_given,
                           environment_samples=arguments.environment_spp or ENVIRONMENT_SAMPLES, **window_options)
     return window
 

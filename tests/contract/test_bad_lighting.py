@@ -62,11 +62,18 @@ def test_bad_lighting_is_one_line_before_any_work(tmp_path, capsys, monkeypatch,
     assert_nothing_written(tmp_path, set())
 
 
-def test_the_viewer_refuses_area_lights_in_one_line(tmp_path, capsys, monkeypatch):
-    """gratnet view does not take area lights yet: one line that says where they render, before any window."""
+@pytest.mark.parametrize(("flags", "needle"), [
+    (["--area-light", "sphere:0,0,1,0,1"], "radius"),
+    (["--area-light", "sphere:0,0,1,0.1,1", "--render-path", "deferred"], "forward path"),
+])
+def test_the_viewer_refuses_bad_area_lights_in_one_line(tmp_path, capsys, monkeypatch, flags, needle):
+    """gratnet view: a bad area light, or area lights on the deferred path (the window renders them forward), is one
+    line before any window."""
     monkeypatch.chdir(tmp_path)
-    code, stderr = run_cli(["view", "--area-light", "sphere:0,0,1,0.1,1", "--max-frames", "1"], capsys)
-    assert_one_clear_error(code, stderr, "view", "gratnet render --area-light")
+    monkeypatch.delenv("DISPLAY", raising=False)
+    monkeypatch.delenv("WAYLAND_DISPLAY", raising=False)
+    code, stderr = run_cli(["view", *flags, "--max-frames", "1"], capsys)
+    assert_one_clear_error(code, stderr, "view", needle)
     assert_nothing_written(tmp_path, set())
 
 

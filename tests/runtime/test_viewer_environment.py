@@ -84,6 +84,38 @@ def test_accumulated_passes_equal_the_n_pass_render_and_restart_on_a_change(ctx)
         viewer.release()
 
 
+def test_area_lights_accumulate_in_the_window_as_gratnet_render_draws_them(ctx):
+    """Area lights without an environment (gratnet view --area-light): the same program and estimator, its passes
+    accumulated while the view stands still equal the N-pass render with the same lights and seed."""
+    clock = FakeClock()
+    passes = 3
+    lamps = ("rect:0.1,0.05,0.25,-1,-0.5,-2.5,0.2,0.1,20", "sphere:-0.2,0.1,0.15,0.02,100")
+    state = ViewerState(mesh="sphere", camera_distance=0.2, camera_elevation=30.0, light_theta=50.0,
+                        light_phi=-60.0, exposure=50.0, light_intensity=0.0, area_light=lamps, seed=5)
+    viewer = ViewerApp(ctx, state, size=(32, 24), clock=clock, environment_samples=passes, max_samples=2,
+                       policy=ResolutionPolicy(refine_budget_s=1e3, band_multiple=1))
+    try:
+        assert viewer.environments == [] and viewer.environment_live() and state.has_sampled_light
+        _settle(viewer, clock)
+        assert viewer.sample_cap == passes
+        while viewer.next_work_in() == 0.0:
+            assert viewer.frame() is True
+        assert viewer.samples == passes
+        renderer, buffers = viewer.supply.scene(viewer.state, preview=False)
+        state = viewer.state  # as shown (a remembered default view may have moved the camera)
+        reference = renderer.render(buffers, state.camera(), state.light(), viewer.full_size(), state.exposure,
+                                    state.effective_ior, samples=passes, seed=state.seed,
+                                    area_lights=state.area_lights())
+        scale = float(np.abs(reference).max())
+        assert scale > 0  # the lights light the sphere (the default light is off)
+        np.testing.assert_allclose(viewer.accumulated_xyz(), reference, rtol=1e-4, atol=1e-5 * scale)
+        assert VARIANT in renderer.network.compiled
+        config = viewer.state.render_config(32, 24)
+        assert config.area_light == lamps and config.has_sampled_light  # the screenshot's config reproduces it
+    finally:
+        viewer.release()
+
+
 def test_banded_passes_make_the_n_pass_render(ctx):
     """One row per band: each band keys its light samples by the whole picture's pixels (render_rgba's
     pixel_origin), so the passes drawn row by row add up to the N-pass render of the whole picture."""
