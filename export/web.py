@@ -1,11 +1,16 @@
-"""``gratnet export --format web``: a self-contained WebGL2 viewer folder (docs/export.md, "The web page").
+"""``gratnet export --format web``: a self-contained viewer folder, WebGL2 or WebGPU (docs/export.md, "The web page").
 
-Files: ``index.html`` and ``gratnet.js`` (export/web/, copied; the JavaScript gets the export's data prepended as
-one ``const EXPORT = {…};`` line; with ``--single-file`` both, and every binary below as base64, in one
-``index.html`` that opens from file://), ``meshes.bin`` (the CD disc, sphere and plane of viewer/meshes.py, as
-``gratnet render`` draws them) and per material ``NAME.weights.bin`` (export/glsl.py's packed weights) and, for a
-feature-grid model, ``NAME.grid<k>.bin`` per grid texture (``u_grid[k]``: the texels viewer/renderer.py uploads, in
-the model's float16 or float32, as ``--format glsl`` writes them).
+Files: ``index.html`` (export/web/, copied) and ``gratnet.js``: the export's data as one ``const EXPORT = {…};`` line,
+then export/web/'s ``webgl2.js`` (the WebGL2 backend), ``webgpu.js`` (the WebGPU backend, URL ``backend=webgpu``) and
+``gratnet.js`` (scene, camera, URL parameters, panel: shared by both), concatenated into one module script, so that
+the folder and the ``--single-file`` page (both, and every file below as base64, in one ``index.html`` that opens from
+file://; ES module imports cannot be inlined) run the same script. ``meshes.bin`` (the CD disc, sphere and plane of
+viewer/meshes.py, as ``gratnet render`` draws them); per material ``NAME.weights.bin`` (export/glsl.py's packed
+weights: the same bytes both backends read) and ``NAME.wgsl`` (export/wgsl.py's module, as ``--format wgsl``
+writes it); for a feature-grid model one ``NAME.grids.bin`` (``--format wgsl``'s buffer: each level's array in turn),
+which WebGPU binds as ``gratnet_grids`` and from which WebGL2 gathers each ``u_grid[k]`` texture (the texels
+viewer/renderer.py uploads, in the model's float16 or float32): the grids once, so an export stays within its model
+file plus the page.
 
 The page's network is the GLSL module of ``--format glsl`` as GLSL ES 3.00: a header of precision statements and
 ``#define precise`` (empty: WebGL2's GLSL ES 3.00 has no ``precise``; what that costs is measured in
@@ -31,12 +36,14 @@ from typing import Any
 import numpy as np
 
 from export.glsl import GlslModule, glsl_module, grid_chunks_of
+from export.wgsl import WgslModule, wgsl_module
 from gratnet.errors import GratNetError
+from gratnet.featuregrid import CHUNK_FEATURES
 from gratnet.modelfile import ModelFile
 from viewer.defaults import FOV_DEGREES as _FOV_DEGREES
 
-__all__ = ["CHROMIUM_BACKENDS", "ES_HEADER", "MESH_NAMES", "PAGE_FILES", "WEBGL2_SAMPLERS", "check_web_model",
-           "es_module", "write_web"]
+__all__ = ["CHROMIUM_BACKENDS", "CHROMIUM_WEBGPU", "ES_HEADER", "MESH_NAMES", "PAGE_FILES", "SCRIPT_PARTS",
+           "WEBGL2_SAMPLERS", "check_web_model", "es_module", "write_web"]
 
 #: Headless chromium's flags per WebGL2 backend that the page is tested and timed on
 #: (shared/notes/browsers-and-shader-tools-here.md): Mesa llvmpipe through ANGLE, and SwiftShader.
@@ -45,8 +52,17 @@ CHROMIUM_BACKENDS = {
     "swiftshader": ["--use-angle=swiftshader", "--enable-unsafe-swiftshader"],
 }
 
-#: The page's static files (export/web/).
+#: Headless chromium's flags for the page's WebGPU backend (``backend=webgpu``). WebGPU runs on SwiftShader's Vulkan,
+#: the only adapter here (lavapipe hangs chromium's GPU process). The compositor must run on llvmpipe (ANGLE gl-egl):
+#: with chromium's default SwiftShader compositing, presenting a WebGPU canvas drops the WebGPU instance
+#: ("A valid external Instance reference no longer exists").
+CHROMIUM_WEBGPU = ["--enable-unsafe-webgpu", "--use-angle=gl-egl", "--ignore-gpu-blocklist"]
+
+#: The page's files in the export folder.
 PAGE_FILES = ("index.html", "gratnet.js")
+#: export/web/'s scripts, in the order the exported gratnet.js holds them (the backends' classes before the shared
+#: code that calls them at its end).
+SCRIPT_PARTS = ("webgl2.js", "webgpu.js", "gratnet.js")
 #: The meshes the page offers, as ``gratnet render --mesh`` names them.
 MESH_NAMES = ("cd", "sphere", "plane")
 #: What turns the GLSL module into GLSL ES 3.00 for WebGL2 (the page's shaders start with ``#version 300 es``).
@@ -108,16 +124,35 @@ def _meshes(folder: Path) -> dict[str, dict[str, int]]:
     return table
 
 
-def _grids(module: GlslModule, name: str, folder: Path) -> list[dict[str, object]]:
-    """Write ``NAME.grid<k>.bin`` per grid texture (little-endian, as export/cli.py writes them for the other
-    formats); their entries: file, texels (width, height, depth), channels and type (float16 or float32)."""
+def _grids(model: ModelFile, wgsl: WgslModule, name: str) -> list[dict[str, object]]:
+    """The WebGL2 backend's grid textures (``u_grid[k]``: each level's features 4k … 4k + 3, the arrays
+    viewer/renderer.py uploads), each an entry that says where its texels lie in ``NAME.grids.bin``, the one grid file
+    both backends read (export/wgsl.py's buffer: each level's ``(T, R, R, C)`` array in turn): file, texels (width,
+    height, depth), channels, type (float16 or float32), the level's first element (``offset``), its ``features``
+    per node and the chunk's ``first`` feature. The page gathers each texture from it (one copy of the grids)."""
     grids: list[dict[str, object]] = []
-    for k, chunk in enumerate(module.grids):
-        (folder / f"{name}.grid{k}.bin").write_bytes(chunk.astype(chunk.dtype.newbyteorder("<")).tobytes())
-        depth, height, width, channels = chunk.shape
-        grids.append({"file": f"{name}.grid{k}.bin", "texels": [width, height, depth], "channels": int(channels),
-                      "type": str(chunk.dtype)})
+    for grid, level in zip(model.grids, wgsl.grid_levels, strict=True):
+        depth, height, width, features = grid.shape
+        for first in range(0, int(features), CHUNK_FEATURES):
+            grids.append({"file": f"{name}.grids.bin", "texels": [int(width), int(height), int(depth)],
+                          "channels": min(CHUNK_FEATURES, int(features) - first), "type": str(grid.dtype),
+                          "offset": int(level.offset), "features": int(features), "first": first})
     return grids
+
+
+def _wgsl(model: ModelFile, name: str, module: GlslModule, folder: Path) -> tuple[WgslModule, str | None]:
+    """Write ``NAME.wgsl`` (the WebGPU backend's) and ``NAME.grids.bin`` (both backends' grids); the module and the
+    grid file's name. The module reads the GLSL module's weight file: refused (GratNetError) should the two exporters
+    ever pack the weights differently."""
+    wgsl = wgsl_module(model, name)
+    if not np.array_equal(wgsl.weights, module.weights):
+        raise GratNetError(f"{name}: export/wgsl.py and export/glsl.py pack the weights differently; the page shares "
+                           f"one NAME.weights.bin between its backends")
+    (folder / f"{name}.wgsl").write_text(wgsl.text, encoding="utf-8")
+    if not wgsl.grids:
+        return wgsl, None
+    (folder / f"{name}.grids.bin").write_bytes(wgsl.grids)
+    return wgsl, f"{name}.grids.bin"
 
 
 def write_web(materials: list[tuple[str, str, ModelFile]], folder: Path,
@@ -134,23 +169,26 @@ def write_web(materials: list[tuple[str, str, ModelFile]], folder: Path,
         module = glsl_module(model, name)
         (folder / f"{name}.weights.bin").write_bytes(module.weights.astype("<f4").tobytes())
         width, height = module.weights_size
-        grids = _grids(module, name, folder)
+        wgsl_module_, wgsl_grids = _wgsl(model, name, module, folder)
+        grids = _grids(model, wgsl_module_, name)
+        wgsl = f"{name}.wgsl"
         page_materials[name] = {"shader": es_module(module), "weights": f"{name}.weights.bin",
-                                "texels": [width, height], "grids": grids,
+                                "texels": [width, height], "grids": grids, "wgsl": wgsl, "wgsl_grids": wgsl_grids,
                                 "defaults": _defaults(given, _FOV_DEGREES, _IOR)}
         entries[name] = {"weights": f"{name}.weights.bin", "weights_texels": [width, height],
-                         "weights_format": "RGBA32F little-endian", "grids": grids, "defaults": page_materials[name][
-                             "defaults"]}
+                         "weights_format": "RGBA32F little-endian", "grids": grids, "wgsl": wgsl,
+                         "wgsl_grids": wgsl_grids, "defaults": page_materials[name]["defaults"]}
     data = {"materials": page_materials, "meshes": _meshes(folder),
             "render": {"size": list(_SIZE), "fov": _FOV_DEGREES, "ior": _IOR},
             # The EXR of gratnet render is linear sRGB: the page's read-back is too (rows of the matrix).
             "xyz_to_linear_srgb": np.asarray(xyz_to_linear_srgb_matrix(), dtype=np.float64).tolist()}
-    script = (_PAGE_ROOT / "gratnet.js").read_text(encoding="utf-8")
+    script = "".join(f"// ---- export/web/{part} ----\n" + (_PAGE_ROOT / part).read_text(encoding="utf-8")
+                     for part in SCRIPT_PARTS)
     if not single_file:
         shutil.copyfile(_PAGE_ROOT / "index.html", folder / "index.html")
         (folder / "gratnet.js").write_text(f"const EXPORT = {json.dumps(data)};\n{script}", encoding="utf-8")
         return entries
-    binaries = sorted(folder.glob("*.bin"))
+    binaries = sorted([*folder.glob("*.bin"), *folder.glob("*.wgsl")])
     data["inline"] = {path.name: base64.b64encode(path.read_bytes()).decode("ascii") for path in binaries}
     for path in binaries:
         path.unlink()
