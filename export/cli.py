@@ -140,14 +140,16 @@ def _check_format(export_format: str) -> None:
 def _usage_note(export_format: str, materials: list[Material], single_file: bool = False) -> str:
     names = ", ".join(material.name for material in materials)
     if export_format == "web":
-        opening = ("Open index.html in a browser with WebGL2 (it holds everything; file:// works)" if single_file else
+        opening = ("Open index.html in a browser with WebGL2 or WebGPU (it holds everything; file:// works)"
+                   if single_file else
                    "Serve this folder over HTTP (`python3 -m http.server`; a page opened from file:// cannot fetch its "
-                   "binaries) and open index.html in a browser with WebGL2")
+                   "binaries) and open index.html in a browser with WebGL2 or WebGPU")
         return (f"# GratNet export (web)\n\nMaterials: {names}. Written by `gratnet export` (GratNet "
                 f"{__version__}).\n\n"
                 f"{opening}. URL parameters (gratnet render's meanings): "
                 f"material, mesh=cd|sphere|plane, slice=1, light=THETA,PHI, camera=DIST,AZIMUTH,ELEVATION, exposure, "
-                f"ior, size=N or W,H, ui=0. Docs: docs/export.md in the GratNet repository.\n")
+                f"ior, size=N or W,H, ui=0, backend=webgl2|webgpu (default webgl2). Docs: docs/export.md in the "
+                f"GratNet repository.\n")
     if export_format == "wgsl":
         return (f"# GratNet export (wgsl)\n\nMaterials: {names}. Written by `gratnet export` (GratNet "
                 f"{__version__}).\n\nEach `NAME.wgsl` is one WGSL shader module for WebGPU, without an entry point: "
@@ -214,10 +216,10 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     from gratnet.config import add_quiet_flag
 
     parser = subparsers.add_parser(
-        "export", help="write materials as shader modules for other engines (GLSL, HLSL, WGSL) or a WebGL2 page",
+        "export", help="write materials as shader modules for other engines (GLSL, HLSL, WGSL) or a WebGL2/WebGPU page",
         description="Write each material's network as a GLSL function module made from the runtime's own shaders "
         "(or that module cross-compiled to HLSL, or its hand-written WGSL twin for WebGPU), with its weights as binary "
-        "files, or a WebGL2 viewer page (docs/export.md).",
+        "files, or a WebGL2/WebGPU viewer page (docs/export.md).",
         epilog="typical use:\n  gratnet export cd snake --format glsl --out exported",
     )
     parser.add_argument("material", metavar="MATERIAL", nargs="+", help="shipped material names or model-file paths")
