@@ -347,3 +347,19 @@ def solid_angle_chi2(directions: np.ndarray, density: Callable[[np.ndarray], np.
     pooled_e, pooled_h = np.append(e[keep], e[~keep].sum()), np.append(observed[keep], observed[~keep].sum())
     pooled_e *= pooled_h.sum() / pooled_e.sum()
     return float(stats.chisquare(pooled_h, pooled_e).pvalue), float(expected.sum())
+
+
+def covered_mean(rgba: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Mean and standard error of the exposed XYZ over the pixels a render covers with every sample (sampled-light
+    tests: each pixel an independent estimate of the same integral)."""
+    import math
+
+    values = rgba[..., :3][rgba[..., 3] == 1.0].astype(np.float64)
+    assert len(values) > 100
+    return values.mean(axis=0), values.std(axis=0) / math.sqrt(len(values))
+
+
+def smooth_random_model(seed: int = 4) -> ModelFile:
+    """A random network of low frequencies only (top frequency 2π): A · XYZ barely changes across a small light."""
+    spec = EncodingSpec(frequencies=2, t_frequencies=1, scale=2.0, t_scale=2.0)
+    return random_model([spec.features, 16, 3], spec=spec, seed=seed)

@@ -17,9 +17,8 @@ import pytest
 
 from gratnet.area_lights import AreaLight, parse_area_light
 from gratnet.brdf import a_term
-from gratnet.encoding import EncodingSpec
 from gratnet.modelfile import evaluate_keys
-from tests.helpers import random_model
+from tests.helpers import covered_mean, random_model, smooth_random_model
 from viewer.camera import Camera, Light, world_direction
 from viewer.meshes import compact_disc, plane
 from viewer.renderer import xyz_to_linear_srgb_matrix
@@ -97,12 +96,6 @@ def light_integral(model, lights: list[AreaLight], ior: float = 1.5) -> np.ndarr
     return total
 
 
-def covered_mean(rgba: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    values = rgba[..., :3][rgba[..., 3] == 1.0].astype(np.float64)
-    assert len(values) > 100
-    return values.mean(axis=0), values.std(axis=0) / math.sqrt(len(values))
-
-
 @pytest.mark.parametrize("sampling", ["mis", "light", "material"])
 def test_rectangle_matches_quadrature_over_its_area(scene, model, sampling):
     light = parse_area_light(RECT)
@@ -128,9 +121,8 @@ def test_several_lights_add_up(scene, model):
 
 @pytest.fixture(scope="module")
 def smooth_scene(ctx):
-    """A random network of low frequencies only (top frequency 2π): A · XYZ is smooth across a small sphere."""
-    spec = EncodingSpec(frequencies=2, t_frequencies=1, scale=2.0, t_scale=2.0)
-    with SceneRenderer(ctx, random_model([spec.features, 16, 3], spec=spec, seed=4), render_path="forward") as renderer:
+    """A random network of low frequencies only: A · XYZ is smooth across a small sphere."""
+    with SceneRenderer(ctx, smooth_random_model(), render_path="forward") as renderer:
         yield renderer
 
 

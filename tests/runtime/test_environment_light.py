@@ -16,11 +16,10 @@ import numpy as np
 import pytest
 
 from gratnet.brdf import a_term
-from gratnet.encoding import EncodingSpec
 from gratnet.environment import Environment, texel_coordinates
 from gratnet.errors import GratNetError
 from gratnet.modelfile import evaluate_keys
-from tests.helpers import random_model
+from tests.helpers import covered_mean, random_model, smooth_random_model
 from viewer.camera import Camera, Light, world_direction
 from viewer.meshes import compact_disc, plane
 from viewer.renderer import xyz_to_linear_srgb_matrix
@@ -79,13 +78,6 @@ def hemisphere_integral(model, environment: Environment, wo: np.ndarray, ior: fl
     return np.linalg.inv(to_rgb) @ np.einsum("ijc,ij->c", rgb * a[..., None], cell)
 
 
-def covered_mean(rgba: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Mean and standard error of the exposed XYZ over the pixels covered by every sample."""
-    values = rgba[..., :3][rgba[..., 3] == 1.0].astype(np.float64)
-    assert len(values) > 100
-    return values.mean(axis=0), values.std(axis=0) / math.sqrt(len(values))
-
-
 @pytest.mark.parametrize("sampling", ["mis", "light", "material"])
 def test_environment_matches_quadrature_over_the_hemisphere(scene, model, sampling):
     environment = Environment("test", structured_map(), rotation_degrees=30.0, scale=1.0, source="test")
@@ -99,9 +91,8 @@ def test_environment_matches_quadrature_over_the_hemisphere(scene, model, sampli
 
 @pytest.fixture(scope="module")
 def smooth_scene(ctx):
-    """A random network of low frequencies only (top frequency 2π): A · XYZ is smooth across a small disc."""
-    spec = EncodingSpec(frequencies=2, t_frequencies=1, scale=2.0, t_scale=2.0)
-    with SceneRenderer(ctx, random_model([spec.features, 16, 3], spec=spec, seed=4), render_path="forward") as renderer:
+    """A random network of low frequencies only: A · XYZ is smooth across a small disc."""
+    with SceneRenderer(ctx, smooth_random_model(), render_path="forward") as renderer:
         yield renderer
 
 
