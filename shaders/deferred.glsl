@@ -13,7 +13,7 @@
 //            (GL_NV_gpu_shader5 or GL_AMD_gpu_shader_half_float, enabled here: TILED_HALF_NV / TILED_HALF_AMD).
 //   TINT     under sampled light (surface.glsl's GBUFFER with ENVIRONMENT), after SHADE / SHADE_TILED: every
 //            texel's exposed XYZ under its pass's linear sRGB tint (a second texture stacked as the G-buffer, 0
-//            where the pixel is not lit), as the forward path's environment_tint (environment.glsl).
+//            where the pixel is not lit), by the forward path's environment_tint (tint.glsl).
 //   RESOLVE  per pixel: the mean of its u_samples texels (sample k at row y + k * u_height) times u_scale,
 //            added to the output when u_accumulate is set (samples in several chunks).
 //
@@ -150,9 +150,8 @@ void main() {
 layout(local_size_x = DEFERRED_TILE, local_size_y = DEFERRED_TILE) in;
 layout(rgba32f, binding = GBUFFER_IMAGE_BINDING) uniform restrict image2D u_gbuffer;
 layout(rgba32f, binding = RESOLVED_IMAGE_BINDING) uniform restrict readonly image2D u_tint;  // unit free till RESOLVE
-uniform mat3 u_xyz_to_rgb;  // CIE XYZ -> linear sRGB (gratnet.display)
-uniform mat3 u_rgb_to_xyz;  // its inverse
 uniform int u_first_row;    // as COMPACT's
+#include "tint.glsl"  // environment_tint: the forward path's colour product
 
 void main() {
     ivec2 texel = ivec2(gl_GlobalInvocationID.xy) + ivec2(0, u_first_row);
@@ -161,8 +160,7 @@ void main() {
     }
     vec4 value = imageLoad(u_gbuffer, texel);
     vec3 tint = imageLoad(u_tint, texel).rgb;
-    // environment.glsl's environment_tint, term for term (it reads gl_FragCoord: not includable here).
-    imageStore(u_gbuffer, texel, vec4(u_rgb_to_xyz * (tint * (u_xyz_to_rgb * value.xyz)), value.w));
+    imageStore(u_gbuffer, texel, vec4(environment_tint(value.xyz, tint), value.w));
 }
 #endif
 

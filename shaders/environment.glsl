@@ -15,13 +15,14 @@
 // contributes M * w_s * L(wi) / p_s(wi) as the "irradiance" of the fragment's light, so the mean over passes
 // is the integral of A * XYZ * L over the light's directions (physics.md eq. 9) plus the delta light.
 // Colour: L is linear sRGB; the fragment's XYZ is taken to linear sRGB, multiplied channel by channel and
-// taken back (environment_tint), as Mitsuba's RGB variants multiply the BSDF's value by the emitter's.
+// taken back (tint.glsl's environment_tint), as Mitsuba's RGB variants multiply the BSDF's value by the emitter's.
 //
 // Needs lights.glsl (light_incidence); includes sampling.glsl and the generated codes.
 
 #include "codes.glsl"
 #include "sampling.glsl"
 #include "area_lights.glsl"
+#include "tint.glsl"  // environment_tint and its matrices
 
 #define ENVIRONMENT_PI 3.14159265358979
 
@@ -39,8 +40,6 @@ uniform uint u_seed;                          // the render's seed
 uniform int u_environment_sampling;           // SAMPLING_MIS, SAMPLING_LIGHT or SAMPLING_MATERIAL
 uniform bool u_delta_light;                   // the delta light of lights.glsl takes its turn too
 uniform bool u_has_environment;               // false: area lights only (the map's textures are placeholders)
-uniform mat3 u_xyz_to_rgb;                    // CIE XYZ -> linear sRGB (gratnet.display)
-uniform mat3 u_rgb_to_xyz;                    // its inverse
 
 // The map's unit-square point (x: azimuth, y: polar angle / pi) of a world direction (gratnet.environment).
 vec2 environment_point(vec3 world) {
@@ -226,9 +225,4 @@ void environment_incidence(vec3 position, mat3 world_to_tangent, vec3 wo, out ve
     }
     tint = light * strategies;
     irradiance = 1.0;
-}
-
-// exposed XYZ under a linear sRGB tint: each sRGB channel scaled (the identity for tint (1, 1, 1)).
-vec3 environment_tint(vec3 xyz, vec3 tint) {
-    return u_rgb_to_xyz * (tint * (u_xyz_to_rgb * xyz));
 }

@@ -135,7 +135,8 @@ class EnvironmentLighting:
 
     @staticmethod
     def set_colour_uniforms(program: moderngl.Program | moderngl.ComputeShader) -> None:
-        """The tint's matrices ``u_xyz_to_rgb`` and ``u_rgb_to_xyz`` (environment_tint, deferred.glsl's TINT)."""
+        """The tint's matrices ``u_xyz_to_rgb`` and ``u_rgb_to_xyz`` (shaders/tint.glsl, which environment.glsl and
+        deferred.glsl's TINT include)."""
         to_rgb = XYZ_TO_LINEAR_SRGB  # colour-science's matrix, without importing it (viewer.srgb)
         # GLSL mat3 uniforms are column-major: the transpose of the row-major numpy matrix.
         set_uniform(program, "u_xyz_to_rgb", np.ascontiguousarray(to_rgb.T, dtype=np.float32))
