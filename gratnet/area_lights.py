@@ -34,7 +34,7 @@ from typing import Any
 
 from gratnet.config import parse_numbers
 from gratnet.errors import GratNetError
-from gratnet.lights import DISTANCE_RANGE_METRES
+from gratnet.lights import DISTANCE_RANGE_METRES, kind_named
 
 __all__ = ["AREA_FLAG", "AREA_HELP", "AREA_KINDS", "MAX_AREA_LIGHTS", "RECTANGLE", "SPHERE", "AreaKind", "AreaLight",
            "area_kind", "parse_area_light", "parse_area_lights", "radiance_towards", "solid_angle_pdf"]
@@ -312,11 +312,7 @@ AREA_HELP = (f"an area light, repeatable (up to {MAX_AREA_LIGHTS}): "
 
 def area_kind(name: object) -> AreaKind:
     """The kind called ``name``, or a one-line GratNetError."""
-    for kind in AREA_KINDS:
-        if kind.name == name:
-            return kind
-    names = [kind.name for kind in AREA_KINDS]
-    raise GratNetError(f"{AREA_FLAG} kind must be {', '.join(names[:-1])} or {names[-1]}, got {name!r}")
+    return kind_named(AREA_KINDS, name, f"{AREA_FLAG} kind")
 
 
 def parse_area_light(text: str) -> AreaLight:

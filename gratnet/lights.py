@@ -30,12 +30,12 @@ from __future__ import annotations
 import dataclasses
 import math
 from collections.abc import Callable, Sequence
-from typing import Any
+from typing import Any, Protocol, TypeVar
 
 from gratnet.errors import GratNetError
 
 __all__ = ["DIRECTIONAL", "DISTANCE_RANGE_METRES", "LIGHT_KINDS", "POINT", "LightFlag", "LightKind", "chosen_kind",
-           "light_kind"]
+           "kind_named", "light_kind"]
 
 #: The distances (metres) the float32 shaders handle: camera distances and light positions (beyond them 1/d²
 #: and the view matrices overflow or lose every digit).
@@ -172,13 +172,27 @@ POINT = LightKind(
 LIGHT_KINDS: tuple[LightKind, ...] = (DIRECTIONAL, POINT)
 
 
-def light_kind(name: object) -> LightKind:
-    """The kind called ``name``, or a one-line GratNetError."""
-    for kind in LIGHT_KINDS:
+KindT = TypeVar("KindT", bound="_Named")
+
+
+class _Named(Protocol):
+    @property
+    def name(self) -> str: ...
+
+
+def kind_named(kinds: Sequence[KindT], name: object, what: str) -> KindT:
+    """The entry of a registry of kinds (this module's, gratnet.area_lights') called ``name``, or a one-line
+    GratNetError that says ``what`` must be one of them."""
+    for kind in kinds:
         if kind.name == name:
             return kind
-    names = [kind.name for kind in LIGHT_KINDS]
-    raise GratNetError(f"light kind must be {', '.join(names[:-1])} or {names[-1]}, got {name!r}")
+    names = [kind.name for kind in kinds]
+    raise GratNetError(f"{what} must be {', '.join(names[:-1])} or {names[-1]}, got {name!r}")
+
+
+def light_kind(name: object) -> LightKind:
+    """The kind called ``name``, or a one-line GratNetError."""
+    return kind_named(LIGHT_KINDS, name, "light kind")
 
 
 def chosen_kind(config: Any) -> LightKind:
