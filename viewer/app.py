@@ -38,7 +38,7 @@ from gratnet.quality import AUTO, FAST, VIEW_QUALITIES, check_quality
 from viewer.camera import Camera, Light
 from viewer.catalog import MESHES, material_point, material_points, model_label, shipped_materials
 from viewer.default_view import DefaultViewRequests
-from viewer.environment_view import ENVIRONMENT_SAMPLES, EnvironmentChoices, picture_exposure
+from viewer.environment_view import ENVIRONMENT_SAMPLES, EnvironmentChoices, picture_exposure, warmed_spec
 from viewer.reference_view import SHADINGS, LoadedReference, ReferenceView, flip_heat_map
 from viewer.scheduling import (
     UNCOVERED_COST,
@@ -135,7 +135,7 @@ class ViewerApp:
         self._exposure_stage = "preview" if self.auto_exposure and self.state.has_sampled_light else ""
         if self._exposure_stage:
             import gratnet.showcase  # noqa: F401 - the exposure rule, imported now rather than in a frame
-        warmed = self.choices.warmed or ("1" if self.state.area_light else None)  # area lights: the same program
+        warmed = warmed_spec(self.choices.warmed, self.state.area_light)
         self.supply = SceneSupply(ctx, weights_path, background, worker, render_path, environment=warmed)
         if warmed is not None:
             self.supply.warm_environment = self.choices.map(warmed)

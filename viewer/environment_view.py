@@ -27,7 +27,8 @@ import numpy as np
 
 from gratnet.errors import GratNetError
 
-__all__ = ["ENVIRONMENT_CHOICES", "ENVIRONMENT_SAMPLES", "EnvironmentChoices", "picture_exposure"]
+__all__ = ["AREA_ONLY_WARMED", "ENVIRONMENT_CHOICES", "ENVIRONMENT_SAMPLES", "EnvironmentChoices", "picture_exposure",
+           "warmed_spec"]
 
 #: The environments the panel offers besides the one given on the command line.
 ENVIRONMENT_CHOICES = ("none", "sky", "studio")
@@ -84,6 +85,17 @@ class EnvironmentChoices:
                        Environment(base.name, base.radiance_map, key[1], key[2], base.source))
             self._variant = key, variant
         return self._variant[1]
+
+
+#: What the compile child warms the sampled-light program with when only area lights light the view: the program
+#: is the same for any environment (area lights are uniforms), so a constant one serves.
+AREA_ONLY_WARMED = "1"
+
+
+def warmed_spec(environment: str | None, area_lights: Iterable[str]) -> str | None:
+    """The environment spec the compile child warms the sampled-light program with: ``environment`` (None: none),
+    else :data:`AREA_ONLY_WARMED` when there are area lights, else None (no such program)."""
+    return environment if environment is not None else (AREA_ONLY_WARMED if tuple(area_lights) else None)
 
 
 def _load(spec: str) -> Any:

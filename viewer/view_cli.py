@@ -266,7 +266,7 @@ def open_window(arguments: argparse.Namespace, **window_options: Any) -> ViewerW
     """The window of a ``gratnet view`` command line, open (the caller closes it): the compile child started
     first, the flags checked, the first view (:func:`starting_view`), the ``--reference`` volume read.
     ``window_options``: further :class:`~viewer.window.ViewerWindow` arguments (benchmarks/viewer_latency.py)."""
-    from viewer.environment_view import ENVIRONMENT_SAMPLES
+    from viewer.environment_view import ENVIRONMENT_SAMPLES, warmed_spec
     from viewer.scene_config import parse_size
     from viewer.scene_supply import SceneSupply
     from viewer.state import ViewerState
@@ -282,8 +282,8 @@ def open_window(arguments: argparse.Namespace, **window_options: Any) -> ViewerW
     with contextlib.suppress(GratNetError):  # the model of the starting point (--quality), as the app asks for it
         start = ViewerState(material=view_point(arguments)[1], slice_mode=arguments.slice, environment=environment,
                             area_light=tuple(getattr(arguments, "area_light", None) or ()))
-        warmed = environment if start.has_environment else ("1" if start.area_light else None)  # as ViewerApp
-        worker = SceneSupply.start_worker(start, arguments.weights_path, arguments.render_path, warmed)
+        worker = SceneSupply.start_worker(start, arguments.weights_path, arguments.render_path,
+                                          warmed_spec(environment if start.has_environment else None, start.area_light))
     try:
         state, guessed = starting_view(arguments)
         reference = None
