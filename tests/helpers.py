@@ -61,6 +61,26 @@ def random_model(
                      scheme)
 
 
+def random_grid_model(features: int, levels: int, dtype: str, interpolation: str = "linear",
+                      seed: int = 5) -> ModelFile:
+    """A random feature-grid model: 2 hidden layers of 21, outputs mostly inside (0, 1); levels of 7, 13 and 25
+    nodes a side (odd widths) and 5, 3, 2 along t (levels differ along t too, down to the fewest a level may
+    have)."""
+    rng = np.random.default_rng(seed)
+    spec = EncodingSpec.for_grid(101, 5, 4, 2)
+    grids = [(0.5 * rng.standard_normal((t_nodes, nodes, nodes, features))).astype(dtype)
+             for nodes, t_nodes in list(zip((7, 13, 25), (5, 3, 2), strict=True))[:levels]]
+    sizes = [levels * features + spec.features, 21, 21, 3]
+    weights = [(rng.standard_normal((b, a)) / np.sqrt(a)).astype(np.float32)
+               for a, b in zip(sizes[:-1], sizes[1:], strict=True)]
+    weights[-1] = (0.3 * weights[-1]).astype(np.float32)
+    biases = [(0.1 * rng.standard_normal(b)).astype(np.float32) for b in sizes[1:]]
+    biases[-1] = np.array([0.55, 0.6, 0.65], dtype=np.float32)
+    model = ModelFile(sizes, weights, biases, "silu", "clamp", spec, RangeSpec(), "simple-max", grids=grids)
+    model.grid_interpolation = interpolation
+    return model
+
+
 def parity_keys() -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """~270 key vectors: random direction pairs plus normal incidence, |w| → 0 and u² + v² → 4."""
     rng = np.random.default_rng(7)

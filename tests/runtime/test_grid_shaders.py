@@ -11,6 +11,7 @@ from gratnet.encoding import EncodingSpec, RangeSpec, network_coordinates
 from gratnet.errors import GratNetError
 from gratnet.modelfile import ModelFile, evaluate_keys
 from gratnet.precision import OWN_KEYS, DriverErrors, assert_within, driver_bound
+from tests.helpers import random_grid_model
 
 # ------------------------------------------------------------------------------------------------
 # GLSL (shaders/featuregrid.glsl) against the numpy evaluator
@@ -18,22 +19,6 @@ from gratnet.precision import OWN_KEYS, DriverErrors, assert_within, driver_boun
 
 #: A texture unit's filtered lookups (gratnet.precision.HARDWARE_FILTER) at the shader's own float32 keys.
 HARDWARE_FILTER_OWN_KEYS = DriverErrors(key_error=0.0, grid_texel_error=2.0**-8)
-
-
-def _random_grid_model(features: int, levels: int, dtype: str, seed: int = 5) -> ModelFile:
-    """A random feature-grid model: 2 hidden layers of 21, outputs mostly inside (0, 1)."""
-    rng = np.random.default_rng(seed)
-    spec = EncodingSpec.for_grid(101, 5, 4, 2)
-    # Levels differ along t too (--grid-level-t), down to the fewest nodes a level may have (2).
-    grids = [(0.5 * rng.standard_normal((t_nodes, nodes, nodes, features))).astype(dtype)
-             for nodes, t_nodes in list(zip((7, 13, 25), (5, 3, 2), strict=True))[:levels]]
-    sizes = [levels * features + spec.features, 21, 21, 3]
-    weights = [(rng.standard_normal((b, a)) / np.sqrt(a)).astype(np.float32) for a, b in zip(sizes[:-1], sizes[1:],
-                                                                                             strict=True)]
-    weights[-1] = (0.3 * weights[-1]).astype(np.float32)
-    biases = [(0.1 * rng.standard_normal(b)).astype(np.float32) for b in sizes[1:]]
-    biases[-1] = np.array([0.55, 0.6, 0.65], dtype=np.float32)
-    return ModelFile(sizes, weights, biases, "silu", "clamp", spec, RangeSpec(), "simple-max", grids=grids)
 
 
 def _keys(count: int = 400) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -54,7 +39,7 @@ def _keys(count: int = 400) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
 def test_gpu_grid_model_matches_numpy(ctx, features, levels, dtype, interpolation, grid_filter):
     from viewer.renderer import NetworkRenderer
 
-    model = _random_grid_model(features, levels, dtype)
+    model = random_grid_model(features, levels, dtype)
     model.grid_interpolation = interpolation
     u, v, w = _keys()
     expected = evaluate_keys(model, u, v, w)
@@ -112,7 +97,7 @@ def test_gpu_grid_brdf_slice_matches_numpy(ctx, features, levels):
     from viewer.renderer import NetworkRenderer
 
     size, theta, phi, exposure = 24, 30.0, 40.0, 2.0
-    model = _random_grid_model(features, levels, "float16")
+    model = random_grid_model(features, levels, "float16")
     views, inside = slice_view_directions(size)
     light = direction(theta, phi)
     key = -(light + views)
@@ -133,7 +118,7 @@ def test_baked_path_evaluates_grid_models_like_numpy(ctx, features, levels, inte
     the same outputs as numpy. Only when asked for: auto keeps grid models on the texture path."""
     from viewer.renderer import NetworkRenderer, choose_weights_path
 
-    model = _random_grid_model(features, levels, "float16")
+    model = random_grid_model(features, levels, "float16")
     model.grid_interpolation = interpolation
     assert choose_weights_path(ctx, model, "auto") == "texture"
     assert choose_weights_path(ctx, model, "baked") == "baked"
@@ -158,7 +143,7 @@ def test_deferred_path_renders_grid_models_like_the_forward_path(ctx, features, 
     from viewer.meshes import compact_disc
     from viewer.scene import SceneRenderer
 
-    model = _random_grid_model(features, levels, "float16")
+    model = random_grid_model(features, levels, "float16")
     model.grid_interpolation = interpolation
     mesh, camera, light = compact_disc(segments=32), Camera(0.2, -90.0, 50.0), Light.directional(30.0, 180.0)
     forward = SceneRenderer(ctx, model, weights_path="texture", render_path="forward")

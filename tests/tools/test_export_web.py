@@ -51,10 +51,9 @@ import pytest
 from export.web import CHROMIUM_BACKENDS, CHROMIUM_WEBGPU
 from gratnet.brdf import a_term, slice_view_directions
 from gratnet.cli import main
-from gratnet.encoding import EncodingSpec, RangeSpec
-from gratnet.modelfile import ModelFile, evaluate_keys, load_model, save_model
+from gratnet.modelfile import evaluate_keys, load_model, save_model
 from gratnet.precision import OWN_KEYS, DriverErrors, assert_within, driver_bound
-from tests.helpers import RELATIVE, random_model
+from tests.helpers import RELATIVE, random_grid_model, random_model
 from viewer.catalog import shipped_materials
 
 CHROMIUM = shutil.which("chromium") or ("/usr/bin/chromium" if Path("/usr/bin/chromium").exists() else None)
@@ -90,24 +89,6 @@ SHIPPED = tuple(name for name in shipped_materials() if name not in SLICE_MATERI
 SHIPPED_SIZE = 32
 
 
-def _random_grid_model(features: int, levels: int, dtype: str, interpolation: str, seed: int) -> ModelFile:
-    """A random feature-grid model (as tests/runtime/test_grid_shaders.py's): 2 hidden layers of 21, outputs mostly
-    inside (0, 1); levels of 7, 13 and 25 nodes a side (odd widths) and 5, 3, 2 along t."""
-    rng = np.random.default_rng(seed)
-    spec = EncodingSpec.for_grid(101, 5, 4, 2)
-    grids = [(0.5 * rng.standard_normal((t_nodes, nodes, nodes, features))).astype(dtype)
-             for nodes, t_nodes in list(zip((7, 13, 25), (5, 3, 2), strict=True))[:levels]]
-    sizes = [levels * features + spec.features, 21, 21, 3]
-    weights = [(rng.standard_normal((b, a)) / np.sqrt(a)).astype(np.float32)
-               for a, b in zip(sizes[:-1], sizes[1:], strict=True)]
-    weights[-1] = (0.3 * weights[-1]).astype(np.float32)
-    biases = [(0.1 * rng.standard_normal(b)).astype(np.float32) for b in sizes[1:]]
-    biases[-1] = np.array([0.55, 0.6, 0.65], dtype=np.float32)
-    model = ModelFile(sizes, weights, biases, "silu", "clamp", spec, RangeSpec(), "simple-max", grids=grids)
-    model.grid_interpolation = interpolation
-    return model
-
-
 class _QuietHandler(http.server.SimpleHTTPRequestHandler):
     def log_message(self, format: str, *args: object) -> None:  # noqa: A002 - the base class's name
         pass
@@ -119,8 +100,8 @@ def site(tmp_path_factory) -> Iterator[tuple[str, Path]]:
     once, served on 127.0.0.1."""
     folder = tmp_path_factory.mktemp("web")
     models = {"random-simple": random_model([163, 21, 13, 3], "relu", "sigmoid", "simple", "log", seed=3),
-              "random-grid16": _random_grid_model(5, 3, "float16", "smoothstep", seed=5),
-              "random-grid32": _random_grid_model(6, 2, "float32", "linear", seed=6)}
+              "random-grid16": random_grid_model(5, 3, "float16", "smoothstep", seed=5),
+              "random-grid32": random_grid_model(6, 2, "float32", "linear", seed=6)}
     for name, model in models.items():
         save_model(folder / f"{name}.npz", model)
     out = folder / "site"
@@ -460,7 +441,7 @@ def test_a_feature_grid_export_describes_the_grid_textures_the_runtime_uploads(s
 def test_too_many_grid_textures_for_webgl2_are_refused_in_one_line(tmp_path, capsys):
     """16 textures (4 levels of 16 features) beside the weights exceed WebGL2's guaranteed 16 samplers."""
     model_path = tmp_path / "wide.npz"
-    model = _random_grid_model(16, 3, "float16", "linear", seed=1)
+    model = random_grid_model(16, 3, "float16", "linear", seed=1)
     model.grids.append(model.grids[-1].copy())
     model.layer_sizes[0] += 16
     model.weights[0] = np.concatenate([model.weights[0], np.zeros((21, 16), np.float32)], axis=1)

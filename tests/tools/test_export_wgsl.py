@@ -38,10 +38,10 @@ import pytest
 from gratnet.brdf import a_term
 from gratnet.cli import main
 from gratnet.codes import HIDDEN, OUTPUT, RANGE, SCHEME
-from gratnet.encoding import EncodingSpec, RangeSpec, network_coordinates
+from gratnet.encoding import network_coordinates
 from gratnet.modelfile import ModelFile, evaluate_keys, load_model, pack_texture, save_model
 from gratnet.precision import DriverErrors, assert_within, driver_bound
-from tests.helpers import RELATIVE, parity_keys, random_model
+from tests.helpers import RELATIVE, parity_keys, random_grid_model, random_model
 from viewer.catalog import shipped_materials
 
 CHROMIUM = shutil.which("chromium") or ("/usr/bin/chromium" if Path("/usr/bin/chromium").exists() else None)
@@ -162,30 +162,13 @@ fn host_main(@builtin(global_invocation_id) id: vec3<u32>) {
 """
 
 
-def _random_grid_model(features: int, levels: int, dtype: str, interpolation: str, seed: int) -> ModelFile:
-    """A random feature-grid model: 2 hidden layers of 21; levels of 7, 13 and 25 nodes a side, 5, 3, 2 along t."""
-    rng = np.random.default_rng(seed)
-    spec = EncodingSpec.for_grid(101, 5, 4, 2)
-    grids = [(0.5 * rng.standard_normal((t_nodes, nodes, nodes, features))).astype(dtype)
-             for nodes, t_nodes in list(zip((7, 13, 25), (5, 3, 2), strict=True))[:levels]]
-    sizes = [levels * features + spec.features, 21, 21, 3]
-    weights = [(rng.standard_normal((b, a)) / np.sqrt(a)).astype(np.float32)
-               for a, b in zip(sizes[:-1], sizes[1:], strict=True)]
-    weights[-1] = (0.3 * weights[-1]).astype(np.float32)
-    biases = [(0.1 * rng.standard_normal(b)).astype(np.float32) for b in sizes[1:]]
-    biases[-1] = np.array([0.55, 0.6, 0.65], dtype=np.float32)
-    model = ModelFile(sizes, weights, biases, "silu", "clamp", spec, RangeSpec(), "simple-max", grids=grids)
-    model.grid_interpolation = interpolation
-    return model
-
-
 def _random_models() -> dict[str, ModelFile]:
     models = {f"random{index}": random_model([163, 21, 13, 3], activation, output, scheme, kind, seed=index)
               for index, (activation, output, scheme, kind) in enumerate([
                   ("silu", "clamp", "regular", "power-log"), ("relu", "sigmoid", "simple", "log"),
                   ("leaky_relu", "none", "simple-max", "log1p")])}
-    models["random-grid16"] = _random_grid_model(5, 3, "float16", "smoothstep", seed=5)
-    models["random-grid32"] = _random_grid_model(6, 2, "float32", "linear", seed=6)
+    models["random-grid16"] = random_grid_model(5, 3, "float16", "smoothstep", seed=5)
+    models["random-grid32"] = random_grid_model(6, 2, "float32", "linear", seed=6)
     return models
 
 
