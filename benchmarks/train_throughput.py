@@ -98,7 +98,8 @@ def main() -> None:
         if arguments.hidden:
             overrides = {**overrides, "hidden": arguments.hidden}
         config = TrainConfig(batch_size=arguments.batch_size, **overrides)
-        encoding = EncodingSpec.for_grid(1001, arguments.slices, config.frequencies, config.t_frequencies)
+        encoding = EncodingSpec.for_grid(1001, arguments.slices, config.frequencies, config.t_frequencies,
+                                            config.diagonal_frequencies)
         torch.manual_seed(0)
         model = build_model(config, encoding).to(device)
         optimizer = make_optimizer(model, config, fused=False if arguments.adam == "foreach" else None)

@@ -183,6 +183,8 @@ def _first_layer_tables(model: ModelFile, grid: np.ndarray, t_grid: np.ndarray) 
     """The first layer, split by coordinate: eq. 6's features of c_u, c_v, c_u + c_v, c_u − c_v and c_t each
     depend on one grid index (i, j, i + j, i − j, k), so W0 · features = U[i] + V[j] + S[i+j] + D[i−j] + T[k]."""
     spec = model.encoding
+    if not spec.diagonals:
+        raise GratNetError("the first-layer bound tables need eq. 6's diagonal groups; this model has none (eq. 6a)")
     weight = model.weights[0].astype(np.float64)
     omega, omega_t = spec.angular_frequencies()
     count = grid.size

@@ -12,7 +12,9 @@ encoding (physics.md eq. 6):
      sin(s^j π c), j = 0…L−1, then cos(s^j π c), j = 0…L−1,   for c in (c_u, c_v, c_u + c_v, c_u − c_v),
      sin(s_t^j π c_t), j = 0…L_t−1, then cos(s_t^j π c_t), j = 0…L_t−1]
 
-3 + 2·(4·L + L_t) features (163 for L = 19, L_t = 4). The scales put the top frequency at the Nyquist rate
+3 + 2·(4·L + L_t) features (163 for L = 19, L_t = 4). Without the diagonal groups (``diagonals = False``, eq. 6a)
+the spatial terms are those of c_u and c_v alone: 3 + 2·(2·L + L_t) features, half the first layer's inputs at
+the same frequency ladder. The scales put the top frequency at the Nyquist rate
 of the training grid: s = ((R − 1)/2)^(1/(L−1)) (≈ 1.41 for R = 1001), s_t = ((S − 1)/2)^(1/(L_t−1)).
 
 Output: the range transform y = T(x) of each CIE XYZ channel (eq. 7), applied to x = XYZ / XYZ_white
@@ -54,20 +56,35 @@ class EncodingSpec:
     t_frequencies: int = 4  # L_t, for c_t
     scale: float = 1.4125  # s
     t_scale: float = 1.7100  # s_t
+    diagonals: bool = True  # the c_u ± c_v groups (eq. 6); False: c_u and c_v alone (eq. 6a)
 
     @classmethod
-    def for_grid(cls, resolution: int, slices: int, frequencies: int = 19, t_frequencies: int = 4) -> EncodingSpec:
+    def for_grid(cls, resolution: int, slices: int, frequencies: int = 19, t_frequencies: int = 4,
+                 diagonals: bool = True) -> EncodingSpec:
         """Scales with the top frequency at the Nyquist rate of an R × R × S training grid."""
         if frequencies < 1 or t_frequencies < 0:
             raise GratNetError(f"frequency counts must be ≥ 1 and ≥ 0, got {frequencies}, {t_frequencies}")
         scale = ((resolution - 1) / 2.0) ** (1.0 / (frequencies - 1)) if frequencies > 1 else 1.0
         t_scale = ((max(slices, 2) - 1) / 2.0) ** (1.0 / (t_frequencies - 1)) if t_frequencies > 1 else 1.0
-        return cls(frequencies, t_frequencies, float(scale), float(t_scale))
+        return cls(frequencies, t_frequencies, float(scale), float(t_scale), diagonals)
+
+    @property
+    def groups(self) -> int:
+        """Spatial groups: 4 (c_u, c_v, c_u + c_v, c_u − c_v), or 2 (c_u, c_v) without the diagonals."""
+        return 4 if self.diagonals else 2
 
     @property
     def features(self) -> int:
-        """Encoded input width: 3 + 2·(4·L + L_t)."""
-        return 3 + 2 * (4 * self.frequencies + self.t_frequencies)
+        """Encoded input width: 3 + 2·(G·L + L_t), G = :attr:`groups`."""
+        return 3 + 2 * (self.groups * self.frequencies + self.t_frequencies)
+
+    def as_dict(self) -> dict[str, Any]:
+        """The JSON form of a model file's ``encoding``: ``diagonals`` only when False, so that every file written
+        before the option (and its cache keys) stays byte for byte what it was."""
+        fields = dataclasses.asdict(self)
+        if self.diagonals:
+            del fields["diagonals"]
+        return fields
 
     def angular_frequencies(self) -> tuple[np.ndarray, np.ndarray]:
         """π·s^j (j < L) and π·s_t^j (j < L_t), float64."""
@@ -137,10 +154,10 @@ def encode(coordinates: Any, spec: EncodingSpec) -> Any:
     # All four groups in one (…, 4, L) phase array, sines and cosines stacked as (…, 4, 2, L): the same
     # elementwise products as one group at a time (bit-identical), in far fewer ops and copies (the trainer
     # encodes every batch).
-    groups = xp.stack([c_u, c_v, c_u + c_v, c_u - c_v], axis=-2)  # (…, 4, 1)
+    groups = xp.stack([c_u, c_v, c_u + c_v, c_u - c_v] if spec.diagonals else [c_u, c_v], axis=-2)  # (…, G, 1)
     phase = groups * omega
-    spatial = xp.stack([xp.sin(phase), xp.cos(phase)], axis=-2)  # (…, 4, 2, L)
-    parts = [coordinates, xp.reshape(spatial, (*coordinates.shape[:-1], 8 * spec.frequencies))]
+    spatial = xp.stack([xp.sin(phase), xp.cos(phase)], axis=-2)  # (…, G, 2, L)
+    parts = [coordinates, xp.reshape(spatial, (*coordinates.shape[:-1], 2 * spec.groups * spec.frequencies))]
     if spec.t_frequencies:
         phase_t = c_t * omega_t
         parts += [xp.sin(phase_t), xp.cos(phase_t)]

@@ -231,9 +231,14 @@ def _check_layer_sizes(sizes: object, where: str) -> list[int]:
 
 def _encoding_from_dict(fields: object, where: str) -> EncodingSpec:
     """An :class:`EncodingSpec` from its JSON form, with every field checked."""
-    names = [f.name for f in dataclasses.fields(EncodingSpec)]
-    if not isinstance(fields, dict) or sorted(fields) != sorted(names):
-        raise GratNetError(f"{where}: 'encoding' must be an object with exactly the keys {', '.join(names)}")
+    names = [f.name for f in dataclasses.fields(EncodingSpec) if f.name != "diagonals"]
+    if (not isinstance(fields, dict) or sorted(set(fields) - {"diagonals"}) != sorted(names)
+            or len(fields) > len(names) + 1):
+        raise GratNetError(f"{where}: 'encoding' must be an object with exactly the keys {', '.join(names)} "
+                           "(and optionally diagonals)")
+    diagonals = fields.get("diagonals", True)
+    if not isinstance(diagonals, bool):
+        raise GratNetError(f"{where}: encoding diagonals must be true or false, got {diagonals!r}")
     frequencies, t_frequencies = fields["frequencies"], fields["t_frequencies"]
     if not _is_int(frequencies) or frequencies < 1 or not _is_int(t_frequencies) or t_frequencies < 0:
         raise GratNetError(
@@ -244,7 +249,8 @@ def _encoding_from_dict(fields: object, where: str) -> EncodingSpec:
         value = fields[name]
         if not _is_number(value) or not math.isfinite(value) or value <= 0:
             raise GratNetError(f"{where}: encoding {name} must be a finite number > 0, got {value!r}")
-    return EncodingSpec(int(frequencies), int(t_frequencies), float(fields["scale"]), float(fields["t_scale"]))
+    return EncodingSpec(int(frequencies), int(t_frequencies), float(fields["scale"]), float(fields["t_scale"]),
+                        diagonals)
 
 
 def _range_from_dict(fields: object, where: str) -> RangeSpec:
@@ -329,7 +335,7 @@ def validated(model: object, where: str = "model", *, from_file: bool = False) -
         raise GratNetError(f"{where}: encoding must be a gratnet.encoding.EncodingSpec")
     if not isinstance(model.range, RangeSpec):
         raise GratNetError(f"{where}: range must be a gratnet.encoding.RangeSpec")
-    encoding = _encoding_from_dict(dataclasses.asdict(model.encoding), where)
+    encoding = _encoding_from_dict(model.encoding.as_dict(), where)
     range_spec = _range_from_dict(dataclasses.asdict(model.range), where)
     grids = _check_grids(model.grids, where, from_file=from_file)
     interpolation = model.grid_interpolation
@@ -490,7 +496,7 @@ def _header(model: ModelFile, layout: list[dict[str, int]]) -> dict[str, Any]:
         "layer_sizes": list(model.layer_sizes),
         "activation": model.activation,
         "output_activation": model.output_activation,
-        "encoding": dataclasses.asdict(model.encoding),
+        "encoding": model.encoding.as_dict(),
         "range": {**dataclasses.asdict(model.range), "white": list(model.range.white)},
         "scheme": model.scheme,
         "texture_layout": layout,
@@ -620,7 +626,7 @@ def content_digest(model: ModelFile) -> str:
         digest.update(np.ascontiguousarray(array, dtype=np.float32).tobytes())
     contract = {"layer_sizes": list(model.layer_sizes), "activation": model.activation,
                 "output_activation": model.output_activation, "scheme": model.scheme,
-                "encoding": dataclasses.asdict(model.encoding), "range": dataclasses.asdict(model.range),
+                "encoding": model.encoding.as_dict(), "range": dataclasses.asdict(model.range),
                 "grid_interpolation": model.grid_interpolation}
     digest.update(json.dumps(contract, sort_keys=True).encode("utf-8"))
     return digest.hexdigest()

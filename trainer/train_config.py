@@ -118,6 +118,9 @@ class TrainConfig:
     output_activation: str = config_field("clamp", "output activation: clamp (to [0, 1]), sigmoid, none")
     frequencies: int = config_field(19, "encoding frequencies L for u*, v*, u*+v*, u*−v*")
     t_frequencies: int = config_field(4, "encoding frequencies L_t for t")
+    diagonal_frequencies: bool = config_field(
+        True, "encode u*+v* and u*−v* too (eq. 6); --no-diagonal-frequencies: u* and v* alone (eq. 6a), half the "
+        "spatial encoding terms and first-layer inputs")
     range_kind: str = config_field("power-log", "range transform: power-log, log, log1p")
     range_bits: float = config_field(48.0, "B of the log range transforms")
     range_power: float = config_field(8.0, "n of the power-log range transform")
@@ -239,7 +242,8 @@ class TrainConfig:
 
     def encoding_for(self, volume: Volume) -> EncodingSpec:
         """Encoding scales for this volume's grid (top frequency at its Nyquist rate)."""
-        return EncodingSpec.for_grid(volume.resolution, volume.slices, self.frequencies, self.t_frequencies)
+        return EncodingSpec.for_grid(volume.resolution, volume.slices, self.frequencies, self.t_frequencies,
+                                     self.diagonal_frequencies)
 
     def grid_shapes(self) -> list[tuple[int, int, int, int]]:
         """(T, R, R, C) of every grid level, coarse to fine ([] for the mlp architecture)."""

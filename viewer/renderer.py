@@ -83,6 +83,9 @@ GRID_FILTERS = ("manual", "hardware")
 
 def model_defines(model: ModelFile) -> dict[str, int | float]:
     """The ``#define``s the programs need for ``model``: array capacities and the leaky-ReLU slope."""
+    if not model.encoding.diagonals:  # eq. 6a: the numpy evaluator's only, so far (issue 42's screen)
+        raise GratNetError("this model's encoding has no diagonal groups (eq. 6a), which the GL runtime does not "
+                           "evaluate yet; score it with gratnet evaluate")
     layout = texture_layout(list(model.layer_sizes))
     defines: dict[str, int | float] = {
         "MAX_BLOCKS": max(max(entry["in_blocks"], entry["out_blocks"]) for entry in layout),

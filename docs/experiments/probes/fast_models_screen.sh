@@ -66,10 +66,14 @@ declare -A candidates=(
     # Depth at a fifth (session 4): base has four hidden layers, every candidate above three or two.
     [g8-L8-d4]="--hidden 36,28,20,12 --grid-levels 3 --grid-resolution 251 --grid-t-resolution 5 --grid-features 8 --frequencies 8 --t-frequencies 2"
     [g4-L12-d4]="--hidden 36,24,16,12 --grid-levels 3 --grid-resolution 251 --grid-t-resolution 6 --grid-features 4 --frequencies 12"
+    # The full ladder on the axes alone (session 5, --no-diagonal-frequencies, eq. 6a): the first layer's inputs
+    # 183 → 107, so a fifth of base's work keeps 40 units there. h64 is the control against g8-L19-h64.
+    [g8-L19a-h40]="--hidden 40,24,12 --grid-levels 3 --grid-resolution 251 --grid-t-resolution 5 --grid-features 8 --t-frequencies 2 --no-diagonal-frequencies"
+    [g8-L19a-h64]="--hidden 64,32,16 --grid-levels 3 --grid-resolution 251 --grid-t-resolution 5 --grid-features 8 --t-frequencies 2 --no-diagonal-frequencies"
 )
 order=(base g4-b12-h48 g8-b12-h40 ln4-L4-h56 g4-L4-h56 ln4-b12-h48 g4-L19-h28 g4-L12-h40 g8-L8-h44 ln4-L8-h40 g4-L19-h24 ln4-L2-h48
        ln8-L4-h48 g4-b14-h32 g8-L4-h56 g4x4-501-L4-h56 g8-L2-h40 p4-L8-h44 p4a-L8-h44 g8-L8-h44-vis
-       g8r351t3-L8-h44 g8-L8-h52 ln8-L8-h38 g8t6-L8-h44 g10-L8-h40 g8-L8-h64 g8-L12-h64 g8-L19-h64 g8-L8-d4 g4-L12-d4)
+       g8r351t3-L8-h44 g8-L8-h52 ln8-L8-h38 g8t6-L8-h44 g10-L8-h40 g8-L8-h64 g8-L12-h64 g8-L19-h64 g8-L8-d4 g4-L12-d4 g8-L19a-h40 g8-L19a-h64)
 names=("$@")
 [ ${#names[@]} -gt 0 ] || names=("${order[@]}")
 for name in "${names[@]}"; do
