@@ -88,11 +88,7 @@ def _load(materials: list[str]) -> list[Material]:
     loaded: list[Material] = []
     for material in materials:
         path = resolve_material(material)
-        model = load_model(path)
-        if not model.encoding.diagonals:  # eq. 6a: not in the exported shaders yet
-            raise GratNetError(f"{path}: its encoding has no diagonal groups (eq. 6a), which the exported shaders "
-                               "do not evaluate yet")
-        loaded.append(Material(export_name(material, path), path, model, material))
+        loaded.append(Material(export_name(material, path), path, load_model(path), material))
     names = [item.name for item in loaded]
     twice = sorted({name for name in names if names.count(name) > 1})
     if twice:

@@ -158,6 +158,7 @@ def uniform_values(model: ModelFile) -> dict[str, str]:
         SCHEME.uniform_name: str(SCHEME.code(model.scheme)),
         "u_frequencies": str(model.encoding.frequencies),
         "u_t_frequencies": str(model.encoding.t_frequencies),
+        "u_spatial_groups": str(model.encoding.groups),
         "u_frequency": "vec4[](" + ", ".join(_vector("vec4", row) for row in frequencies) + ")",
         HIDDEN.uniform_name: str(HIDDEN.code(model.activation)),
         OUTPUT.uniform_name: str(OUTPUT.code(model.output_activation)),

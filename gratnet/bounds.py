@@ -181,10 +181,9 @@ def display_skip_matrix() -> np.ndarray:
 
 def _first_layer_tables(model: ModelFile, grid: np.ndarray, t_grid: np.ndarray) -> dict[str, np.ndarray]:
     """The first layer, split by coordinate: eq. 6's features of c_u, c_v, c_u + c_v, c_u − c_v and c_t each
-    depend on one grid index (i, j, i + j, i − j, k), so W0 · features = U[i] + V[j] + S[i+j] + D[i−j] + T[k]."""
+    depend on one grid index (i, j, i + j, i − j, k), so W0 · features = U[i] + V[j] + S[i+j] + D[i−j] + T[k]
+    (eq. 6a, without the diagonals: S = D = 0)."""
     spec = model.encoding
-    if not spec.diagonals:
-        raise GratNetError("the first-layer bound tables need eq. 6's diagonal groups; this model has none (eq. 6a)")
     weight = model.weights[0].astype(np.float64)
     omega, omega_t = spec.angular_frequencies()
     count = grid.size
@@ -201,17 +200,18 @@ def _first_layer_tables(model: ModelFile, grid: np.ndarray, t_grid: np.ndarray) 
 
     sums = 2.0 * grid[0] + step * np.arange(2 * count - 1)  # c_u + c_v at index i + j
     differences = step * np.arange(-(count - 1), count)  # c_u − c_v at index i − j + (count − 1)
-    tables = {
-        "u": group(grid, slice(3, 3 + width), 0),
-        "v": group(grid, slice(3 + width, 3 + 2 * width), 1),
-        "sum": group(sums, slice(3 + 2 * width, 3 + 3 * width), None),
-        "difference": group(differences, slice(3 + 3 * width, 3 + 4 * width), None),
-    }
+    tables = {"u": group(grid, slice(3, 3 + width), 0), "v": group(grid, slice(3 + width, 3 + 2 * width), 1)}
+    if spec.diagonals:
+        tables["sum"] = group(sums, slice(3 + 2 * width, 3 + 3 * width), None)
+        tables["difference"] = group(differences, slice(3 + 3 * width, 3 + 4 * width), None)
+    else:
+        tables["sum"] = tables["difference"] = np.zeros((sums.size, weight.shape[0]))
+    t_first = 3 + spec.groups * width
     t_table = t_grid[:, None] * weight[None, :, 2] + model.biases[0].astype(np.float64)[None, :]
     if spec.t_frequencies:
         phase = t_grid[:, None] * omega_t[None, :]
         features = np.concatenate([np.sin(phase), np.cos(phase)], axis=1)
-        t_table += features @ weight[:, 3 + 4 * width:3 + 4 * width + 2 * spec.t_frequencies].T
+        t_table += features @ weight[:, t_first:t_first + 2 * spec.t_frequencies].T
     tables["t"] = t_table
     return {name: table.astype(np.float32) for name, table in tables.items()}
 

@@ -18,6 +18,7 @@ const float PI = 3.14159265358979;
 uniform int u_scheme;          // SCHEME_* of the source volume (physics.md "Sampling")
 uniform int u_frequencies;     // L: frequencies per spatial coordinate
 uniform int u_t_frequencies;   // L_t: frequencies of c_t
+uniform int u_spatial_groups;  // G: 4 (c_u, c_v, c_u + c_v, c_u - c_v), or 2 (c_u, c_v) without the diagonals (eq. 6a)
 // Row j: (a, b) with a + b = s^j (a has 10 significant bits), then (a_t, b_t) for s_t^j; unused rows 0.
 uniform vec4 u_frequency[MAX_FREQUENCIES];
 
@@ -174,13 +175,14 @@ float sinusoid(bool cosine, float half_turns) {
 }
 
 // Feature f of eq. 6: [c_u, c_v, c_t, sin/cos blocks of c_u, c_v, c_u+c_v, c_u-c_v, then of c_t], else 0.
+// Eq. 6a (u_spatial_groups 2) is the same with the first two groups only: the diagonals' blocks are left out.
 float encoded_feature(int f) {
     if (f < 3) {
         return g_coordinates[f];
     }
     int g = f - 3;
     int per_group = 2 * u_frequencies;  // L sines then L cosines
-    if (g < 4 * per_group) {
+    if (g < u_spatial_groups * per_group) {
         int group = g / per_group;
         int r = g - group * per_group;
         bool cosine = r >= u_frequencies;
@@ -188,7 +190,7 @@ float encoded_feature(int f) {
         return sinusoid(cosine, reduced_half_turns(u_frequency[j].xy, g_group_grid[group], g_group_rest[group],
                                                    g_group[group]));
     }
-    g -= 4 * per_group;
+    g -= u_spatial_groups * per_group;
     if (g < 2 * u_t_frequencies) {
         bool cosine = g >= u_t_frequencies;
         int j = cosine ? g - u_t_frequencies : g;

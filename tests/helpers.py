@@ -62,12 +62,12 @@ def random_model(
 
 
 def random_grid_model(features: int, levels: int, dtype: str, interpolation: str = "linear",
-                      seed: int = 5) -> ModelFile:
+                      seed: int = 5, diagonals: bool = True) -> ModelFile:
     """A random feature-grid model: 2 hidden layers of 21, outputs mostly inside (0, 1); levels of 7, 13 and 25
     nodes a side (odd widths) and 5, 3, 2 along t (levels differ along t too, down to the fewest a level may
-    have)."""
+    have). ``diagonals``: eq. 6's c_u ± c_v groups (False: eq. 6a)."""
     rng = np.random.default_rng(seed)
-    spec = EncodingSpec.for_grid(101, 5, 4, 2)
+    spec = EncodingSpec.for_grid(101, 5, 4, 2, diagonals)
     grids = [(0.5 * rng.standard_normal((t_nodes, nodes, nodes, features))).astype(dtype)
              for nodes, t_nodes in list(zip((7, 13, 25), (5, 3, 2), strict=True))[:levels]]
     sizes = [levels * features + spec.features, 21, 21, 3]

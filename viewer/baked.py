@@ -57,13 +57,13 @@ def _mat4(block: np.ndarray) -> str:
 def baked_encoded_inputs(model: ModelFile) -> list[tuple[str, str, list[int]]]:
     """The baked layer 1's input vec4s: ``(GLSL declaration, variable, eq. 6 feature index per lane)``,
     a lane -1 holding no feature. Together they hold every feature of ``model.encoding`` once."""
-    spatial, temporal = model.encoding.frequencies, model.encoding.t_frequencies
+    spatial, temporal, groups = model.encoding.frequencies, model.encoding.t_frequencies, model.encoding.groups
     inputs = [("vec4 coordinates = vec4(g_coordinates, 0.0);", "coordinates", [0, 1, 2, -1])]
     for j in range(spatial):
         inputs.append((f"vec4 sin_{j}, cos_{j}; encoded_spatial_frequency({j}, sin_{j}, cos_{j});", f"sin_{j}",
-                       [3 + 2 * spatial * g + j for g in range(4)]))
-        inputs.append(("", f"cos_{j}", [3 + 2 * spatial * g + spatial + j for g in range(4)]))
-    first_t = 3 + 8 * spatial
+                       [3 + 2 * spatial * g + j if g < groups else -1 for g in range(4)]))
+        inputs.append(("", f"cos_{j}", [3 + 2 * spatial * g + spatial + j if g < groups else -1 for g in range(4)]))
+    first_t = 3 + 2 * groups * spatial  # eq. 6a: lanes 2 and 3 (the diagonals) hold no feature
     for j0 in range(0, temporal, 4):
         lanes = list(range(j0, min(j0 + 4, temporal)))
         a = ", ".join([f"u_frequency[{j}].z" for j in lanes] + ["0.0"] * (4 - len(lanes)))

@@ -83,9 +83,6 @@ GRID_FILTERS = ("manual", "hardware")
 
 def model_defines(model: ModelFile) -> dict[str, int | float]:
     """The ``#define``s the programs need for ``model``: array capacities and the leaky-ReLU slope."""
-    if not model.encoding.diagonals:  # eq. 6a: the numpy evaluator's only, so far (issue 42's screen)
-        raise GratNetError("this model's encoding has no diagonal groups (eq. 6a), which the GL runtime does not "
-                           "evaluate yet; score it with gratnet evaluate")
     layout = texture_layout(list(model.layer_sizes))
     defines: dict[str, int | float] = {
         "MAX_BLOCKS": max(max(entry["in_blocks"], entry["out_blocks"]) for entry in layout),
@@ -280,6 +277,7 @@ class NetworkRenderer(ShadingPrograms):
         if source is not WeightSource.BAKED or "u_frequencies" in program:
             set_uniform(program, "u_frequencies", model.encoding.frequencies)
             set_uniform(program, "u_t_frequencies", model.encoding.t_frequencies)
+            set_uniform(program, "u_spatial_groups", model.encoding.groups)
         set_uniform(program, "u_frequency", frequency_table(model, int(self.defines["MAX_FREQUENCIES"])))
         set_uniform(program, RANGE.uniform_name, RANGE.code(model.range.kind))
         set_uniform(program, "u_range_bits", float(model.range.bits))

@@ -110,13 +110,14 @@ fn sinusoid(cosine: bool, half_turns: f32) -> f32 {
 }
 
 // Feature f of eq. 6: [c_u, c_v, c_t, sin/cos blocks of c_u, c_v, c_u+c_v, c_u-c_v, then of c_t], else 0.
+// Eq. 6a (u_spatial_groups 2) is the same with the first two groups only: the diagonals' blocks are left out.
 fn encoded_feature(f: i32) -> f32 {
     if (f < 3) {
         return g_coordinates[f];
     }
     var g = f - 3;
     let per_group = 2 * u_frequencies;  // L sines then L cosines
-    if (g < 4 * per_group) {
+    if (g < u_spatial_groups * per_group) {
         let group = g / per_group;
         let r = g - group * per_group;
         let cosine = r >= u_frequencies;
@@ -124,7 +125,7 @@ fn encoded_feature(f: i32) -> f32 {
         return sinusoid(cosine, reduced_half_turns(u_frequency[j].xy, g_group_grid[group], g_group_rest[group],
                                                    g_group[group]));
     }
-    g -= 4 * per_group;
+    g -= u_spatial_groups * per_group;
     if (g < 2 * u_t_frequencies) {
         let cosine = g >= u_t_frequencies;
         let j = select(g, g - u_t_frequencies, cosine);

@@ -86,6 +86,20 @@ def test_encoding_layout_and_frequencies():
     np.testing.assert_allclose(encoded[-2 * spec.t_frequencies:-spec.t_frequencies], np.sin(omega_t * 0.1))
 
 
+def test_eq_6a_is_eq_6_without_the_diagonal_groups():
+    """Without the diagonals (eq. 6a) the encoding is eq. 6's coordinates, c_u and c_v blocks and c_t block, in
+    that order: 3 + 2·(2·L + L_t) features, at the same frequencies."""
+    full = EncodingSpec.for_grid(1001, 11, 19, 2)
+    axes = EncodingSpec.for_grid(1001, 11, 19, 2, diagonals=False)
+    assert (full.groups, axes.groups) == (4, 2) and axes.features == 3 + 2 * (2 * 19 + 2) == 83
+    assert axes.angular_frequencies()[0].tolist() == full.angular_frequencies()[0].tolist()
+    coordinates = np.random.default_rng(3).uniform(-1.0, 1.0, (50, 3))
+    a, f, L = encode(coordinates, axes), encode(coordinates, full), full.frequencies
+    np.testing.assert_array_equal(a[:, :3 + 4 * L], f[:, :3 + 4 * L])
+    np.testing.assert_array_equal(a[:, 3 + 4 * L:], f[:, 3 + 8 * L:])
+    np.testing.assert_allclose(encode(torch.from_numpy(coordinates), axes).numpy(), a, rtol=0, atol=1e-12)
+
+
 def test_numpy_and_torch_give_the_same_encoding():
     spec = EncodingSpec.for_grid(101, 5)
     rng = np.random.default_rng(0)

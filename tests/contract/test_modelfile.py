@@ -135,6 +135,21 @@ def test_round_trip_is_exact(tmp_path):
     assert (loaded.activation, loaded.output_activation, loaded.scheme) == ("silu", "sigmoid", "simple-max")
 
 
+def test_an_eq_6a_encoding_round_trips_and_old_headers_stay_as_they_were(tmp_path):
+    """``diagonals`` is written only when False: a file of an eq. 6 model keeps its header key for key."""
+    axes = EncodingSpec.for_grid(101, 5, diagonals=False)
+    model = random_model([axes.features, 12, 3], encoding=axes)
+    save_model(tmp_path / "axes.npz", model)
+    loaded = load_model(tmp_path / "axes.npz")
+    assert loaded == model and loaded.encoding.diagonals is False and loaded.layer_sizes[0] == 87
+    header = json.loads(str(np.load(tmp_path / "axes.npz")["metadata_json"]))
+    assert header["encoding"]["diagonals"] is False
+    save_model(tmp_path / "full.npz", random_model())
+    assert "diagonals" not in json.loads(str(np.load(tmp_path / "full.npz")["metadata_json"]))["encoding"]
+    with pytest.raises(GratNetError, match="layer_sizes"):
+        save_model(tmp_path / "wrong.npz", random_model(encoding=axes))  # 163 inputs for an 87-feature encoding
+
+
 def test_file_contents_follow_the_documented_layout(saved):
     model = random_model()
     with np.load(saved, allow_pickle=False) as archive:

@@ -43,6 +43,8 @@ SMALL = EncodingSpec(3, 1, 2.0, 1.5)  # 3 + 8·3 + 2·1 = 29 features: 8 input b
         ([19, 7, 3], "silu", "sigmoid", "simple-max", "power-log", EncodingSpec(2, 0, 1.7, 1.0)),
         ([29, 10, 3], "relu", "clamp", "regular", "log", EncodingSpec(2, 5, 1.7, 1.3)),
         ([13, 6, 3], "silu", "clamp", "simple", "power-log", EncodingSpec(1, 1, 1.0, 1.0)),
+        # eq. 6a: the sin/cos vec4s of a frequency hold two features (lanes 2 and 3 empty)
+        ([17, 9, 3], "silu", "clamp", "simple-max", "power-log", EncodingSpec(3, 1, 2.0, 1.5, diagonals=False)),
     ],
 )
 def test_baked_evaluate_keys_matches_numpy_and_the_texture_path(ctx, sizes, activation, output_activation, scheme,
@@ -142,7 +144,7 @@ def test_float_literals_round_trip_to_the_float32_weights():
 
 
 @pytest.mark.parametrize("spec", [SMALL, SPEC, EncodingSpec(1, 0, 1.0, 1.0), EncodingSpec(2, 5, 1.7, 1.3),
-                                  EncodingSpec(3, 8, 1.5, 1.2)])
+                                  EncodingSpec(3, 8, 1.5, 1.2), EncodingSpec(3, 5, 1.5, 1.2, diagonals=False)])
 def test_baked_inputs_hold_every_encoded_feature_once(spec):
     model = random_model([spec.features, 5, 3], spec=spec)
     lanes = [feature for _, _, features in baked_encoded_inputs(model) for feature in features]

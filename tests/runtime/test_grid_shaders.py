@@ -111,14 +111,15 @@ def test_gpu_grid_brdf_slice_matches_numpy(ctx, features, levels):
     np.testing.assert_allclose(exposed, expected, rtol=1e-4, atol=1e-3 * float(np.abs(expected).max()))
 
 
-@pytest.mark.parametrize(("features", "levels", "interpolation"),
-                         [(3, 2, "linear"), (3, 2, "smoothstep"), (6, 3, "linear"), (5, 2, "smoothstep")])
-def test_baked_path_evaluates_grid_models_like_numpy(ctx, features, levels, interpolation):
+@pytest.mark.parametrize(("features", "levels", "interpolation", "diagonals"),
+                         [(3, 2, "linear", True), (3, 2, "smoothstep", True), (6, 3, "linear", True),
+                          (5, 2, "smoothstep", True), (4, 2, "smoothstep", False)])
+def test_baked_path_evaluates_grid_models_like_numpy(ctx, features, levels, interpolation, diagonals):
     """The baked MLP reads the grid features (featuregrid.glsl, included before mlp.glsl) as its first inputs:
     the same outputs as numpy. Only when asked for: auto keeps grid models on the texture path."""
     from viewer.renderer import NetworkRenderer, choose_weights_path
 
-    model = random_grid_model(features, levels, "float16")
+    model = random_grid_model(features, levels, "float16", diagonals=diagonals)
     model.grid_interpolation = interpolation
     assert choose_weights_path(ctx, model, "auto") == "texture"
     assert choose_weights_path(ctx, model, "baked") == "baked"

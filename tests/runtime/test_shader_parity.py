@@ -33,6 +33,8 @@ from viewer.glsl import LINE_STRIDE, compile_program, load_program_source, map_e
         ([163, 21, 21, 3], "silu", "clamp", "simple-max", "power-log", SPEC),
         ([163, 9, 3], "leaky_relu", "sigmoid", "simple", "power-log", SPEC),
         ([27, 13, 6, 5, 3], "relu", "clamp", "regular", "power-log", EncodingSpec(3, 0, 2.0, 1.0)),
+        # eq. 6a: the axes alone (no c_u ± c_v groups)
+        ([87, 21, 21, 3], "silu", "clamp", "simple-max", "power-log", EncodingSpec.for_grid(101, 5, diagonals=False)),
     ],
 )
 def test_gpu_evaluate_keys_matches_numpy(ctx, sizes, activation, output_activation, scheme, range_kind, spec):
@@ -79,7 +81,9 @@ def test_gpu_evaluate_keys_keeps_the_broadcast_shape_and_ignores_the_callers_ble
 
 
 @pytest.mark.parametrize("scheme", ["regular", "simple", "simple-max"])
-@pytest.mark.parametrize("spec", [SPEC, EncodingSpec.for_grid(1001, 11)], ids=["R101", "R1001"])
+@pytest.mark.parametrize("spec", [SPEC, EncodingSpec.for_grid(1001, 11),
+                                  EncodingSpec.for_grid(1001, 11, diagonals=False)],
+                         ids=["R101", "R1001", "R1001-axes"])
 def test_gpu_encoding_matches_numpy(ctx, scheme, spec):
     from viewer.renderer import NetworkRenderer
 
@@ -101,7 +105,7 @@ def test_gpu_encoding_matches_numpy(ctx, scheme, spec):
     allowed = np.full(spec.features, errors.sinusoid_error)
     allowed[:3] = [UNIT_ROUNDOFF, UNIT_ROUNDOFF, errors.t_coordinate_error]
     _, omega_t = spec.angular_frequencies()
-    first_t = 3 + 8 * spec.frequencies
+    first_t = 3 + 2 * spec.groups * spec.frequencies
     allowed[first_t:] += np.tile(omega_t, 2) * errors.t_coordinate_error
     assert_within(actual, expected, np.broadcast_to(allowed, actual.shape), "encoded features")
 

@@ -90,7 +90,7 @@ def _export(materials: list[str], out: Path, export_format: str = "glsl") -> dic
 
 @pytest.fixture(scope="module")
 def random_models(tmp_path_factory) -> list[Path]:
-    """Random pure-MLP models covering the activations, output activations, schemes and range kinds."""
+    """Random pure-MLP models covering the activations, output activations, schemes and range kinds, and eq. 6a."""
     folder = tmp_path_factory.mktemp("models")
     paths = []
     for index, (activation, output, scheme, kind) in enumerate([
@@ -99,6 +99,10 @@ def random_models(tmp_path_factory) -> list[Path]:
         path = folder / f"random{index}.npz"
         save_model(path, random_model([163, 21, 13, 3], activation, output, scheme, kind, seed=index))
         paths.append(path)
+    # eq. 6a: an encoding without the diagonal groups
+    axes = EncodingSpec.for_grid(101, 5, diagonals=False)
+    paths.append(folder / "random3.npz")
+    save_model(paths[-1], random_model([axes.features, 21, 13, 3], "silu", "clamp", "simple-max", spec=axes, seed=3))
     return paths
 
 
@@ -222,7 +226,7 @@ def _check_parity(name: str, entry: dict, results: list[np.ndarray], wi: np.ndar
     np.testing.assert_allclose(results[2], linear, rtol=1e-5, atol=1e-7 * float(np.abs(linear).max()))
 
 
-@pytest.mark.parametrize("name", [*shipped_materials(), "random0", "random1", "random2"])
+@pytest.mark.parametrize("name", [*shipped_materials(), "random0", "random1", "random2", "random3"])
 def test_exported_glsl_module_equals_numpy_in_gl(ctx, exported, name):
     folder, config = exported
     wi, wo = _directions(PAIRS, seed=len(name))
@@ -231,7 +235,7 @@ def test_exported_glsl_module_equals_numpy_in_gl(ctx, exported, name):
 
 #: HLSL parity on a cross-section (every shipped material compiles in the glslang test below): two pure MLPs, grid
 #: models with 4, 2 and 16 features a level (1, 1 and 4 grid textures a level), the three random models.
-HLSL_PARITY = ("cd", "snake", "paper-cd", "paper-pits", "paper-scratches", "random0", "random1", "random2")
+HLSL_PARITY = ("cd", "snake", "paper-cd", "paper-pits", "paper-scratches", "random0", "random1", "random2", "random3")
 
 
 @pytest.mark.parametrize("name", HLSL_PARITY)
@@ -244,7 +248,7 @@ def test_exported_hlsl_module_equals_numpy_through_spirv(ctx, exported_hlsl, nam
 
 def test_every_shipped_material_and_random_model_was_exported(exported):
     folder, config = exported
-    assert _names(config) == sorted([*shipped_materials(), "random0", "random1", "random2"])
+    assert _names(config) == sorted([*shipped_materials(), "random0", "random1", "random2", "random3"])
     grid_models = [name for name, entry in config["materials"].items() if entry["grids"]]
     assert grid_models and len(grid_models) < len(config["materials"])  # both kinds of model are covered
     for entry in config["materials"].values():
