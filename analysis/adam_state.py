@@ -69,7 +69,9 @@ def first_layer_sqrt_v(state: dict[str, Any]) -> dict[str, Any]:
     group = optimizer["param_groups"][0]
     root = _sqrt_v_hat(optimizer["state"][group["params"][0]], group)
     grid = sum(int(tensor.shape[0]) for name, tensor in state["model"].items() if name.startswith("grids."))
-    grid_columns, spatial, t_part = split_first_layer(root, grid, config["frequencies"], config["t_frequencies"])
+    groups = 4 if config.get("diagonal_frequencies", True) else 2  # eq. 6a: a checkpoint's config may have it
+    grid_columns, spatial, t_part = split_first_layer(root, grid, config["frequencies"], config["t_frequencies"],
+                                                      groups)
     return {
         "eps": group["eps"],
         "grid_features": float(np.median(grid_columns)) if grid else None,

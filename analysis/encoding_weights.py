@@ -3,7 +3,8 @@
     python -m analysis.encoding_weights MODEL.npz … [--json OUT.json]
 
 The first layer of the funnel MLP reads [grid features (feature-grid models), (u*, v*, t), eq. 6's sines and
-cosines]. The spatial part holds 4 groups (u*, v*, u*+v*, u*−v*) × (sin, cos) × L frequencies, the t part
+cosines]. The spatial part holds G groups (u*, v*, u*+v*, u*−v*; u*, v* alone for eq. 6a) × (sin, cos) × L
+frequencies, the t part
 (sin, cos) × L_t (gratnet.encoding.encode). Per frequency this prints the Frobenius norm of the first layer's
 columns of that frequency (all groups, sine and cosine), and the mean column norm of the grid features. The top
 frequency of each part sits at the volume's Nyquist rate: between samples the samples do not constrain it, so a
@@ -27,12 +28,13 @@ from gratnet.modelfile import ModelFile, load_model
 
 
 def split_first_layer(columns: np.ndarray, grid: int, frequencies: int,
-                      t_frequencies: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+                      t_frequencies: int, groups: int = 4) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """The first layer's columns (any array of shape (outputs, inputs)) by eq. 6's layout: the grid features
-    (outputs, grid), the spatial part (outputs, 4 groups, sin/cos, L) and the t part (outputs, sin/cos, L_t)."""
+    (outputs, grid), the spatial part (outputs, G groups, sin/cos, L) and the t part (outputs, sin/cos, L_t)."""
     start = grid + 3  # grid features, then the raw coordinates (u*, v*, t)
-    spatial = columns[:, start:start + 8 * frequencies].reshape(columns.shape[0], 4, 2, frequencies)
-    t_part = columns[:, start + 8 * frequencies:start + 8 * frequencies + 2 * t_frequencies]
+    spatial_end = start + 2 * groups * frequencies
+    spatial = columns[:, start:spatial_end].reshape(columns.shape[0], groups, 2, frequencies)
+    t_part = columns[:, spatial_end:spatial_end + 2 * t_frequencies]
     return columns[:, :grid], spatial, t_part.reshape(columns.shape[0], 2, t_frequencies)
 
 
@@ -42,7 +44,7 @@ def frequency_norms(model: ModelFile) -> dict[str, Any]:
     weights = np.asarray(model.weights[0], dtype=np.float64)  # (outputs, inputs)
     grid = model.grid_feature_count
     grid_columns, spatial, t_part = split_first_layer(weights, grid, model.encoding.frequencies,
-                                                      model.encoding.t_frequencies)
+                                                      model.encoding.t_frequencies, model.encoding.groups)
     return {
         "spatial": np.sqrt((spatial**2).sum(axis=(0, 1, 2))).tolist(),
         "spatial_sin": np.sqrt((spatial[:, :, 0] ** 2).sum(axis=(0, 1))).tolist(),

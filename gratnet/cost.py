@@ -8,7 +8,8 @@ Counted from the model file alone (numpy, no torch, no GL):
   features of each level is a weighted sum of its :data:`GRID_CORNERS` = 8 corner values (eq. 6g; smoothstep
   interpolation has the same eight corners, only other weights). 0 for a pure MLP.
 - ``macs_per_pixel``: the two together.
-- ``encoding_terms``: sines and cosines the sinusoidal encoding evaluates per pixel, 2·(4·L + L_t).
+- ``encoding_terms``: sines and cosines the sinusoidal encoding evaluates per pixel, 2·(G·L + L_t) (G = 4 spatial
+  groups, 2 without the diagonals: physics.md eq. 6a).
 - ``grid_values_read``: grid values (texels' channels) read per pixel: 8 corners × C features per level.
 - ``weight_texture_bytes``, ``grid_texture_bytes``, ``bytes_gpu``: what :class:`viewer.renderer.NetworkRenderer`
   uploads: the packed RGBA32F weight texture (docs/formats.md, "Weight texture layout": H × W texels of 16 bytes)
@@ -109,7 +110,7 @@ class ModelCost:
         return cls(
             mlp_macs=model.macs_per_evaluation,
             grid_interpolation_macs=GRID_CORNERS * features,
-            encoding_terms=2 * (4 * spec.frequencies + spec.t_frequencies),
+            encoding_terms=2 * (spec.groups * spec.frequencies + spec.t_frequencies),
             grid_values_read=reads,
             weight_texture_bytes=weight_texture_bytes(model.layer_sizes),
             grid_texture_bytes=grid_texture_bytes(model.grids),
