@@ -9,7 +9,8 @@
 #   OUT=out/fast (volume, runs, slice cache), EPOCHS=3, GRATNET=.venv/bin/gratnet
 # The band (--first-frequency), line (--grid-lines) and polar (--grid-polar) candidates need fast_models_screen.patch, which is not
 # part of GratNet: `git checkout 54c7d34 && git apply docs/experiments/probes/fast_models_screen.patch`, then
-# run this script from that tree (docs/experiments/2026-11-27-fast-models-screen.md).
+# run this script from that tree (docs/experiments/2026-11-27-fast-models-screen.md). The branch candidates
+# (--first-layer-branches) need fast_models_branches.patch the same way, on 1898f87.
 set -euo pipefail
 cd "$(dirname "$0")/../../.."
 gratnet=${GRATNET:-.venv/bin/gratnet}
@@ -70,10 +71,15 @@ declare -A candidates=(
     # 183 → 107, so a fifth of base's work keeps 40 units there. h64 is the control against g8-L19-h64.
     [g8-L19a-h40]="--hidden 40,24,12 --grid-levels 3 --grid-resolution 251 --grid-t-resolution 5 --grid-features 8 --t-frequencies 2 --no-diagonal-frequencies"
     [g8-L19a-h64]="--hidden 64,32,16 --grid-levels 3 --grid-resolution 251 --grid-t-resolution 5 --grid-features 8 --t-frequencies 2 --no-diagonal-frequencies"
+    # A first layer of separate branches (session 5; needs fast_models_branches.patch): one per spatial group (its
+    # sin/cos block, its coordinates, c_t and the t terms), one for the grid features; they meet in the second layer.
+    # A unit reads ~44 inputs, not 107 or 183, so the first layer is 80-88 wide at a fifth of base's work.
+    [g8-L19a-br]="--hidden 80,24 --first-layer-branches 32,32,16 --grid-levels 3 --grid-resolution 251 --grid-t-resolution 5 --grid-features 8 --t-frequencies 2 --no-diagonal-frequencies"
+    [g8-L19-br]="--hidden 88,16 --first-layer-branches 20,20,16,16,16 --grid-levels 3 --grid-resolution 251 --grid-t-resolution 5 --grid-features 8 --t-frequencies 2"
 )
 order=(base g4-b12-h48 g8-b12-h40 ln4-L4-h56 g4-L4-h56 ln4-b12-h48 g4-L19-h28 g4-L12-h40 g8-L8-h44 ln4-L8-h40 g4-L19-h24 ln4-L2-h48
        ln8-L4-h48 g4-b14-h32 g8-L4-h56 g4x4-501-L4-h56 g8-L2-h40 p4-L8-h44 p4a-L8-h44 g8-L8-h44-vis
-       g8r351t3-L8-h44 g8-L8-h52 ln8-L8-h38 g8t6-L8-h44 g10-L8-h40 g8-L8-h64 g8-L12-h64 g8-L19-h64 g8-L8-d4 g4-L12-d4 g8-L19a-h40 g8-L19a-h64)
+       g8r351t3-L8-h44 g8-L8-h52 ln8-L8-h38 g8t6-L8-h44 g10-L8-h40 g8-L8-h64 g8-L12-h64 g8-L19-h64 g8-L8-d4 g4-L12-d4 g8-L19a-h40 g8-L19a-h64 g8-L19a-br g8-L19-br)
 names=("$@")
 [ ${#names[@]} -gt 0 ] || names=("${order[@]}")
 for name in "${names[@]}"; do
