@@ -30,7 +30,7 @@ from gratnet.modelfile import ModelFile
 from gratnet.volume import Volume, volume_axes
 from trainer.allocator import keep_freed_memory
 from trainer.cudagraph import GraphedSteps
-from trainer.model import FunnelMLP, GridNetwork, log_cosh_loss, parse_hidden
+from trainer.model import FunnelMLP, GridNetwork, log_cosh_loss, parse_hidden, silence_unseen_features
 from trainer.objective import VisibleWeight, batch_loss, cosine_factor, visible_weight
 from trainer.sampling import grid_to_key, slice_w
 from trainer.train_config import TrainConfig
@@ -307,6 +307,9 @@ def _set_up(volume: Volume, config: TrainConfig, out_dir: str | os.PathLike[str]
     train_samples, test_samples = split_samples(volume, config)
     graphed = uses_cuda_graph(config, device)
     model = build_model(config, encoding).to(device)
+    if config.zero_unseen_features:
+        silenced = silence_unseen_features(model, torch.from_numpy(train_samples.coordinates).to(device), encoding)
+        tqdm.write(f"--zero-unseen-features: first-layer inputs {silenced} stay at zero weight")
     optimizer = make_optimizer(model, config)
     base_rates = [float(group["lr"]) for group in optimizer.param_groups]
     steps_per_epoch = math.ceil(len(train_samples) / config.batch_size)

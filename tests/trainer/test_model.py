@@ -68,6 +68,23 @@ def test_smoke_train_lowers_the_loss_and_round_trips(tiny_volume, tmp_path):
     assert json.loads((tmp_path / "history.json").read_text())["parameters"] == model.parameter_count
 
 
+def test_zero_unseen_features_silences_exactly_the_top_sines_and_keeps_them_silent(tiny_volume, tmp_path):
+    """The top frequency of each spatial group and of t sits at the lattice's Nyquist rate: its sine is zero at
+    every training sample. --zero-unseen-features gives those columns zero weight, and training keeps it."""
+    volume, _ = tiny_volume
+    config = TrainConfig(preset="tiny", epochs=2, batch_size=256, test_slices="2", seed=1, zero_unseen_features=True)
+    _, model_file, _ = train(volume, config, tmp_path, progress=False)
+    spec = model_file.encoding
+    L, Lt = spec.frequencies, spec.t_frequencies
+    top_sines = [3 + 2 * L * group + L - 1 for group in range(spec.groups)] + [3 + 2 * spec.groups * L + Lt - 1]
+    weight = model_file.weights[0]
+    assert np.all(weight[:, top_sines] == 0.0)
+    others = np.delete(weight, top_sines, axis=1)
+    assert np.all(np.abs(others).max(axis=0) > 0)  # nothing else silenced
+    with pytest.raises(GratNetError, match="off-lattice"):
+        TrainConfig(zero_unseen_features=True, off_lattice=0.5)
+
+
 def test_resume_continues_from_the_checkpoint(tiny_volume, tmp_path):
     volume, _ = tiny_volume
     first = TrainConfig(preset="tiny", epochs=2, batch_size=512, test_slices="2")

@@ -76,10 +76,17 @@ declare -A candidates=(
     # A unit reads ~44 inputs, not 107 or 183, so the first layer is 80-88 wide at a fifth of base's work.
     [g8-L19a-br]="--hidden 80,24 --first-layer-branches 32,32,16 --grid-levels 3 --grid-resolution 251 --grid-t-resolution 5 --grid-features 8 --t-frequencies 2 --no-diagonal-frequencies"
     [g8-L19-br]="--hidden 88,16 --first-layer-branches 20,20,16,16,16 --grid-levels 3 --grid-resolution 251 --grid-t-resolution 5 --grid-features 8 --t-frequencies 2"
+    # The top frequencies' sines vanish at every sample (their phase is a whole multiple of π on the lattice), so
+    # their random initial weights draw stripes and rings between the samples unseen by the loss
+    # (--zero-unseen-features, session 5): the same runs with them silenced, and base too.
+    [g8-L19a-h40z]="--hidden 40,24,12 --grid-levels 3 --grid-resolution 251 --grid-t-resolution 5 --grid-features 8 --t-frequencies 2 --no-diagonal-frequencies --zero-unseen-features"
+    [g8-L19a-h64z]="--hidden 64,32,16 --grid-levels 3 --grid-resolution 251 --grid-t-resolution 5 --grid-features 8 --t-frequencies 2 --no-diagonal-frequencies --zero-unseen-features"
+    [base-z]="--preset small --grid-levels 3 --grid-resolution 251 --grid-t-resolution 6 --grid-features 4 --zero-unseen-features"
 )
 order=(base g4-b12-h48 g8-b12-h40 ln4-L4-h56 g4-L4-h56 ln4-b12-h48 g4-L19-h28 g4-L12-h40 g8-L8-h44 ln4-L8-h40 g4-L19-h24 ln4-L2-h48
        ln8-L4-h48 g4-b14-h32 g8-L4-h56 g4x4-501-L4-h56 g8-L2-h40 p4-L8-h44 p4a-L8-h44 g8-L8-h44-vis
-       g8r351t3-L8-h44 g8-L8-h52 ln8-L8-h38 g8t6-L8-h44 g10-L8-h40 g8-L8-h64 g8-L12-h64 g8-L19-h64 g8-L8-d4 g4-L12-d4 g8-L19a-h40 g8-L19a-h64 g8-L19a-br g8-L19-br)
+       g8r351t3-L8-h44 g8-L8-h52 ln8-L8-h38 g8t6-L8-h44 g10-L8-h40 g8-L8-h64 g8-L12-h64 g8-L19-h64 g8-L8-d4 g4-L12-d4 g8-L19a-h40 g8-L19a-h64 g8-L19a-br g8-L19-br
+       g8-L19a-h64z g8-L19a-h40z base-z)
 names=("$@")
 [ ${#names[@]} -gt 0 ] || names=("${order[@]}")
 for name in "${names[@]}"; do
