@@ -214,37 +214,6 @@ class GridNetwork(nn.Module):
         return model_file
 
 
-#: A feature whose largest magnitude over the training samples is below this is unseen: the top frequency's sine
-#: there is float32 rounding of a whole multiple of π (≲ 1e-4 at 1571 rad), every other feature of order 1.
-UNSEEN_FEATURE = 1e-3
-
-
-def silence_unseen_features(model: FunnelMLP | GridNetwork, coordinates: torch.Tensor,
-                            encoding: EncodingSpec) -> list[int]:
-    """Zero the first-layer weights of the encoding's features that vanish at every one of ``coordinates`` (the
-    training samples, network coordinates (N, 3)), and keep them zero (a gradient hook): the encoding's top
-    frequencies sit at the lattice's Nyquist rate, so their sines are zero at every sample, the loss never sees
-    them, and Adam (ε = 1e-8 against their rounding-noise gradients) leaves their random initial weights as they
-    are, to draw stripes and rings between the samples (docs/experiments/2026-11-25-scratches-adam-epsilon.md).
-    Returns the silenced input columns of the first layer (grid features are never silenced)."""
-    grid_network = isinstance(model, GridNetwork)
-    first = (model.mlp if isinstance(model, GridNetwork) else model).linear_layers()[0]
-    with torch.no_grad():
-        largest = torch.zeros(encoding.features, device=coordinates.device)
-        for start in range(0, coordinates.shape[0], 65536):
-            encoded = encode(coordinates[start:start + 65536], encoding)
-            largest = torch.maximum(largest, encoded.abs().amax(dim=0))
-        grid = first.in_features - encoding.features if grid_network else 0
-        unseen = [grid + index for index in range(encoding.features) if float(largest[index]) < UNSEEN_FEATURE]
-        if not unseen:
-            return []
-        mask = torch.ones_like(first.weight)
-        mask[:, unseen] = 0.0
-        first.weight.mul_(mask)
-    first.weight.register_hook(lambda gradient: gradient * mask)
-    return unseen
-
-
 def log_cosh_loss(prediction: torch.Tensor, target: torch.Tensor, weight: torch.Tensor | None = None) -> torch.Tensor:
     """Mean log(cosh(prediction − target)), computed stably as |d| + softplus(−2|d|) − log 2; with ``weight``
     (one per sample, shape (N,)) the weighted mean Σ w·l / Σ w over the samples."""

@@ -30,10 +30,11 @@ from gratnet.modelfile import ModelFile
 from gratnet.volume import Volume, volume_axes
 from trainer.allocator import keep_freed_memory
 from trainer.cudagraph import GraphedSteps
-from trainer.model import FunnelMLP, GridNetwork, log_cosh_loss, parse_hidden, silence_unseen_features
+from trainer.model import FunnelMLP, GridNetwork, log_cosh_loss, parse_hidden
 from trainer.objective import VisibleWeight, batch_loss, cosine_factor, visible_weight
 from trainer.sampling import grid_to_key, slice_w
 from trainer.train_config import TrainConfig
+from trainer.unseen import silence_unseen_features
 
 
 @dataclasses.dataclass
@@ -307,7 +308,7 @@ def _set_up(volume: Volume, config: TrainConfig, out_dir: str | os.PathLike[str]
     train_samples, test_samples = split_samples(volume, config)
     graphed = uses_cuda_graph(config, device)
     model = build_model(config, encoding).to(device)
-    if config.zero_unseen_features:
+    if config.zero_unseen_features and not config.off_lattice:  # off-lattice points see every feature
         silenced = silence_unseen_features(model, torch.from_numpy(train_samples.coordinates).to(device), encoding)
         tqdm.write(f"--zero-unseen-features: first-layer inputs {silenced} stay at zero weight")
     optimizer = make_optimizer(model, config)
@@ -329,9 +330,14 @@ def _resume(run: _Run) -> None:
     free = ("epoch_flip_size", "cuda_graph")
     # Options added since a checkpoint was written take their defaults, which is how it was trained; one saved
     # before the grid options were nested (flat grid_* keys) reads as one saved after.
-    saved = {key: value for key, value in saved_config_dict(TrainConfig, state["config"]).items() if key not in free}
-    if saved != {key: value for key, value in config_to_dict(config).items() if key not in free}:
-        raise GratNetError(f"{path} was made with a different configuration; start afresh without --resume")
+    # One exception: a checkpoint from before --zero-unseen-features (default on since 2026-11-28) trained without.
+    recorded = {"zero_unseen_features": False, **state["config"]}
+    saved = {key: value for key, value in saved_config_dict(TrainConfig, recorded).items() if key not in free}
+    wanted = {key: value for key, value in config_to_dict(config).items() if key not in free}
+    if saved != wanted:
+        differing = ", ".join(sorted(key for key in {*saved, *wanted} if saved.get(key) != wanted.get(key)))
+        raise GratNetError(f"{path} was made with a different configuration ({differing}); start afresh without "
+                           "--resume")
     if state["scheduler"] is None and run.scheduler is not None:
         raise GratNetError(f"{path} was trained with --cuda-graph (on a GPU): resume it on a CUDA device, or start "
                            "afresh without --resume")

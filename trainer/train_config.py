@@ -143,10 +143,11 @@ class TrainConfig:
         "lattice samples filling the rest (0: the lattice samples only)"
     )
     zero_unseen_features: bool = config_field(
-        False, "give the encoding's features that vanish at every training sample (the sines of the top frequencies, "
-        "at the lattice's Nyquist rate) zero first-layer weights, kept at zero: the loss never sees them, so their "
-        "random initial weights only draw stripes and rings between the samples (trainer/model.py "
-        "silence_unseen_features; not with --off-lattice)")
+        True, "give the encoding's features that vanish at every training sample (the sines of the top frequencies, "
+        "at the lattice's Nyquist rate) zero first-layer weights, kept at zero: the loss never sees them, so random "
+        "initial weights there only draw stripes and rings between the samples (trainer/model.py "
+        "silence_unseen_features; docs/physics.md \"Network\"). With --off-lattice every feature is seen and none is "
+        "silenced. --no-zero-unseen-features: train them as before 2026-11-28")
     epochs: int = config_field(6, "passes over the training samples")
     batch_size: int = config_field(32768, "samples per optimisation step (feature grids trained markedly better "
                                           "at 4096-8192 on a GPU: docs/experiments/2026-11-23-smaller-batches-h100.md)")
@@ -186,9 +187,6 @@ class TrainConfig:
         if not (math.isfinite(self.loss_visible_weight) and self.loss_visible_weight > 0):
             raise GratNetError(f"--loss-visible-weight must be a positive number, got {self.loss_visible_weight}")
         self.visible_band()  # checks the band
-        if self.zero_unseen_features and self.off_lattice:
-            raise GratNetError("--zero-unseen-features is for lattice samples only: with --off-lattice every feature "
-                               "is seen; leave out one of the two")
         if not (math.isfinite(self.off_lattice) and 0 <= self.off_lattice < 1):
             raise GratNetError(f"--off-lattice must be a fraction in [0, 1), got {self.off_lattice}")
         if self.cuda_graph not in ("auto", "on", "off"):

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import json
 
 import numpy as np
@@ -72,7 +73,7 @@ def test_zero_unseen_features_silences_exactly_the_top_sines_and_keeps_them_sile
     """The top frequency of each spatial group and of t sits at the lattice's Nyquist rate: its sine is zero at
     every training sample. --zero-unseen-features gives those columns zero weight, and training keeps it."""
     volume, _ = tiny_volume
-    config = TrainConfig(preset="tiny", epochs=2, batch_size=256, test_slices="2", seed=1, zero_unseen_features=True)
+    config = TrainConfig(preset="tiny", epochs=2, batch_size=256, test_slices="2", seed=1)
     _, model_file, _ = train(volume, config, tmp_path, progress=False)
     spec = model_file.encoding
     L, Lt = spec.frequencies, spec.t_frequencies
@@ -81,8 +82,11 @@ def test_zero_unseen_features_silences_exactly_the_top_sines_and_keeps_them_sile
     assert np.all(weight[:, top_sines] == 0.0)
     others = np.delete(weight, top_sines, axis=1)
     assert np.all(np.abs(others).max(axis=0) > 0)  # nothing else silenced
-    with pytest.raises(GratNetError, match="off-lattice"):
-        TrainConfig(zero_unseen_features=True, off_lattice=0.5)
+    # The flag is the default; --no-zero-unseen-features trains those columns as before (they barely move).
+    assert TrainConfig().zero_unseen_features
+    _, before, _ = train(volume, dataclasses.replace(config, zero_unseen_features=False), tmp_path / "off",
+                         progress=False)
+    assert np.all(np.abs(before.weights[0][:, top_sines]).max(axis=0) > 0)
 
 
 def test_resume_continues_from_the_checkpoint(tiny_volume, tmp_path):
