@@ -271,11 +271,12 @@ def _commit(targets: list[Path], temporaries: list[Path]) -> None:
 
 
 @contextlib.contextmanager
-def atomic_paths(*targets: str | os.PathLike[str]) -> Iterator[tuple[Path, ...]]:
+def atomic_paths(*targets: str | os.PathLike[str], output: bool = True) -> Iterator[tuple[Path, ...]]:
     """Yield one temporary path per target (same folder, same suffix); on success rename them all.
 
     On an exception nothing new is left: every temporary is removed, and targets already renamed
-    are put back as they were.
+    are put back as they were. ``output`` False: a cache entry, not the command's output (an interrupted
+    command's line does not name it: :data:`WRITTEN`).
     """
     paths = [Path(target) for target in targets]
     if len({os.path.abspath(path) for path in paths}) != len(paths):
@@ -290,7 +291,7 @@ def atomic_paths(*targets: str | os.PathLike[str]) -> Iterator[tuple[Path, ...]]
             names = " and ".join(map(str, paths))
             raise GratNetError(f"cannot write {names}: {error.strerror or error}") from error
         _commit(paths, temporaries)
-        for path in paths:
+        for path in paths if output else ():
             WRITTEN.append(path)
             interrupts.written(path)
     finally:
@@ -301,9 +302,10 @@ def atomic_paths(*targets: str | os.PathLike[str]) -> Iterator[tuple[Path, ...]]
 
 
 @contextlib.contextmanager
-def atomic_path(target: str | os.PathLike[str]) -> Iterator[Path]:
-    """Yield a temporary path in the target's folder; rename it onto ``target`` on success."""
-    with atomic_paths(target) as (temporary,):
+def atomic_path(target: str | os.PathLike[str], output: bool = True) -> Iterator[Path]:
+    """Yield a temporary path in the target's folder; rename it onto ``target`` on success (``output``: as
+    :func:`atomic_paths`)."""
+    with atomic_paths(target, output=output) as (temporary,):
         yield temporary
 
 

@@ -338,7 +338,7 @@ def output_bounds(model: ModelFile, parameters: BoundParameters | None = None, c
         header = json.dumps({"format": _FORMAT, "version": _FORMAT_VERSION,
                              "parameters": dataclasses.asdict(params)})
         try:
-            with atomic_path(path) as temporary, open(temporary, "wb") as handle:
+            with atomic_path(path, output=False) as temporary, open(temporary, "wb") as handle:
                 np.savez(handle, header=np.array(header), xyz=bounds.xyz)
         except (OSError, GratNetError) as error:  # a read-only cache only costs time
             print(f"note: could not cache the output bound at {path}: {error}", file=sys.stderr)

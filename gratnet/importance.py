@@ -461,7 +461,7 @@ def _read_cached(path: Path, parameters: dict[str, object], digest: str) -> Mate
 def _write_cached(path: Path, parameters: dict[str, object], weights: np.ndarray, seconds: float) -> None:
     header = json.dumps({"parameters": parameters, "build_seconds": round(seconds, 3)})
     try:
-        with atomic_path(path) as temporary, open(temporary, "wb") as handle:
+        with atomic_path(path, output=False) as temporary, open(temporary, "wb") as handle:
             np.savez(handle, header=np.array(header), weights=weights.astype(np.float64))
     except (OSError, GratNetError) as error:  # a read-only cache only costs a rebuild
         print(f"note: could not cache the importance table at {path}: {error}", file=sys.stderr)

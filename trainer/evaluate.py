@@ -123,7 +123,7 @@ def ground_truth_brdf_slice(
         return np.load(path)
     xyz = brdf_slice_xyz(prepare_surface(field, optics), config, optics, progress=progress, device=device)
     if path is not None:  # atomically: workers of a sweep share the cache
-        with atomic_path(path) as temporary:
+        with atomic_path(path, output=False) as temporary:
             np.save(temporary, xyz)
     return xyz
 

@@ -94,3 +94,14 @@ def test_a_killed_writers_temporary_is_removed_by_the_next_write(tmp_path: Path)
     assert left.exists()
     atomic.write_text_atomic(tmp_path / "volume.exr", "{}")
     assert sorted(path.name for path in tmp_path.iterdir()) == ["other.json", "volume.exr"]
+
+
+def test_a_cache_entry_is_not_an_output(tmp_path: Path) -> None:
+    """An interrupted command's line names the outputs it kept (atomic.WRITTEN); a cache entry it wrote on the way
+    (the importance table, the bounds, the ground-truth slices) is none of them."""
+    before = list(atomic.WRITTEN)
+    with atomic.atomic_path(tmp_path / "cache.npz", output=False) as temporary:
+        temporary.write_bytes(b"cached")
+    assert (tmp_path / "cache.npz").read_bytes() == b"cached" and atomic.WRITTEN == before
+    atomic.write_text_atomic(tmp_path / "out.txt", "output")
+    assert atomic.WRITTEN == [*before, tmp_path / "out.txt"]

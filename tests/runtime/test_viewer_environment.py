@@ -108,7 +108,14 @@ def test_area_lights_accumulate_in_the_window_as_gratnet_render_draws_them(ctx):
                                     area_lights=state.area_lights())
         scale = float(np.abs(reference).max())
         assert scale > 0  # the lights light the sphere (the default light is off)
-        np.testing.assert_allclose(viewer.accumulated_xyz(), reference, rtol=1e-4, atol=1e-5 * scale)
+        # The window draws its passes in bands of rows paced by real time (so by the machine's load), each band
+        # through its own sub-frustum: the fragments' interpolated positions, and so their keys and light
+        # samples, move by float32 ulps. Where a sample grazes a rectangle's edge or a steep order, that moved a
+        # few pixels by up to 4e-4 of their value under load (3 of 2,304 values, in two of seven runs). So: nearly
+        # every value to 1e-4, and every one to 1e-2, far below what a wrong estimator or seed would give.
+        accumulated = viewer.accumulated_xyz()
+        assert np.isclose(accumulated, reference, rtol=1e-4, atol=1e-5 * scale).mean() >= 0.99
+        np.testing.assert_allclose(accumulated, reference, rtol=1e-2, atol=1e-3 * scale)
         assert VARIANT in renderer.network.compiled
         config = viewer.state.render_config(32, 24)
         assert config.area_light == lamps and config.has_sampled_light  # the screenshot's config reproduces it
