@@ -25,16 +25,19 @@ from gratnet.quality import FAST
 from gratnet.volume import Volume
 
 #: Presets that are whole recipes, by flat field name (``grid_levels``: ``--grid-levels``). ``fast``: a feature-grid
-#: network of at most a fifth of the shipped paper models' multiply-adds per pixel, the recipe that the screen on
-#: paper-cd chose (docs/experiments/2026-11-27-fast-models-screen.md).
+#: network of at most a fifth of the shipped paper models' multiply-adds per pixel, the recipe that the fifth pass
+#: of the screen on paper-cd chose (docs/experiments/2026-11-27-fast-models-screen.md): every frequency on the axes
+#: alone (eq. 6a) into a 40-24-12 funnel, the unseen features silenced.
 RECIPES: dict[str, dict[str, Any]] = {
-    FAST: {"architecture": "grid", "hidden": "44,24,12", "grid_levels": 3, "grid_resolution": 251,
-           "grid_t_resolution": 5, "grid_features": 8, "frequencies": 8, "t_frequencies": 2},
+    FAST: {"architecture": "grid", "hidden": "40,24,12", "grid_levels": 3, "grid_resolution": 251,
+           "grid_t_resolution": 5, "grid_features": 8, "frequencies": 19, "t_frequencies": 2,
+           "diagonal_frequencies": False},
 }
 #: Every field some recipe sets (their flags' defaults mean "not given" on gratnet train's command line).
 RECIPE_FIELDS = tuple(sorted({name for recipe in RECIPES.values() for name in recipe}))
 #: The fast recipe as the flags that spell it (the preset's help).
-_FAST_FLAGS = " ".join(f"--{name.replace('_', '-')} {value}" for name, value in RECIPES[FAST].items())
+_FAST_FLAGS = " ".join((f"--{'' if value else 'no-'}{name.replace('_', '-')}" if isinstance(value, bool)
+                        else f"--{name.replace('_', '-')} {value}") for name, value in RECIPES[FAST].items())
 
 
 @dataclasses.dataclass(frozen=True)

@@ -19,8 +19,9 @@ from tests.helpers import ASSETS
 from trainer.train_config import RECIPES, TrainConfig, config_from_arguments, preset_config
 
 #: The screen's recipe (docs/experiments/2026-11-27-fast-models-screen.md), as the issue gives it in flags.
-FAST_FLAGS = {"architecture": "grid", "hidden": "44,24,12", "grid_levels": 3, "grid_resolution": 251,
-              "grid_t_resolution": 5, "grid_features": 8, "frequencies": 8, "t_frequencies": 2}
+FAST_FLAGS = {"architecture": "grid", "hidden": "40,24,12", "grid_levels": 3, "grid_resolution": 251,
+              "grid_t_resolution": 5, "grid_features": 8, "frequencies": 19, "t_frequencies": 2,
+              "diagonal_frequencies": False}
 
 
 def config_of(*flags: str) -> TrainConfig:
@@ -38,15 +39,16 @@ def test_the_fast_preset_is_the_screens_recipe():
     assert config.preset == FAST and resolved(config) == FAST_FLAGS
     # The saved config (gratnet.config.save_config beside model.npz) holds the resolved values.
     saved = config_to_dict(config)
-    assert saved["preset"] == "fast" and saved["hidden"] == "44,24,12" and saved["architecture"] == "grid"
-    assert saved["frequencies"] == 8 and saved["t_frequencies"] == 2
+    assert saved["preset"] == "fast" and saved["hidden"] == "40,24,12" and saved["architecture"] == "grid"
+    assert saved["frequencies"] == 19 and saved["t_frequencies"] == 2 and saved["diagonal_frequencies"] is False
     assert {key: saved["grid"][key] for key in ("levels", "resolution", "t_resolution", "features")} == {
         "levels": 3, "resolution": 251, "t_resolution": 5, "features": 8}
 
 
 @pytest.mark.parametrize(("flags", "expected"), [
     (["--hidden", "64,32"], {"hidden": "64,32"}),
-    (["--frequencies", "19"], {"frequencies": 19}),  # the field's default, given: it wins over the recipe's 8
+    (["--frequencies", "12"], {"frequencies": 12}),
+    (["--diagonal-frequencies"], {"diagonal_frequencies": True}),  # the field's default, given: it wins
     (["--t-frequencies", "4", "--grid-features", "2"], {"t_frequencies": 4, "grid_features": 2}),
     (["--grid-levels", "2", "--grid-resolution", "125", "--grid-t-resolution", "11"],
      {"grid_levels": 2, "grid_resolution": 125, "grid_t_resolution": 11}),
@@ -91,7 +93,8 @@ def test_the_fast_preset_on_the_mlp_architecture_is_refused_before_the_volume_is
 def test_help_gives_each_recipe_value_beside_the_default(capsys):
     assert main(["train", "--help"]) == 0
     text = " ".join(capsys.readouterr().out.split())
-    assert "(default: 19; --preset fast: 8)" in text and "(default: mlp; --preset fast: grid)" in text
+    assert "(default: 4; --preset fast: 2)" in text and "(default: mlp; --preset fast: grid)" in text
+    assert "(default: True; --preset fast: False)" in text  # --no-diagonal-frequencies
 
 
 def test_a_fast_training_saves_the_resolved_config_and_its_network(tiny_volume: tuple[object, Path], tmp_path: Path):
@@ -101,10 +104,10 @@ def test_a_fast_training_saves_the_resolved_config_and_its_network(tiny_volume: 
                  "--epochs", "1", "--batch-size", "512", "--max-train-samples", "1024", "--test-slices", "2",
                  "--device", "cpu", "--no-evaluate", "--quiet"]) == 0
     saved = json.loads((out / "model.config.json").read_text())["train"]
-    assert saved["preset"] == "fast" and saved["hidden"] == "44,24,12" and saved["frequencies"] == 8
+    assert saved["preset"] == "fast" and saved["hidden"] == "40,24,12" and saved["frequencies"] == 19
     assert saved["grid"]["features"] == 8 and saved["grid"]["resolution"] == 21 and saved["grid"]["t_resolution"] == 5
     model = load_model(out / "model.npz")
-    assert model.layer_sizes[1:] == [44, 24, 12, 3] and len(model.grids) == 3
+    assert model.layer_sizes[1:] == [40, 24, 12, 3] and len(model.grids) == 3 and not model.encoding.diagonals
     assert [grid.shape[0] for grid in model.grids] == [5, 5, 5] and model.grids[-1].shape[-1] == 8
 
     def macs(model_file: ModelFile) -> int:  # the MLP's and the grid interpolation's (8 corners per feature)
