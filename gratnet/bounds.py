@@ -182,7 +182,7 @@ def display_skip_matrix() -> np.ndarray:
 def _first_layer_tables(model: ModelFile, grid: np.ndarray, t_grid: np.ndarray) -> dict[str, np.ndarray]:
     """The first layer, split by coordinate: eq. 6's features of c_u, c_v, c_u + c_v, c_u − c_v and c_t each
     depend on one grid index (i, j, i + j, i − j, k), so W0 · features = U[i] + V[j] + S[i+j] + D[i−j] + T[k]
-    (eq. 6a, without the diagonals: S = D = 0)."""
+    (eq. 6a, without the diagonals: no S and D tables)."""
     spec = model.encoding
     weight = model.weights[0].astype(np.float64)
     omega, omega_t = spec.angular_frequencies()
@@ -204,8 +204,6 @@ def _first_layer_tables(model: ModelFile, grid: np.ndarray, t_grid: np.ndarray) 
     if spec.diagonals:
         tables["sum"] = group(sums, slice(3 + 2 * width, 3 + 3 * width), None)
         tables["difference"] = group(differences, slice(3 + 3 * width, 3 + 4 * width), None)
-    else:
-        tables["sum"] = tables["difference"] = np.zeros((sums.size, weight.shape[0]))
     t_first = 3 + spec.groups * width
     t_table = t_grid[:, None] * weight[None, :, 2] + model.biases[0].astype(np.float64)[None, :]
     if spec.t_frequencies:
@@ -256,8 +254,11 @@ def compute_output_bounds(model: ModelFile, parameters: BoundParameters | None =
     j = np.arange(resolution)
     for k, start in iterator:
         i = np.arange(start, min(start + rows_per_batch, resolution))
-        x = (tables["u"][i][:, None, :] + tables["v"][None, :, :] + tables["sum"][i[:, None] + j[None, :]]
-             + tables["difference"][i[:, None] - j[None, :] + resolution - 1] + tables["t"][k][None, None, :])
+        x = tables["u"][i][:, None, :] + tables["v"][None, :, :]
+        if "sum" in tables:  # eq. 6's diagonal groups (the sum in its earlier order: the same float32 bound)
+            x = (x + tables["sum"][i[:, None] + j[None, :]]
+                 + tables["difference"][i[:, None] - j[None, :] + resolution - 1])
+        x = x + tables["t"][k][None, None, :]
         x = activate_hidden(x.reshape(-1, x.shape[-1]), model.activation)
         last = len(weights) - 1
         for layer, (weight, bias) in enumerate(zip(weights, biases, strict=True)):

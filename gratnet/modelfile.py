@@ -232,8 +232,7 @@ def _check_layer_sizes(sizes: object, where: str) -> list[int]:
 def _encoding_from_dict(fields: object, where: str) -> EncodingSpec:
     """An :class:`EncodingSpec` from its JSON form, with every field checked."""
     names = [f.name for f in dataclasses.fields(EncodingSpec) if f.name != "diagonals"]
-    if (not isinstance(fields, dict) or sorted(set(fields) - {"diagonals"}) != sorted(names)
-            or len(fields) > len(names) + 1):
+    if not isinstance(fields, dict) or set(fields) - {"diagonals"} != set(names):
         raise GratNetError(f"{where}: 'encoding' must be an object with exactly the keys {', '.join(names)} "
                            "(and optionally diagonals)")
     diagonals = fields.get("diagonals", True)

@@ -309,7 +309,7 @@ def _set_up(volume: Volume, config: TrainConfig, out_dir: str | os.PathLike[str]
     graphed = uses_cuda_graph(config, device)
     model = build_model(config, encoding).to(device)
     if config.zero_unseen_features and not config.off_lattice:  # off-lattice points see every feature
-        silenced = silence_unseen_features(model, torch.from_numpy(train_samples.coordinates).to(device), encoding)
+        silenced = silence_unseen_features(model, train_samples.coordinates, encoding)
         tqdm.write(f"--zero-unseen-features: first-layer inputs {silenced} stay at zero weight")
     optimizer = make_optimizer(model, config)
     base_rates = [float(group["lr"]) for group in optimizer.param_groups]

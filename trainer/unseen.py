@@ -29,7 +29,7 @@ from gratnet.modelfile import ModelFile
 from gratnet.volume import volume_axes
 from trainer.model import FunnelMLP, GridNetwork
 
-__all__ = ["UNSEEN_FEATURE", "silence_model_file", "silence_unseen_features", "unseen_columns"]
+__all__ = ["UNSEEN_FEATURE", "silence_model_file", "silence_unseen_features", "unseen_columns", "unseen_features"]
 
 #: A feature whose largest magnitude over the training samples is below this is unseen: a top frequency's sine
 #: there is float32 rounding of a whole multiple of π (≲ 1e-4 at 1571 rad), every other feature of order 1.
@@ -37,22 +37,28 @@ UNSEEN_FEATURE = 1e-3
 _BATCH = 65536
 
 
-def silence_unseen_features(model: FunnelMLP | GridNetwork, coordinates: torch.Tensor,
+def unseen_features(coordinates: np.ndarray, encoding: EncodingSpec) -> list[int]:
+    """The indices of ``encoding``'s features whose magnitude stays below :data:`UNSEEN_FEATURE` at every one of
+    ``coordinates`` (network coordinates (N, 3), float32 as training holds them)."""
+    largest = np.zeros(encoding.features)
+    for start in range(0, coordinates.shape[0], _BATCH):
+        largest = np.maximum(largest, np.abs(encode(coordinates[start:start + _BATCH], encoding)).max(axis=0))
+    return np.flatnonzero(largest < UNSEEN_FEATURE).tolist()
+
+
+def silence_unseen_features(model: FunnelMLP | GridNetwork, coordinates: np.ndarray,
                             encoding: EncodingSpec) -> list[int]:
     """Zero the first-layer weights of the encoding's features that vanish at every one of ``coordinates`` (the
     training samples, network coordinates (N, 3)) and keep them zero (a gradient hook). Returns the silenced input
     columns of the first layer (grid features are never silenced)."""
     first = (model.mlp if isinstance(model, GridNetwork) else model).linear_layers()[0]
+    grid = first.in_features - encoding.features
+    unseen = [grid + index for index in unseen_features(coordinates, encoding)]
+    if not unseen:
+        return []
+    mask = torch.ones_like(first.weight)
+    mask[:, unseen] = 0.0
     with torch.no_grad():
-        largest = torch.zeros(encoding.features, device=coordinates.device)
-        for start in range(0, coordinates.shape[0], _BATCH):
-            largest = torch.maximum(largest, encode(coordinates[start:start + _BATCH], encoding).abs().amax(dim=0))
-        grid = first.in_features - encoding.features
-        unseen = [grid + index for index in range(encoding.features) if float(largest[index]) < UNSEEN_FEATURE]
-        if not unseen:
-            return []
-        mask = torch.ones_like(first.weight)
-        mask[:, unseen] = 0.0
         first.weight.mul_(mask)
     first.weight.register_hook(lambda gradient: gradient * mask)
     return unseen
@@ -76,11 +82,7 @@ def lattice_coordinates(model: ModelFile, samples: int = 200_000, seed: int = 0)
 
 def unseen_columns(model: ModelFile) -> list[int]:
     """The first-layer input columns of ``model``'s encoding features that vanish on its training lattice."""
-    coordinates = lattice_coordinates(model)
-    largest = np.zeros(model.encoding.features)
-    for start in range(0, coordinates.shape[0], _BATCH):
-        largest = np.maximum(largest, np.abs(encode(coordinates[start:start + _BATCH], model.encoding)).max(axis=0))
-    return [model.grid_feature_count + index for index in np.flatnonzero(largest < UNSEEN_FEATURE).tolist()]
+    return [model.grid_feature_count + index for index in unseen_features(lattice_coordinates(model), model.encoding)]
 
 
 def silence_model_file(model: ModelFile) -> list[int]:
