@@ -81,6 +81,15 @@ def random_grid_model(features: int, levels: int, dtype: str, interpolation: str
     return model
 
 
+
+def top_sine_columns(model: ModelFile) -> list[int]:
+    """The first-layer columns of the top frequency's sine of every spatial group and of t: eq. 6's layout, typed
+    here apart from trainer.unseen (which finds them by evaluating the encoding on the lattice)."""
+    spec, grid = model.encoding, model.grid_feature_count
+    L, Lt = spec.frequencies, spec.t_frequencies
+    return [grid + 3 + 2 * L * g + L - 1 for g in range(spec.groups)] + [grid + 3 + 2 * spec.groups * L + Lt - 1]
+
+
 def parity_keys() -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """~270 key vectors: random direction pairs plus normal incidence, |w| → 0 and u² + v² → 4."""
     rng = np.random.default_rng(7)

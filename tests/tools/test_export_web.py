@@ -367,6 +367,17 @@ def test_a_mesh_render_equals_gratnet_renders_exr_and_its_png_within_flip(site, 
     assert flip <= flip_target, f"{mesh}: LDR-FLIP {flip:.4f}"
 
 
+
+def _refused(browser, url: str) -> tuple[str, str]:
+    """A page that refuses its URL: no picture on show and never ready; its error (window.gratnetError) and the line
+    it shows."""
+    with _page(browser, url) as page:
+        error = page.evaluate("window.gratnetError")
+        line = page.evaluate("document.getElementById('error').textContent")
+        assert page.evaluate("document.getElementById('view').hidden") is True
+        assert page.evaluate("window.gratnetReady") is None
+    return error, line
+
 @needs_browser
 @pytest.mark.parametrize("browser", WEBGL2_BROWSERS, indirect=True)
 @pytest.mark.parametrize(("query", "words"), [
@@ -376,11 +387,7 @@ def test_a_mesh_render_equals_gratnet_renders_exr_and_its_png_within_flip(site, 
 ])
 def test_a_bad_url_parameter_shows_one_line_and_no_picture(site, browser, query, words):
     url, _ = site
-    with _page(browser, f"{url}?{query}") as page:
-        error = page.evaluate("window.gratnetError")
-        line = page.evaluate("document.getElementById('error').textContent")
-        assert page.evaluate("document.getElementById('view').hidden") is True
-        assert page.evaluate("window.gratnetReady") is None
+    error, line = _refused(browser, f"{url}?{query}")
     assert words in error and "\n" not in line and line.startswith("gratnet: ")
 
 
@@ -389,11 +396,7 @@ def test_a_bad_url_parameter_shows_one_line_and_no_picture(site, browser, query,
 def test_backend_webgpu_in_a_browser_without_webgpu_shows_one_line(site, browser):
     """chromium without --enable-unsafe-webgpu offers no WebGPU adapter on Linux: the WebGL2 browsers show that."""
     url, _ = site
-    with _page(browser, f"{url}?backend=webgpu&size=8") as page:
-        error = page.evaluate("window.gratnetError")
-        line = page.evaluate("document.getElementById('error').textContent")
-        assert page.evaluate("document.getElementById('view').hidden") is True
-        assert page.evaluate("window.gratnetReady") is None
+    error, line = _refused(browser, f"{url}?backend=webgpu&size=8")
     assert "no WebGPU" in error and "backend=webgl2" in error and "\n" not in line
 
 

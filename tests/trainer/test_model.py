@@ -12,6 +12,7 @@ import torch
 from gratnet.encoding import EncodingSpec
 from gratnet.errors import GratNetError
 from gratnet.modelfile import evaluate_keys, load_model
+from tests.helpers import top_sine_columns
 from trainer.model import PRESETS, FunnelMLP, funnel_sizes, log_cosh_loss
 from trainer.train import split_samples, train
 from trainer.train_config import TrainConfig
@@ -75,9 +76,7 @@ def test_zero_unseen_features_silences_exactly_the_top_sines_and_keeps_them_sile
     volume, _ = tiny_volume
     config = TrainConfig(preset="tiny", epochs=2, batch_size=256, test_slices="2", seed=1)
     _, model_file, _ = train(volume, config, tmp_path, progress=False)
-    spec = model_file.encoding
-    L, Lt = spec.frequencies, spec.t_frequencies
-    top_sines = [3 + 2 * L * group + L - 1 for group in range(spec.groups)] + [3 + 2 * spec.groups * L + Lt - 1]
+    top_sines = top_sine_columns(model_file)
     weight = model_file.weights[0]
     assert np.all(weight[:, top_sines] == 0.0)
     others = np.delete(weight, top_sines, axis=1)

@@ -11,16 +11,11 @@ import pytest
 from gratnet.errors import GratNetError
 from gratnet.modelfile import evaluate_keys
 from gratnet.volume import volume_axes
+from tests.helpers import top_sine_columns
 from trainer.sampling import grid_to_key
 from trainer.train import train
 from trainer.train_config import TrainConfig
 from trainer.unseen import silence_model_file, unseen_columns
-
-
-def _top_sines(model) -> list[int]:
-    spec, grid = model.encoding, model.grid_feature_count
-    L, Lt = spec.frequencies, spec.t_frequencies
-    return [grid + 3 + 2 * L * g + L - 1 for g in range(spec.groups)] + [grid + 3 + 2 * spec.groups * L + Lt - 1]
 
 
 @pytest.fixture(scope="module")
@@ -36,15 +31,15 @@ def unsilenced(tiny_volume, tmp_path_factory):
 
 def test_the_unseen_columns_are_the_top_sines_of_every_group_and_of_t(unsilenced):
     _, model = unsilenced
-    assert unseen_columns(model) == _top_sines(model)
-    assert np.all(np.abs(model.weights[0][:, _top_sines(model)]).max(axis=0) > 0)  # trained without: still random
+    assert unseen_columns(model) == top_sine_columns(model)
+    assert np.all(np.abs(model.weights[0][:, top_sine_columns(model)]).max(axis=0) > 0)  # trained without: still random
 
 
 def test_silencing_a_model_file_keeps_every_sample_and_changes_what_lies_between(unsilenced):
     volume, model = unsilenced
     silenced = dataclasses.replace(model, weights=list(model.weights))
     columns = silence_model_file(silenced)
-    assert columns == _top_sines(model) and np.all(silenced.weights[0][:, columns] == 0.0)
+    assert columns == top_sine_columns(model) and np.all(silenced.weights[0][:, columns] == 0.0)
     assert np.array_equal(np.delete(silenced.weights[0], columns, axis=1), np.delete(model.weights[0], columns, axis=1))
     key = grid_to_key(volume_axes(volume.resolution), "simple-max")
     u, v = np.meshgrid(key, key)
