@@ -16,6 +16,7 @@ import re
 from pathlib import Path
 
 from analysis import oracle_table, pareto, seed_summary
+from analysis.fast_points import fast_section, network_description
 from analysis.pareto import frame_row, frame_times
 from gratnet.atomic import write_text_atomic
 from gratnet.cost import ModelCost, megabytes
@@ -233,9 +234,13 @@ def _frame_note(record: dict | None) -> list[str]:
         return ["No frame times are recorded yet: `python benchmarks/frame_time_1080p.py` on an idle machine adds",
                 "a column of them (docs/data/frame_times_1080p.json)."]
     machine = record["machine"]
-    return [f"The frame column: `{record['command']}` on {record['date'][:10]} ({machine['cpu']}, {machine['cores']}",
-            f"cores, {machine['gl_renderer']}, load average {record['load_average_before'][0]:g} before): the CD disc",
-            "as `gratnet render --mesh cd` draws it, 1 sample per pixel, median wall time of each model's frames."]
+    lines = [f"The frame column: `{record['command']}` on {record['date'][:10]} ({machine['cpu']}, {machine['cores']}",
+             f"cores, {machine['gl_renderer']}, load average {record['load_average_before'][0]:g} before): the CD disc",
+             "as `gratnet render --mesh cd` draws it, 1 sample per pixel, median wall time of each model's frames."]
+    for run in record.get("updates", []):  # benchmarks/frame_time_1080p.py --update: some rows re-timed later
+        lines.append(f"Re-timed by `{run['command']}` on {run['date'][:10]} (load average "
+                     f"{run['load_average_before'][0]:g} before): its models' points in that one run.")
+    return lines
 
 
 def cost_cells(folder: Path, record: dict | None) -> str:
@@ -273,14 +278,9 @@ def paper_datasets_table(assets: Path) -> list[str]:
         history = json.loads((folder / "history.json").read_text())
         grid = history.get("grid_bytes")
         volume_bytes = history.get("volume_bytes")
-        shapes = history.get("grid_shapes") or []
         trained_on = _trained_volume(folder)
         config = json.loads((folder / "model.config.json").read_text())["train"]
-        network = "-".join(map(str, history["layer_sizes"]))
-        if shapes:
-            interpolation = config.get("grid", {}).get("interpolation", config.get("grid_interpolation", "linear"))
-            network = (f"grid {len(shapes)}×{shapes[-1][3]}@{shapes[-1][1]}², t {shapes[-1][0]}, "
-                       f"{interpolation}; MLP {network}")
+        network = network_description(folder)
         column, paper = PAPER_COLUMNS.get(folder.name, ("—", None))
         shipped.add(folder.name)
         flip = normal.get("flip")
@@ -592,6 +592,7 @@ def main() -> None:
         *paper_datasets_table(Path(arguments.assets)),
         "",
         *pareto.pareto_section(points),
+        *fast_section(Path(arguments.assets), record=record),
         *_seeds_section(),
         *_meshes_section(),
         "## Earlier materials: 20 µm tiles (not the paper's datasets)",

@@ -6,8 +6,9 @@ RUNS_DIR holds NAME/seed-K/metrics.json and, for a material's quality points, NA
 (``SEEDS="0 1 2" bash scripts/reproduce_paper_models.sh``; a point's row is named NAME/POINT). Per dataset:
 the seeds found, the mean, standard deviation (ddof 1), lowest and highest FLIP at (0°, 0°) 2000 RU, the paper's
 column for it (its preset's ``paper_flip``, trainer/datasets.py) and whether the mean beats it (the rule for shipping a
-recipe), and the mean over the seeds of the worst other paper slice and the worst further view, each over the
-(0°, 0°) FLIP (the 1.5× rule).
+recipe), the mean over the seeds of the worst other paper slice and the worst further view, each over the
+(0°, 0°) FLIP (the 1.5× rule), and the mean and standard deviation over the seeds of the FLIP averaged over every
+evaluated view (``views_mean``, ``views_std``).
 """
 
 from __future__ import annotations
@@ -34,12 +35,13 @@ def summarise(runs: Path) -> list[dict[str, Any]]:
                     if point.is_dir() and not point.name.startswith("seed-")]
     for name, folder in folders:
         seeds = sorted(folder.glob("seed-*/metrics.json"))
-        flips, slice_ratios, view_ratios = [], [], []
+        flips, slice_ratios, view_ratios, view_means = [], [], [], []
         for path in seeds:
             entries = json.loads(path.read_text(encoding="utf-8"))["brdf_slices"]
             paper = {entry["slice"]: entry for entry in entries if not entry.get("extra_view")}
             normal = paper[SLICE_ORDER[0]]["flip"]
             flips.append(normal)
+            view_means.append(statistics.fmean(entry["flip"] for entry in entries))  # every evaluated view
             slice_ratios.append(max(paper[name]["flip"] for name in SLICE_ORDER[1:]) / normal)
             views = [entry["flip"] for entry in entries if entry.get("extra_view")]
             if views:
@@ -56,6 +58,8 @@ def summarise(runs: Path) -> list[dict[str, Any]]:
             "mean_beats_paper": None if target is None else mean <= target,
             "other_slices_worst_ratio": statistics.fmean(slice_ratios),
             "views_worst_ratio": statistics.fmean(view_ratios) if view_ratios else None,
+            "views_mean": statistics.fmean(view_means),
+            "views_std": statistics.stdev(view_means) if len(view_means) > 1 else 0.0,
         })
     return rows
 

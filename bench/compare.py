@@ -248,14 +248,15 @@ def _write(out: Path, material: str, config: CompareConfig, rows: list[dict[str,
         for axis in row_axes:
             axis.set_axis_off()
     figure.colorbar(heat, ax=axes[:, 2].tolist(), shrink=0.3, label="LDR-FLIP")
-    figure.suptitle(f"{material}: ground-truth volume (reference) against the network", fontsize=10)
+    label = material if config.quality is None else f"{material} ({config.quality})"  # a shipped point is named
+    figure.suptitle(f"{label}: ground-truth volume (reference) against the network", fontsize=10)
     documents = {"compare": config, "material": material, "model_file": str(model_path),
                  "reference_source": volume_metadata.get("source")}
     out.mkdir(parents=True, exist_ok=True)
     with atomic_paths(out / "compare.md", out / "compare.json", out / "compare.png",
                       out / "compare.config.json") as (markdown, figures, picture, settings):
         markdown.write_text(table(material, rows), encoding="utf-8")
-        summary = {"material": material,
+        summary = {"material": material, "quality": config.quality,
                    "volume": f"{volume_metadata.get('resolution')}² × {volume_metadata.get('slices')} "
                              f"{volume_metadata.get('scheme')}, {config.reference_precision}",
                    "image": f"{config.width}×{config.height}, {config.spp} spp", "views": rows}

@@ -2,6 +2,7 @@
 
     python benchmarks/frame_time_1080p.py        # every shipped material, each point → docs/data/frame_times_1080p.json
     python benchmarks/frame_time_1080p.py paper-cd assets/cd/model.npz --out /tmp/frames.json
+    python benchmarks/frame_time_1080p.py paper-cd --update   # re-time one material's points (all in one run)
 
 Each model is timed by ``gratnet bench`` in a child process, exactly as ``gratnet evaluate --frame-time`` times it
 (trainer.evaluate.measure_frame_time): the CD disc as ``gratnet render --mesh cd`` draws it at 1920×1080, one sample
@@ -71,6 +72,20 @@ def _shown(path: Path) -> str:
         return str(path)
 
 
+def _updated(old: dict[str, Any] | None, record: dict[str, Any]) -> dict[str, Any]:
+    """The record ``old`` with ``record``'s rows in place of its rows of the same model (material and point) and
+    ``record``'s run added to its ``updates``; ``record`` itself where there is no ``old``."""
+    if old is None:
+        return record
+    timed = {(row["material"], row["quality"]) for row in record["models"]}
+    kept = [row for row in old["models"] if (row["material"], row["quality"]) not in timed]
+    run = {key: record[key] for key in ("date", "command", "load_average_before", "load_average_after")}
+    models = kept + record["models"]
+    # A run stays listed while some row is still its (a row names its run by the run's start date).
+    runs = [entry for entry in [*old.get("updates", []), run] if any(row.get("run") == entry["date"] for row in models)]
+    return {**old, "models": models, "updates": runs}
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("models", nargs="*", metavar="MATERIAL",
@@ -81,6 +96,10 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--repeats", type=int, default=FRAME_TIME_REPEATS, help="timed frames per model (median)")
     parser.add_argument("--timeout", type=float, default=1800.0, help="seconds one model's bench may take")
     parser.add_argument("--out", type=Path, default=None, help=f"the JSON record (default {DEFAULT_OUT})")
+    parser.add_argument("--update", action="store_true",
+                        help="keep the record's other models and replace only the rows timed now (each row keeps "
+                             "its own date, load and command; the record lists under 'updates' each later run that "
+                             "still owns rows)")
     arguments = parser.parse_args(argv)
     if arguments.out is None and tuple(arguments.size) != FRAME_TIME_SIZE:
         parser.error(f"--size {arguments.size[0]}x{arguments.size[1]} is not 1080p: give --out (the default "
@@ -99,12 +118,21 @@ def main(argv: list[str] | None = None) -> int:
     except GratNetError as error:
         print(f"frame_time_1080p: {error}", file=sys.stderr)
         return 2
+    old = None
+    if arguments.update and out.exists():  # checked before any timing
+        try:
+            old = json.loads(out.read_text(encoding="utf-8"))
+        except (OSError, ValueError) as error:
+            parser.error(f"--update: cannot read {out}: {error}")
+        if (old.get("width"), old.get("height")) != tuple(arguments.size):
+            parser.error(f"--update: {out} holds {old.get('width')}x{old.get('height')} frames, not "
+                         f"{arguments.size[0]}x{arguments.size[1]}")
     command = shlex.join(["python", "benchmarks/frame_time_1080p.py", *(argv if argv is not None else sys.argv[1:])])
     load_before = [round(value, 2) for value in os.getloadavg()]
     started = time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime())
     rows, failed = [], 0
     for material, quality, path in items:
-        row: dict[str, Any] = {"material": material, "quality": quality, "model_file": _shown(path)}
+        row: dict[str, Any] = {"material": material, "quality": quality, "model_file": _shown(path), "run": started}
         try:
             row.update(ModelCost.of_file(path).to_dict())
             row.update(measure_frame_time(path, tuple(arguments.size), arguments.repeats, arguments.timeout))
@@ -121,6 +149,8 @@ def main(argv: list[str] | None = None) -> int:
         "load_average_before": load_before, "load_average_after": [round(value, 2) for value in os.getloadavg()],
         "models": rows,
     }
+    if arguments.update:
+        record = _updated(old, record)
     write_text_atomic(out, json.dumps(record, indent=1, allow_nan=False) + "\n")
     print(f"wrote {out}", file=sys.stderr)
     return 1 if failed else 0

@@ -183,6 +183,7 @@ def test_compare_scores_the_point_asked_for_and_records_it(ctx, assets, tmp_path
         config = json.loads((out / "compare.config.json").read_text())
         assert config["compare"]["quality"] == (quality or ACCURATE)
         assert config["model_file"] == str(catalog.material_points("duo")[quality or ACCURATE])
+        assert json.loads((out / "compare.json").read_text())["quality"] == (quality or ACCURATE)
 
 
 def test_compare_refuses_a_missing_point_before_any_work(assets, tmp_path, capsys, monkeypatch):

@@ -55,3 +55,32 @@ def test_a_size_other_than_1080p_needs_its_own_record(tmp_path):
     """The default record (docs/data/frame_times_1080p.json, read by docs/results.md) holds 1080p frames only."""
     done = _run("cd", "--size", "64x36", env_cache=tmp_path)
     assert done.returncode == 2 and "give --out" in done.stderr.splitlines()[-1]  # refused before any work
+
+
+def test_update_replaces_only_the_rows_timed_now(tmp_path, ctx):  # ctx: skipped without GL
+    """`--update` keeps the record's other models (each row its own date and load) and lists every run."""
+    first, second = _tiny_model(tmp_path / "one" / "model.npz"), _tiny_model(tmp_path / "two" / "model.npz")
+    out = tmp_path / "frames.json"
+    common = ("--size", "48x32", "--repeats", "1", "--out", str(out))
+    assert _run(str(first), str(second), *common, env_cache=tmp_path / "cache").returncode == 0
+    before = json.loads(out.read_text())
+    done = _run(str(second), *common, "--update", env_cache=tmp_path / "cache")
+    assert done.returncode == 0, done.stderr
+    after = json.loads(out.read_text())
+    rows = {row["material"]: row for row in after["models"]}
+    assert set(rows) == {"one", "two"}
+    assert rows["one"] == before["models"][0]  # untouched
+    assert rows["two"]["date"] >= before["models"][1]["date"] and rows["two"]["times_ms"] != []
+    assert after["date"] == before["date"] and len(after["updates"]) == 1
+    assert "--update" in after["updates"][0]["command"] and rows["two"]["run"] == after["updates"][0]["date"]
+    again = _run(str(second), *common, "--update", env_cache=tmp_path / "cache")  # its rows replaced: one run listed
+    assert again.returncode == 0, again.stderr
+    assert len(json.loads(out.read_text())["updates"]) == 1
+
+
+def test_update_of_a_record_of_another_size_is_refused_before_any_timing(tmp_path):
+    out = tmp_path / "frames.json"
+    out.write_text(json.dumps({"width": 64, "height": 36, "models": []}))
+    done = _run("cd", "--size", "48x32", "--out", str(out), "--update", env_cache=tmp_path)
+    assert done.returncode == 2 and "64x36" in done.stderr.splitlines()[-1]
+    assert json.loads(out.read_text()) == {"width": 64, "height": 36, "models": []}
