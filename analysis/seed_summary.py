@@ -66,15 +66,16 @@ def summarise(runs: Path) -> list[dict[str, Any]]:
 
 def markdown(rows: list[dict[str, Any]]) -> str:
     lines = ["| dataset | seeds | FLIP (0°, 0°): mean ± std (min … max) | paper's column | paper | mean beats it "
-             "| other slices: worst / (0°, 0°) | further views: worst / (0°, 0°) |",
-             "|---|---|---|---|---|---|---|---|"]
+             "| other slices: worst / (0°, 0°) | further views: worst / (0°, 0°) | every view's mean: mean ± std |",
+             "|---|---|---|---|---|---|---|---|---|"]
     for row in rows:
         verdict = "—" if row["mean_beats_paper"] is None else ("**yes**" if row["mean_beats_paper"] else "no")
         views = "—" if row["views_worst_ratio"] is None else f"{row['views_worst_ratio']:.2f}×"
+        everything = "—" if row.get("views_mean") is None else f"{row['views_mean']:.4f} ± {row['views_std']:.4f}"
         lines.append(f"| {row['dataset']} | {len(row['seeds'])} | {row['mean']:.4f} ± {row['std']:.4f} "
                      f"({row['min']:.4f} … {row['max']:.4f}) | {row['paper_column']} | "
                      f"{'—' if row['paper'] is None else row['paper']} | {verdict} | "
-                     f"{row['other_slices_worst_ratio']:.2f}× | {views} |")
+                     f"{row['other_slices_worst_ratio']:.2f}× | {views} | {everything} |")
     return "\n".join(lines) + "\n"
 
 

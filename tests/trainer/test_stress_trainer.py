@@ -178,7 +178,9 @@ def test_key_to_grid_is_odd_monotone_and_free_of_floating_point_errors(key, sche
     with np.errstate(all="raise", under="ignore"):  # underflow to a denormal or 0 is the right answer
         grid = key_to_grid(keys, scheme)
     assert grid[0] <= grid[1] and grid[2] == -grid[0]
-    assert np.sign(grid[0]) == np.sign(key)
+    # The sign is kept, except where a subnormal key's image underflows to 0 (5e-324 · ½ is 0: found by Hypothesis).
+    underflow = grid[0] == 0.0 and abs(key) < np.finfo(np.float64).tiny
+    assert np.sign(grid[0]) == np.sign(key) or underflow
 
 
 @PROPERTY
