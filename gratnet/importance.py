@@ -78,6 +78,7 @@ numpy only (no torch, no GL).
 from __future__ import annotations
 
 import dataclasses
+import functools
 import hashlib
 import json
 import math
@@ -109,6 +110,9 @@ __all__ = [
     "MaterialTable",
     "clear_memory_cache",
     "cosine_hemisphere",
+    "FLAT_RESOLUTION",
+    "cached_material_table",
+    "flat_table",
     "importance_cache_folder",
     "luminance_table",
     "luminance_weights",
@@ -118,6 +122,8 @@ __all__ = [
     "volume_table",
 ]
 
+#: Cells per axis of :func:`flat_table` (its density is flat: more cells would only cost texture memory).
+FLAT_RESOLUTION = 64
 #: Share of samples drawn cosine-weighted over the upper hemisphere: every direction above the horizon keeps a
 #: density ≥ DEFENSIVE_SHARE · cos θ / π, so the estimator's weight is bounded where the table is too low.
 DEFENSIVE_SHARE = 0.1
@@ -321,13 +327,29 @@ def luminance_weights(luminance: Luminance, resolution: int = DEFAULT_RESOLUTION
         per_slice[k, inside[rows]] = np.where(np.isfinite(values), np.clip(values, 0.0, None), 0.0)
     cells = per_slice.reshape(len(fractions), size, sub, size, sub).max(axis=(2, 4))
     weights = cells.mean(axis=0) if how == "mean" else cells.max(axis=0)
-    # Reachable cells: those whose nearest point to the origin lies inside the disc of radius 2.
-    edges = -KEY_LIMIT + np.arange(size + 1) * (2.0 * KEY_LIMIT / size)
-    nearest = np.where(edges[:-1] > 0.0, edges[:-1], np.where(edges[1:] < 0.0, edges[1:], 0.0))
-    reachable = nearest[:, None] ** 2 + nearest[None, :] ** 2 < 4.0
+    reachable = _reachable_cells(size)
     mean = float(weights[reachable].mean())
     floor = FLOOR_SHARE * mean if mean > 0.0 else 1.0  # a black material: sample the disc uniformly
     return np.where(reachable, np.maximum(weights, floor), 0.0)
+
+
+def _reachable_cells(size: int) -> np.ndarray:
+    """``bool (R, R)``: the cells whose nearest point to the origin lies inside the disc u² + v² < 4 (the keys a pair
+    of directions reaches)."""
+    edges = -KEY_LIMIT + np.arange(size + 1) * (2.0 * KEY_LIMIT / size)
+    nearest = np.where(edges[:-1] > 0.0, edges[:-1], np.where(edges[1:] < 0.0, edges[1:], 0.0))
+    return nearest[:, None] ** 2 + nearest[None, :] ** 2 < 4.0
+
+
+@functools.lru_cache(maxsize=4)  # immutable, asked for once per environment pass
+def flat_table(resolution: int = FLAT_RESOLUTION) -> MaterialTable:
+    """A table that knows no material: every reachable cell weighs the same (uniform in ``(u, v)`` over the disc
+    u² + v² < 4, so the table branch draws light directions with density ∝ cos θi around each view). Any table gives
+    an unbiased estimate; this one only a noisier one. The viewer samples with it while the material's own table is
+    being built (seconds of numpy), so that the first picture under an environment does not wait for it."""
+    size = _check_resolution(resolution)
+    return _table(_reachable_cells(size).astype(np.float64), "flat", f"flat-{size}", 1, DEFAULT_W_FRACTIONS, "mean",
+                  0.0)
 
 
 def luminance_table(luminance: Luminance, resolution: int = DEFAULT_RESOLUTION, *,
@@ -410,9 +432,10 @@ def clear_memory_cache() -> None:
 
 
 def _cached_table(material: str, source: str, luminance: Callable[[], Luminance], resolution: int, subsamples: int,
-                  w_range: Iterable[float], combine: str, cache: bool, progress: bool) -> MaterialTable:
+                  w_range: Iterable[float], combine: str, cache: bool, progress: bool, build: bool = True
+                  ) -> MaterialTable | None:
     """The table for ``material`` (a content hash) and the parameters: from memory, else from disk, else built
-    (then kept in both)."""
+    (then kept in both; with ``build`` False: None instead)."""
     size, sub, fractions, how = _check_parameters(resolution, subsamples, w_range, combine)
     parameters = {"format": _FORMAT, "version": _FORMAT_VERSION, "material": material, "source": source,
                   "resolution": size, "subsamples": sub, "w_range": list(fractions), "combine": how,
@@ -425,6 +448,8 @@ def _cached_table(material: str, source: str, luminance: Callable[[], Luminance]
             return found
     path = importance_cache_folder() / f"{digest}.npz"
     table = _read_cached(path, parameters, digest) if cache else None
+    if table is None and not build:
+        return None
     if table is None:
         started = time.perf_counter()
         weights = luminance_weights(luminance(), size, subsamples=sub, w_range=fractions, combine=how,
@@ -472,8 +497,18 @@ def material_table(model: ModelFile, resolution: int = DEFAULT_RESOLUTION, *, su
                    progress: bool = True) -> MaterialTable:
     """The importance table of a trained network (its CIE Y in float32), cached in memory and on disk
     (:func:`importance_cache_folder`) by the model's content hash and the parameters."""
+    table = _cached_table(content_digest(validated(model)), "model", lambda: model_luminance(model), resolution,
+                          subsamples, w_range, combine, cache, progress)
+    assert table is not None  # built when not cached
+    return table
+
+
+def cached_material_table(model: ModelFile, resolution: int = DEFAULT_RESOLUTION, *,
+                          subsamples: int = DEFAULT_SUBSAMPLES, w_range: Iterable[float] = DEFAULT_W_FRACTIONS,
+                          combine: str = "mean") -> MaterialTable | None:
+    """:func:`material_table` if it is in memory or in the disk cache (milliseconds), else None: never builds."""
     return _cached_table(content_digest(validated(model)), "model", lambda: model_luminance(model), resolution,
-                         subsamples, w_range, combine, cache, progress)
+                         subsamples, w_range, combine, True, False, build=False)
 
 
 def volume_table(volume: object, resolution: int = DEFAULT_RESOLUTION, *, subsamples: int = DEFAULT_SUBSAMPLES,
@@ -491,5 +526,7 @@ def volume_table(volume: object, resolution: int = DEFAULT_RESOLUTION, *, subsam
     if scheme not in SCHEME:
         raise GratNetError(f"the volume's metadata names no sampling scheme ({', '.join(SCHEME.names)}), got "
                            f"{scheme!r}")
-    return _cached_table(_volume_digest(xyz, str(scheme)), "volume", lambda: volume_luminance(xyz, str(scheme)),
-                         resolution, subsamples, w_range, combine, cache, progress)
+    table = _cached_table(_volume_digest(xyz, str(scheme)), "volume", lambda: volume_luminance(xyz, str(scheme)),
+                          resolution, subsamples, w_range, combine, cache, progress)
+    assert table is not None  # built when not cached
+    return table

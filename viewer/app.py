@@ -17,9 +17,8 @@ model and how the viewer spends its frames (:mod:`viewer.scheduling`: staying re
 issue 11); a switch's default view (:mod:`viewer.default_view`); the environment light (:mod:`viewer.environment_view`,
 issue 43); screenshots and slider driving (:mod:`viewer.screenshot`).
 
-Every pixel comes from :class:`SceneRenderer` (``render_rgba`` / ``render_brdf_slice``), converted by
-:mod:`viewer.srgb` (``gratnet.display``'s bytes without importing colour-science), so the window shows
-exactly what ``gratnet render`` writes.
+Every pixel comes from :class:`SceneRenderer` (``render_rgba`` / ``render_brdf_slice``), converted by :mod:`viewer.srgb`
+(``gratnet.display``'s bytes without colour-science), so the window shows exactly what ``gratnet render`` writes.
 """
 
 from __future__ import annotations
@@ -556,13 +555,15 @@ class ViewerApp:
                 if rows is not None:
                     xyz = xyz[rows[0]:rows[1]]
             else:  # the reference draws the network's mesh buffers: the same geometry, preview or full
-                target, view = size, camera or state.camera()
+                target, view, keys = size, camera or state.camera(), origin
                 lit, lamps = (environment, area_lights) if scene is renderer else (None, ())
-                if scene.render_path == "deferred" and lit is None and not lamps:  # power-of-two: the warm variant
-                    target, view = self._padded(view, size)
+                if scene.render_path == "deferred":  # power-of-two: the warm variant; the picture at its top left,
+                    target, view = self._padded(view, size)  # so its pixels' keys move down by the padding rows
+                    keys = (origin[0], origin[1] - (target[1] - size[1]))
+                path = scene.render_path if lit is not None or lamps else None  # sampled light: the scene's path
                 rgba = scene.render_rgba(buffers, view, light, target, state.exposure, state.effective_ior,
-                                         first_sample=sample, environment=lit, seed=state.seed,
-                                         pixel_origin=origin, area_lights=lamps)[:size[1], :size[0]]
+                                         first_sample=sample, environment=lit, seed=state.seed, pixel_origin=keys,
+                                         area_lights=lamps, render_path=path)[:size[1], :size[0]]
                 xyz, coverage = rgba[..., :3], rgba[..., 3]
             pictures.append(xyz)
         if shading == "flip":  # network XYZ, reference XYZ, coverage: _display shows the FLIP heat map
@@ -602,8 +603,8 @@ class ViewerApp:
             covered = float(np.mean(self._coverage))
             predicted = seconds_per_pixel * full[0] * full[1] * (covered + UNCOVERED_COST * (1.0 - covered))
         elif self.environment_live():
-            # Nothing measured under the environment yet: the smallest preview. Its forward-path passes cost several
-            # times the deferred path's pixels on a CPU rasterizer (paper-cd, 32² on llvmpipe: 0.23 s, 16²: 0.06 s).
+            # Nothing measured under the environment yet: the smallest preview (a pass costs several times a
+            # directionally lit render's pixels: on the forward path, paper-cd, 32² on llvmpipe: 0.23 s, 16²: 0.06 s).
             predicted = math.inf
         factor = self.policy.reduced_factor(predicted, full)
         size = reduced_size(full, factor)  # square in slice mode (full is square)
@@ -751,8 +752,7 @@ class ViewerApp:
         (the network runs per covered pixel, not per block of fragments, and a power-of-two band needs no
         padding: :func:`viewer.scheduling.padded_size`); elsewhere a multiple of the policy's."""
         supplied = self.supply.scene(self._supplied(state))
-        deferred = (supplied is not None and supplied[0].render_path == "deferred"
-                    and not self.environment_live(state))  # an environment renders forward
+        deferred = supplied is not None and supplied[0].render_path == "deferred"
         return self.policy.band_rows(row_seconds, 1 if deferred else None, power_of_two=deferred)
 
     def _row_seconds(self, width: int, height: int) -> np.ndarray:

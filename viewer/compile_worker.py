@@ -19,9 +19,11 @@ the window's compile afterwards takes 0.1 s (link) + tens of ms (first draw).
 
 Groups: ``surface`` (the ``surface`` program and its depth pre-pass program, drawn as
 :meth:`SceneRenderer.render` draws them), ``slice`` (``brdf_slice``) and, for ``gratnet view --environment``,
-``environment`` (the ``surface`` program's ``ENVIRONMENT`` variant, always on the forward path, drawn with the
-viewer's environment; the child first builds the material's importance table, which gratnet.importance caches on
-disk, so that the window loads it in milliseconds instead of building it for seconds). Rendering only: no glfw, no
+``environment`` (the ``surface`` program's ``ENVIRONMENT`` variant on the window's render path, drawn with the
+viewer's environment and the flat importance table). After the first path's groups the child builds the material's
+importance table, which gratnet.importance caches on disk, and reports ``ready PATH importance SECONDS``: the
+window samples with the flat table until then and loads the material's own in milliseconds afterwards, instead of
+building it for seconds. Rendering only: no glfw, no
 imgui.
 """
 
@@ -40,12 +42,15 @@ from typing import Any
 
 from gratnet.errors import GratNetError
 
-__all__ = ["ENVIRONMENT_GROUP", "GROUPS", "CompileWorker", "shader_cache_enabled", "warm_group"]
+__all__ = ["ENVIRONMENT_GROUP", "GROUPS", "IMPORTANCE", "CompileWorker", "shader_cache_enabled", "warm_group"]
 
 #: Program groups, each warmed and reported as one (a viewer without an environment warms these).
 GROUPS = ("surface", "slice")
 #: The group of the surface program's environment-light variant (gratnet view --environment).
 ENVIRONMENT_GROUP = "environment"
+#: Not a program group: reported (``ready PATH importance SECONDS``) once the material's importance table is in the
+#: disk cache, built right after the environment group.
+IMPORTANCE = "importance"
 _ALL_GROUPS = (*GROUPS, ENVIRONMENT_GROUP)
 #: Niceness the child adds before the long (baked) compiles: on a 2-core machine the window's thread
 #: then wins the CPU whenever both want it.
@@ -98,9 +103,11 @@ def warm_group(scene: Any, group: str, buffers: Any = None, environment: Any = N
         try:
             # Twice: on the deferred path the first render at a size above 1×1 still cost 0.35 s of JIT work
             # (measured, tiny net on llvmpipe) when only a 1×1 render had warmed it; a 2×2 one takes it.
-            for size in ((1, 1), (2, 2)):
+            lit = group == ENVIRONMENT_GROUP
+            for size in ((1, 1), (2, 2)):  # sampled light on the scene's own path, as the window renders it
                 scene.render_rgba(uploaded, Camera(0.18, -90.0, 50.0), Light.directional(20.0, 90.0), size, 1.0, 1.5,
-                                  environment=environment if group == ENVIRONMENT_GROUP else None)
+                                  environment=environment if lit else None,
+                                  render_path=scene.render_path if lit else None)
         finally:
             if buffers is None:
                 uploaded.release()
@@ -251,6 +258,7 @@ def _warm(model_path: Path, paths: Sequence[str], groups: Sequence[str], folder:
     done: set[str] = set()
     software = False
     yielded = False  # the environment group lowered the child's priority
+    table_built = False
     for requested in paths:
         ctx = ctx or create_headless_context()
         software = is_software_rasterizer(ctx)
@@ -276,7 +284,9 @@ def _warm(model_path: Path, paths: Sequence[str], groups: Sequence[str], folder:
                     yielded = True  # which the table's seconds of numpy starved by 2.5 s at niceness 0 (measured)
                     with contextlib.suppress(OSError):
                         os.nice(_BAKED_NICENESS)
-                scene.importance_table()  # built (seconds of numpy) and cached on disk for the window
+                # Drawn with the flat table, as the window's first passes are: the material's own table (seconds of
+                # numpy) is built after this group is reported, so the environment's first picture never waits on it.
+                scene.provisional_importance = True
                 if environment is None:
                     from gratnet.environment import load_environment
 
@@ -289,6 +299,13 @@ def _warm(model_path: Path, paths: Sequence[str], groups: Sequence[str], folder:
             release_headless_context(ctx)
             ctx = None
             print(f"ready {path} {group} {time.perf_counter() - started:.3f}", flush=True)
+        if ENVIRONMENT_GROUP in groups and not table_built:  # after the first path's groups (the slice's too), once:
+            from gratnet.importance import material_table  # the table is the network's, not a path's
+
+            started = time.perf_counter()
+            material_table(model)  # cached on disk, where the window finds it (viewer.scene_supply)
+            table_built = True
+            print(f"ready {path} {IMPORTANCE} {time.perf_counter() - started:.3f}", flush=True)
     # On a CPU the window's auto is deferred: no probe.
     if render_path == "auto" and "surface" in groups and not software:
         with contextlib.suppress(OSError):

@@ -273,11 +273,12 @@ class DeferredRenderer:
                 self._weight_buffer = self.ctx.buffer(np.ascontiguousarray(texels).tobytes())
             self._weight_buffer.bind_to_storage_buffer(_WEIGHTS_BINDING)
 
-    def compile_steps(self) -> list[Callable[[], object]]:
+    def compile_steps(self, tinted: bool = False) -> list[Callable[[], object]]:
         """One callable per program, each compiling (or linking from the driver's cache) that program: the
-        viewer runs one per frame, since linking them all at once from Mesa's cache blocked a frame 0.6 s."""
-        steps: list[Callable[[], object]] = [self._gbuffer_program]
-        kernels = ("COMPACT", "SHADE", "RESOLVE")
+        viewer runs one per frame, since linking them all at once from Mesa's cache blocked a frame 0.6 s.
+        ``tinted``: the programs of sampled light (the G-buffer with ``ENVIRONMENT`` and the ``TINT`` kernel)."""
+        steps: list[Callable[[], object]] = [lambda: self._gbuffer_program(tinted)]
+        kernels = ("COMPACT", "SHADE", *(("TINT",) if tinted else ()), "RESOLVE")
         return steps + [lambda kernel=kernel: self._compute(kernel) for kernel in kernels]
 
     def compile(self) -> None:

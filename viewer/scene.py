@@ -54,7 +54,7 @@ from gratnet.codes import RENDER_PATHS, WeightForm
 from gratnet.display import xyz_to_display_srgb8, xyz_to_linear_srgb
 from gratnet.environment import Environment
 from gratnet.errors import GratNetError
-from gratnet.importance import MaterialTable, material_table, volume_table
+from gratnet.importance import MaterialTable, cached_material_table, flat_table, material_table, volume_table
 from gratnet.modelfile import ModelFile
 from gratnet.volume import Volume
 from viewer.antialias import check_offsets, sample_range_offsets
@@ -146,6 +146,9 @@ class SceneRenderer:
         self.forward = ForwardRenderer(self.shading)
         self._source = model
         self._importance: MaterialTable | None = None  # the material's importance table (environment light)
+        #: Sample with :func:`gratnet.importance.flat_table` while the material's own table is not built yet (the
+        #: viewer's window, whose compile child builds it) instead of building it here: each pass stays unbiased.
+        self.provisional_importance = False
         self._lighting: EnvironmentLighting | None = None  # the last environment's textures
         self._render_path: tuple[str, str] | None = None
         self._measure_render_path = measure_render_path
@@ -317,13 +320,28 @@ class SceneRenderer:
                 self._importance = material_table(self._source)
         return self._importance
 
+    def importance_table_ready(self) -> bool:
+        """Whether the material's own importance table is at hand (in this scene, in memory or in the disk cache: a
+        look that never builds it); once found it replaces a provisional flat table at the next environment pass."""
+        if self._importance is None and self.model is not None:
+            self._importance = cached_material_table(self.model)
+        return self._importance is not None
+
+    @property
+    def importance_provisional(self) -> bool:
+        """Whether environment passes now sample with the flat table (:attr:`provisional_importance`, no own table
+        yet)."""
+        return self.provisional_importance and self._importance is None
+
     def environment_lighting(self, environment: Environment | None,
                              area_lights: tuple[AreaLight, ...] = ()) -> EnvironmentLighting:
         """``environment``'s textures and ``area_lights`` on this context with the material's importance table (kept
-        for the next render with the same environment object and equal area lights)."""
-        if self._lighting is not None and self._lighting.matches(environment, area_lights):
+        for the next render with the same environment object, equal area lights and the same table); the flat table
+        while :attr:`importance_provisional`."""
+        table = flat_table() if self.importance_provisional else self.importance_table()
+        if (self._lighting is not None and self._lighting.matches(environment, area_lights)
+                and self._lighting.table.digest == table.digest):
             return self._lighting
-        table = self.importance_table()
         if self._lighting is not None:
             self._lighting.release()
             self._lighting = None

@@ -15,8 +15,11 @@ uploaded mesh for a :class:`~viewer.state.ViewerState`, in one of two modes:
   display conversion is :mod:`viewer.srgb`'s.)
 
 Environment light (``gratnet view --environment``; ``environment`` set): the child also warms the ``environment``
-group (the surface program's ``ENVIRONMENT`` variant on the forward path, and the material's importance table,
-which lands in its disk cache). A state with an environment renders with it only once that group is linked and
+group (the surface program's ``ENVIRONMENT`` variant on the window's render path: on a CPU rasterizer the deferred
+path's G-buffer with it and the ``TINT`` kernel, beside the network kernel the ``surface`` group compiled already),
+then builds the material's importance table into its disk cache. Until this supply reads that table
+(:meth:`poll`, once the child reports it), environment passes sample with :func:`gratnet.importance.flat_table`:
+unbiased, only noisier. A state with an environment renders with it only once that group is linked and
 drawn here (:meth:`SceneSupply.environment_live`); until then :meth:`SceneSupply.scene` hands the ``surface``
 group's renderer, the caller shows the scene without the environment, and :meth:`SceneSupply.status` says so.
 
@@ -49,6 +52,7 @@ from viewer.catalog import build_mesh, check_mesh_spec, resolve_material
 from viewer.compile_worker import (
     ENVIRONMENT_GROUP,
     GROUPS,
+    IMPORTANCE,
     CompileWorker,
     shader_cache_enabled,
     warm_group,
@@ -142,6 +146,7 @@ class SceneSupply:
         self._material: str | None = None
         self._paths: tuple[str, ...] = ()  # the material's weights paths, slowest first
         self._scenes: dict[str, Any] = {}  # weights path -> SceneRenderer of _material
+        self._importance_looked: set[str] = set()  # weights paths whose scene looked for the child's table
         self._linked: set[tuple[str, str]] = set()  # (path, group) linked in this context
         #: (path, group) → the link steps still to run (:meth:`_link`, one per frame in the background).
         self._pending_links: dict[tuple[str, str], list[Callable[[], object]]] = {}
@@ -250,6 +255,7 @@ class SceneSupply:
             elif worker.finished and not worker.running:  # its context chose otherwise: keep what it made
                 made = tuple(path for path in self._paths if any((path, g) in worker.ready for g in worker.groups))
                 self._paths = made or self._paths[:1]
+        self._find_importance()
         self._collect_meshes()
         self._advance_prefetch(_group(state, self.environment), idle)
         for group in self._groups(state):
@@ -403,12 +409,26 @@ class SceneSupply:
 
         if path not in self._scenes:
             source = self._worker.baked_source if (self._worker is not None and path == "baked") else None
-            self._scenes[path] = SceneRenderer(self.ctx, self.model(self._material or ""), weights_path=path,
-                                               baked_source=source,
-                                               render_path=window_render_path(
-                                                   self.render_path, is_software_rasterizer(self.ctx)),
-                                               measure_render_path=False)
+            scene = SceneRenderer(self.ctx, self.model(self._material or ""), weights_path=path,
+                                  baked_source=source,
+                                  render_path=window_render_path(self.render_path, is_software_rasterizer(self.ctx)),
+                                  measure_render_path=False)
+            # The window never builds the importance table (seconds of numpy): its child does, and until then the
+            # passes sample with the flat table (each pass unbiased; _find_importance swaps the table in).
+            scene.provisional_importance = self.background
+            self._scenes[path] = scene
         return self._scenes[path]
+
+    def _find_importance(self) -> None:
+        """Once the child reported the material's importance table (``ready PATH importance``), each scene reads it
+        from the disk cache (milliseconds), once."""
+        worker = self._worker
+        if worker is None or not any(group == IMPORTANCE for _, group in worker.ready):
+            return
+        for path, scene in self._scenes.items():
+            if path not in self._importance_looked:
+                self._importance_looked.add(path)
+                scene.importance_table_ready()
 
     def _link_steps(self, path: str, group: str) -> list[Callable[[], object]]:
         """The programs ``group`` needs on ``path``, one callable each (each one link from Mesa's cache)."""
@@ -417,13 +437,13 @@ class SceneSupply:
         if group == "slice":
             return [lambda: network.program("brdf_slice")]
         steps: list[Callable[[], object]] = [lambda: network.program("surface")]  # the mesh buffers bind to it
-        if group == ENVIRONMENT_GROUP:  # always the forward path; the table from the child's disk cache (~16 ms)
+        if scene.render_path == "deferred":  # the window's path on a CPU, or the cached verdict on a GPU
+            return steps + scene.deferred.compile_steps(tinted=group == ENVIRONMENT_GROUP)
+        if group == ENVIRONMENT_GROUP:  # sampled light on the forward path (the importance table: poll's)
             from viewer.environment_light import ENVIRONMENT_DEFINES
 
             return [*steps, lambda: network.variant_program("surface", ENVIRONMENT_DEFINES),
-                    lambda: network.depth_only_program("surface"), scene.importance_table]
-        if scene.render_path == "deferred":  # the window's path on a CPU, or the cached verdict on a GPU
-            return steps + scene.deferred.compile_steps()
+                    lambda: network.depth_only_program("surface")]
         return [*steps, lambda: network.depth_only_program("surface")]  # the forward path's depth pre-pass
 
     def _link(self, path: str, group: str, every_step: bool = True) -> bool:
@@ -538,6 +558,7 @@ class SceneSupply:
         for scene in self._scenes.values():
             scene.release()
         self._scenes.clear()
+        self._importance_looked.clear()
         self._linked.clear()
         self._pending_links.clear()
         self._active.clear()

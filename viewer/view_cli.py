@@ -31,8 +31,8 @@
   to ``--environment-spp`` (default 256); without ``--exposure`` the exposure comes from the first picture under
   the environment. The panel then offers none, sky, studio and the given environment, its rotation and scale.
   ``--area-light`` (repeatable) adds area lights, fixed for the session, accumulated the same way.
-  ``--render-path deferred`` with an environment or area lights is refused: the window renders them forward (its
-  refinement and compile groups know that path only; ``gratnet render --render-path deferred`` takes them).
+  Sampled light renders on the window's path (deferred on a CPU rasterizer); until the compile process has built
+  the material's importance table the passes sample light directions from a flat table (unbiased, noisier).
 
 Mouse: drag over the picture to orbit (in BRDF-slice mode: to move the light), wheel to zoom. The
 Screenshot button writes ``gratnet-view-NNN.png`` (display sRGB, full resolution) and its
@@ -238,18 +238,13 @@ def starting_view(arguments: argparse.Namespace, exact: bool = False) -> tuple[V
 
 def lighting_of(arguments: argparse.Namespace) -> LightingConfig:
     """The lighting flags checked as ``gratnet render`` checks them (one line if bad, the map read), before any
-    window: ``--environment`` with ``--render-path deferred`` is refused (the window renders an environment
-    forward)."""
+    window."""
     from gratnet.config import from_arguments
     from viewer.antialias import MAX_SAMPLES
     from viewer.scene_config import check_lighting, light_flag_given, with_given_light
 
     lighting = with_given_light(from_arguments(LightingConfig, arguments), light_flag_given(arguments))
     check_lighting(lighting)
-    if lighting.has_sampled_light and getattr(arguments, "render_path", "auto") == "deferred":
-        flag = "--environment" if lighting.has_environment else "--area-light"
-        raise GratNetError(f"gratnet view renders {flag} on the forward path (--render-path auto or forward; "
-                           "gratnet render --render-path deferred takes it)")
     passes = getattr(arguments, "environment_spp", None)
     if passes is not None and not 1 <= passes <= MAX_SAMPLES:
         raise GratNetError(f"--environment-spp must be an integer in 1 … {MAX_SAMPLES}, got {passes}")

@@ -64,11 +64,11 @@ def test_bad_lighting_is_one_line_before_any_work(tmp_path, capsys, monkeypatch,
 
 @pytest.mark.parametrize(("flags", "needle"), [
     (["--area-light", "sphere:0,0,1,0,1"], "radius"),
-    (["--area-light", "sphere:0,0,1,0.1,1", "--render-path", "deferred"], "forward path"),
+    (["--area-light", "sphere:0,0,1,0.1,1", "--render-path", "deferred", "--environment", "-1"], "environment"),
 ])
 def test_the_viewer_refuses_bad_area_lights_in_one_line(tmp_path, capsys, monkeypatch, flags, needle):
-    """gratnet view: a bad area light, or area lights on the deferred path (the window renders them forward), is one
-    line before any window."""
+    """gratnet view: a bad area light, or a bad environment beside one on the deferred path, is one line before any
+    window."""
     monkeypatch.chdir(tmp_path)
     monkeypatch.delenv("DISPLAY", raising=False)
     monkeypatch.delenv("WAYLAND_DISPLAY", raising=False)

@@ -286,3 +286,36 @@ def test_the_cache_gives_the_same_table(tmp_path: object, monkeypatch: pytest.Mo
     importance.clear_memory_cache()
     rebuilt = importance.material_table(model, 32, subsamples=1, progress=False)
     np.testing.assert_array_equal(rebuilt.distribution.density, first.distribution.density)
+
+
+def test_the_cached_look_never_builds(tmp_path: object, monkeypatch: pytest.MonkeyPatch) -> None:
+    """cached_material_table: None while no table is cached (and still none on disk afterwards), the cached table
+    once one is, from memory or from disk (the viewer's window reads its compile child's table this way)."""
+    monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path))
+    importance.clear_memory_cache()
+    model = random_model([163, 16, 3], scheme="simple-max", seed=9)
+    assert importance.cached_material_table(model, 32, subsamples=1) is None
+    assert not importance.importance_cache_folder().exists()
+    built = importance.material_table(model, 32, subsamples=1, progress=False)
+    assert importance.cached_material_table(model, 32, subsamples=1) is built
+    importance.clear_memory_cache()
+    found = importance.cached_material_table(model, 32, subsamples=1)
+    assert found is not None and found.digest == built.digest
+    np.testing.assert_array_equal(found.distribution.density, built.distribution.density)
+
+
+def test_the_flat_table_is_uniform_over_the_reachable_cells() -> None:
+    """flat_table: the same density in every cell that meets the disc u² + v² < 4, none outside; so the table
+    branch's keys are uniform there, and every density above still holds (it is a table like any other)."""
+    flat = importance.flat_table()
+    assert flat.source == "flat" and flat.resolution == importance.FLAT_RESOLUTION and flat is importance.flat_table()
+    cells = flat.resolution
+    centres = flat.key_min + (np.arange(cells) + 0.5) * (flat.span / cells)
+    u, v = np.meshgrid(centres, centres)
+    density = flat.pdf_uv(u, v)
+    half = flat.span / cells / 2  # a cell meets the disc when its nearest point to the origin lies inside it
+    nearest_u, nearest_v = np.maximum(np.abs(u) - half, 0.0), np.maximum(np.abs(v) - half, 0.0)
+    reachable = nearest_u**2 + nearest_v**2 < 4.0
+    assert np.all(density[~reachable] == 0.0)
+    np.testing.assert_allclose(density[reachable], 1.0 / (reachable.sum() * (flat.span / cells) ** 2), rtol=1e-9)
+    assert _uv_chi2_p_value(flat, view(40.0, 60.0)) > 0.001
