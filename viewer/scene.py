@@ -64,7 +64,7 @@ from viewer.environment_light import EnvironmentLighting, EnvironmentPass
 from viewer.forward import ForwardRenderer
 from viewer.meshes import Mesh
 from viewer.reference import ReferenceRenderer
-from viewer.renderer import NetworkRenderer
+from viewer.renderer import NetworkRenderer, is_software_rasterizer
 from viewer.shading import ShadingPrograms, skip_threshold_value
 from viewer.surface import MeshBuffers, check_size, upload_mesh
 
@@ -172,12 +172,16 @@ class SceneRenderer:
         return self._render_path
 
     def path_for_render(self, sampled_light: bool, render_path: str | None = None) -> tuple[str, str]:
-        """``(path, reason)`` of a mesh render: ``render_path`` if it names one; else :attr:`render_path`, but
-        ``forward`` with sampled light (an environment or area lights): the scene's path (``auto``'s measured verdict,
-        the viewer window's choice) was chosen for one light, and the window's environment passes are forward ones."""
+        """``(path, reason)`` of a mesh render: ``render_path`` if it names one; else :attr:`render_path`, but with
+        sampled light (an environment or area lights) ``deferred`` on a software rasterizer when the scene's path is
+        ``auto`` (a pass there costs a fraction of a forward one: docs/benchmarks.md "Environment light") and
+        ``forward`` otherwise (a GPU's measured verdict was taken for one light)."""
         if render_path is not None:
             return render_path, "requested"  # render_rgba refuses deferred in a reference scene
         if sampled_light and self.reference is None:
+            if self._requested_path == "auto" and is_software_rasterizer(self.ctx):
+                return "deferred", ("auto: sampled light on a software rasterizer renders deferred (the network once "
+                                    "per covered pixel, not per block of fragments)")
             return "forward", "sampled light renders forward unless the render asks for deferred"
         return self._resolved_path()
 
@@ -245,7 +249,7 @@ class SceneRenderer:
         integrated by shaders/environment.glsl: each sample is one pass of its estimator, pass
         ``first_sample + k`` for sample k, with random numbers from ``seed``; the mean over samples converges to
         the integral (physics.md "Environment light"), so more samples mean less noise. Both paths give the same
-        estimate; it renders forward unless this call's ``render_path`` is ``deferred`` (:meth:`path_for_render`).
+        estimate, on the path :meth:`path_for_render` gives (deferred on a software rasterizer unless asked otherwise).
         ``sampling``: ``mis`` (default), or ``light`` / ``material`` alone (gratnet.codes.ENVIRONMENT_SAMPLING).
         ``pixel_origin``: this image's lower-left pixel in a larger picture (GL pixels, y up), when it is a band of
         one: the light samples are keyed by the whole picture's pixels, so the bands of N passes make the picture of

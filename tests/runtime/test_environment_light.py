@@ -222,9 +222,15 @@ def test_deferred_bands_with_their_pixel_origin_make_the_forward_picture(ctx, mo
     width, height = 24, 20
     with SceneRenderer(ctx, model, weights_path="texture", render_path="deferred",
                        deferred_weights="texture") as scene:
-        # The scene's own path (the viewer window's choice) leaves sampled light forward; a render may ask.
+        # A scene asked for one path (as the viewer's window is) leaves sampled light forward; a render may ask.
         assert scene.path_for_render(True)[0] == "forward" and scene.path_for_render(False)[0] == "deferred"
         assert scene.path_for_render(True, "deferred") == ("deferred", "requested")
+    with SceneRenderer(ctx, model, weights_path="texture") as automatic:  # auto: deferred on a CPU rasterizer
+        from viewer.renderer import is_software_rasterizer
+
+        assert automatic.path_for_render(True)[0] == ("deferred" if is_software_rasterizer(ctx) else "forward")
+    with SceneRenderer(ctx, model, weights_path="texture", render_path="deferred",
+                       deferred_weights="texture") as scene:
         whole = scene.render_rgba(plane(), camera, NO_LIGHT, (width, height), 1.0, 1.5, samples=3, first_sample=2,
                                   environment=environment, seed=4)
         bands = []
@@ -280,7 +286,8 @@ def test_gl_and_mitsuba_integrate_the_same_environment(tmp_path, scene, model):
 
 def test_render_cli_renders_an_environment_on_the_deferred_path(tmp_path):
     """``gratnet render --environment --render-path deferred`` (refused before issue 43's deferred estimator) writes
-    the forward render's picture and says which path it took; ``auto`` takes forward and says why."""
+    the forward render's picture and says which path it took; ``auto`` takes deferred on a software rasterizer
+    (forward elsewhere) and says why."""
     import json
 
     from gratnet.cli import main
@@ -290,14 +297,21 @@ def test_render_cli_renders_an_environment_on_the_deferred_path(tmp_path):
               "--light", "40,80", "--exposure", "5000", "--size", "24,16", "--spp", "3", "--seed", "2",
               "--weights-path", "texture", "--deferred-weights", "texture", "--quiet"]
     pictures = {}
+    from viewer.context import create_headless_context, release_headless_context
+    from viewer.renderer import is_software_rasterizer
+
+    probe = create_headless_context()
+    automatic = "deferred" if is_software_rasterizer(probe) else "forward"
+    release_headless_context(probe)
     for path in ("deferred", "forward", "auto"):
         out = tmp_path / f"{path}.exr"
         assert main([*common, "--render-path", path, "--out", str(out)]) == 0
         pictures[path] = read_render_exr(out)
         config = json.loads((tmp_path / f"{path}.config.json").read_text())
-        assert config["render_path"]["path"] == ("deferred" if path == "deferred" else "forward")
-    assert json.loads((tmp_path / "auto.config.json").read_text())["render_path"]["reason"].startswith("sampled light")
-    np.testing.assert_array_equal(pictures["auto"], pictures["forward"])
+        assert config["render_path"]["path"] == (automatic if path == "auto" else path)
+    reason = json.loads((tmp_path / "auto.config.json").read_text())["render_path"]["reason"]
+    assert ("software rasterizer" in reason) == (automatic == "deferred") and "sampled light" in reason
+    np.testing.assert_array_equal(pictures["auto"], pictures[automatic])
     peak = float(np.abs(pictures["forward"]).max())
     assert peak > 0
     np.testing.assert_allclose(pictures["deferred"], pictures["forward"], rtol=0, atol=PATH_TOLERANCE * peak)
