@@ -42,7 +42,7 @@ def main() -> None:
             scene.render_rgba(buffers, camera, light, size, 1.0, 1.5, environment=sky, render_path=path)
         ctx.finish()
         report[f"environment_{path}_compile_s"] = time.perf_counter() - started
-    for side in (64, 128, 256):
+    for side in (64, 128, 256, 512):
         for path in ("deferred", "forward"):
             times = []
             for sample in range(3):
