@@ -19,12 +19,8 @@ size=${SIZE:-384}
 spp=${SPP:-4}
 names=("$@")
 if [ ${#names[@]} -eq 0 ]; then
-    for folder in assets/paper-*/; do
-        names+=("$(basename "$folder")")
-        for point in "$folder"*/model.npz; do  # its quality points (assets/NAME/fast/…)
-            [ -f "$point" ] && names+=("$(basename "$folder")/$(basename "$(dirname "$point")")")
-        done
-    done
+    source scripts/paper_points.sh
+    mapfile -t names < <(paper_points model.npz)  # each material, then its quality points (NAME/fast)
 fi
 run() { echo "+ $*"; if [ -z "${DRY_RUN:-}" ]; then "$@"; fi; }
 for name in "${names[@]}"; do  # every name is checked before any work

@@ -29,12 +29,8 @@ budget=${TIME_BUDGET_S:-0}
 left=0
 declare -A made=()
 if [ ${#names[@]} -eq 0 ]; then
-    for folder in assets/paper-*/; do
-        names+=("$(basename "$folder")")
-        for point in "$folder"*/train_command.json; do  # its quality points (assets/NAME/fast/…)
-            [ -f "$point" ] && names+=("$(basename "$folder")/$(basename "$(dirname "$point")")")
-        done
-    done
+    source scripts/paper_points.sh
+    mapfile -t names < <(paper_points train_command.json)  # each material, then its quality points (NAME/fast)
 fi
 run() { echo "+ $*"; if [ -z "${DRY_RUN:-}" ]; then "$@"; fi; }
 spent() { [ "$budget" -gt 0 ] && [ $((SECONDS - started)) -ge "$budget" ]; }
