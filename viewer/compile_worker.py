@@ -49,7 +49,7 @@ GROUPS = ("surface", "slice")
 #: The group of the surface program's environment-light variant (gratnet view --environment).
 ENVIRONMENT_GROUP = "environment"
 #: Not a program group: reported (``ready PATH importance SECONDS``) once the material's importance table is in the
-#: disk cache, built right after the environment group.
+#: disk cache, built after the first path's groups when the environment group is among them.
 IMPORTANCE = "importance"
 _ALL_GROUPS = (*GROUPS, ENVIRONMENT_GROUP)
 #: Niceness the child adds before the long (baked) compiles: on a 2-core machine the window's thread

@@ -249,9 +249,11 @@ class SceneSupply:
             self._note_warm(worker)
             if worker.error is not None and "worker" not in self.errors:
                 self.errors["worker"] = f"the background compile failed ({worker.error}); compiling in the window"
-                self._worker = None  # fall back: the first path, compiled here
+                self._worker = None  # fall back: the first path, compiled here (and the table built here)
                 self._paths = self._paths[:1]
                 worker.close()
+                for scene in self._scenes.values():
+                    scene.provisional_importance = False
             elif worker.finished and not worker.running:  # its context chose otherwise: keep what it made
                 made = tuple(path for path in self._paths if any((path, g) in worker.ready for g in worker.groups))
                 self._paths = made or self._paths[:1]
@@ -413,9 +415,9 @@ class SceneSupply:
                                   baked_source=source,
                                   render_path=window_render_path(self.render_path, is_software_rasterizer(self.ctx)),
                                   measure_render_path=False)
-            # The window never builds the importance table (seconds of numpy): its child does, and until then the
+            # The window never builds the importance table (seconds of numpy) while a child does: until then the
             # passes sample with the flat table (each pass unbiased; _find_importance swaps the table in).
-            scene.provisional_importance = self.background
+            scene.provisional_importance = self.background and self._worker is not None
             self._scenes[path] = scene
         return self._scenes[path]
 
