@@ -263,6 +263,27 @@ def test_the_window_waits_for_the_compile_child_and_shows_the_scene_without_the_
         viewer.release()
 
 
+def test_without_a_compile_child_the_window_builds_the_table_itself(ctx, tmp_path, monkeypatch):
+    """No shader cache, so no child to build the material's table: the window does not sample with the flat table
+    for ever, it builds the table at the first pass under the environment (as it compiles everything itself)."""
+    from gratnet.importance import clear_memory_cache
+
+    monkeypatch.setenv("MESA_SHADER_CACHE_DISABLE", "1")
+    monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path))
+    clear_memory_cache()
+    clock = FakeClock()
+    viewer = ViewerApp(ctx, SKY, size=(16, 12), clock=clock, background=True, weights_path="texture")
+    try:
+        assert viewer.supply.worker is None
+        _frames_until(viewer, clock, lambda: viewer.environment_live() and viewer.image is not None
+                      and viewer.image.key == viewer.render_key())
+        renderer = viewer.supply.scene(viewer.state)[0]
+        assert not renderer.importance_provisional
+        assert renderer.environment_lighting(viewer.environment()).table.source == "model"
+    finally:
+        viewer.release()
+
+
 def test_a_viewer_without_an_environment_warms_no_environment_group(ctx, fake_worker):
     viewer = ViewerApp(ctx, ViewerState(mesh="plane"), size=(16, 16), background=True, weights_path="texture")
     try:
