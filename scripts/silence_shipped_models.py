@@ -42,6 +42,16 @@ def merged(old: Any, new: Any) -> Any:
     return new
 
 
+def recorded_views(folder: Path, shipped: dict[str, Any]) -> str | None:
+    """The further views the point was evaluated on (``--views``): its metrics.config.json's, else those of its
+    metrics.json's ``extra_view`` entries (θ, φ, exposure), so that every recorded view is scored again."""
+    config = folder / "metrics.config.json"
+    if config.exists():
+        return json.loads(config.read_text(encoding="utf-8"))["evaluate"]["views"]
+    extra = [entry for entry in shipped.get("brdf_slices", []) if entry.get("extra_view")]
+    return ";".join(f"{entry['theta']:g},{entry['phi']:g},{entry['exposure']:g}" for entry in extra) or None
+
+
 def silence_point(folder: Path, cache_dir: Path) -> str:
     model_path = folder / "model.npz"
     model = load_model(model_path)
@@ -54,8 +64,7 @@ def silence_point(folder: Path, cache_dir: Path) -> str:
         "weight_norms": np.round(np.linalg.norm(before[:, columns], axis=0), 6).tolist()}}
     metrics_path = folder / "metrics.json"
     shipped = json.loads(metrics_path.read_text(encoding="utf-8"))
-    views = json.loads((folder / "metrics.config.json").read_text(encoding="utf-8"))["evaluate"]["views"] \
-        if (folder / "metrics.config.json").exists() else None
+    views = recorded_views(folder, shipped)
     with tempfile.TemporaryDirectory(dir=folder) as staging:
         stage = Path(staging)
         save_model(stage / "model.npz", model)
@@ -65,6 +74,9 @@ def silence_point(folder: Path, cache_dir: Path) -> str:
             command += ["--views", views]
         subprocess.run(command, check=True, cwd=REPO)
         fresh = json.loads((stage / "report" / "metrics.json").read_text(encoding="utf-8"))
+        if len(fresh.get("brdf_slices", [])) != len(shipped.get("brdf_slices", [])):  # never drop a recorded view
+            raise SystemExit(f"{model_path}: re-evaluated {len(fresh.get('brdf_slices', []))} views, recorded "
+                             f"{len(shipped.get('brdf_slices', []))}; nothing changed")
         combined = merged(shipped, fresh)
         old = [entry["flip"] for entry in shipped.get("brdf_slices", [])]
         new = [entry["flip"] for entry in combined.get("brdf_slices", [])]
