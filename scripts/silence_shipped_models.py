@@ -27,6 +27,7 @@ import numpy as np
 
 from gratnet.atomic import write_text_atomic
 from gratnet.modelfile import load_model, save_model
+from gratnet.showcase import DISPLAY_KEY, with_display
 from trainer.unseen import silence_model_file
 
 REPO = Path(__file__).resolve().parent.parent
@@ -62,6 +63,8 @@ def silence_point(folder: Path, cache_dir: Path) -> str:
     model.metadata = {**model.metadata, "unseen_features_silenced": {
         "columns": columns, "date": datetime.date.today().isoformat(), "by": "trainer.unseen.silence_model_file",
         "weight_norms": np.round(np.linalg.norm(before[:, columns], axis=0), 6).tolist()}}
+    if DISPLAY_KEY in model.metadata:  # the stored display analysis (default views) follows the network
+        model = with_display(model)
     metrics_path = folder / "metrics.json"
     shipped = json.loads(metrics_path.read_text(encoding="utf-8"))
     views = recorded_views(folder, shipped)

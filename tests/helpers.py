@@ -329,8 +329,14 @@ def run_cli(argv: list[str], capsys: pytest.CaptureFixture[str]) -> tuple[int, s
     return code, capsys.readouterr().err
 
 
+def shown_lines(stderr: str) -> list[str]:
+    """``stderr`` as a terminal leaves it: each line's text after its last carriage return (a progress bar that
+    cleared itself, tqdm's ``leave=False``, leaves nothing), blank lines dropped."""
+    return [shown for line in stderr.split("\n") if (shown := line.rsplit("\r", 1)[-1].strip())]
+
+
 def assert_one_clear_error(code: int, stderr: str, command: str, *needles: str) -> None:
-    lines = stderr.strip().splitlines()
+    lines = shown_lines(stderr)
     assert code == 2, (code, stderr)
     assert len(lines) == 1, stderr
     assert lines[0].startswith(f"gratnet {command}: error: "), stderr
