@@ -29,6 +29,7 @@ from gratnet.atomic import write_text_atomic
 from gratnet.cost import MEGABYTE, ModelCost
 from gratnet.quality import ACCURATE, FAST
 from trainer.datasets import PRESETS
+from trainer.evaluate import STANDARD_SLICE_LABELS
 
 __all__ = ["BASELINE_JSON", "Targets", "baseline_from_history", "fast_section", "mesh_flip", "network_description",
            "view_flips"]
@@ -64,7 +65,8 @@ def network_description(folder: Path) -> str:
 def view_flips(metrics: dict[str, Any]) -> tuple[float, float]:
     """(FLIP at (0°, 0°) 2000 RU, mean FLIP over every evaluated view) of a metrics.json."""
     entries = metrics["brdf_slices"]
-    return float(entries[0]["flip"]), statistics.fmean(float(entry["flip"]) for entry in entries)
+    normal = next(entry for entry in entries if entry["slice"] == STANDARD_SLICE_LABELS[0])
+    return float(normal["flip"]), statistics.fmean(float(entry["flip"]) for entry in entries)
 
 
 def mesh_flip(compare: dict[str, Any]) -> float:

@@ -16,7 +16,7 @@ import re
 from pathlib import Path
 
 from analysis import oracle_table, pareto, seed_summary
-from analysis.fast_points import fast_section, network_description
+from analysis.fast_points import fast_section, mesh_flip, network_description
 from analysis.pareto import frame_row, frame_times
 from gratnet.atomic import write_text_atomic
 from gratnet.cost import ModelCost, megabytes
@@ -489,7 +489,7 @@ def _meshes_section(folder: Path = COMPARE_DATA) -> list[str]:
             per_mesh.setdefault(row["mesh"], []).append(row["flip_covered"])
         cells = [" / ".join(f"{value:.4f}" for value in per_mesh.get(mesh, [])) or "—"
                  for mesh in ("cd", "sphere", "plane")]
-        mean = sum(row["flip_covered"] for row in views) / len(views)
+        mean = mesh_flip(data)
         picture = f"[picture](images/compare_{data['material']}.png)"
         lines.append(f"| {data['material']} | {data.get('volume', '—')} | {data.get('image', '—')} | "
                      f"{' | '.join(cells)} | {mean:.4f} | {picture} |")

@@ -284,7 +284,7 @@ def test_gl_and_mitsuba_integrate_the_same_environment(tmp_path, scene, model):
     assert np.all(np.abs(gl_mean - mitsuba_mean) <= bound), (gl_mean, gl_error, mitsuba_mean, mitsuba_error)
 
 
-def test_render_cli_renders_an_environment_on_the_deferred_path(tmp_path):
+def test_render_cli_renders_an_environment_on_the_deferred_path(ctx, tmp_path):
     """``gratnet render --environment --render-path deferred`` (refused before issue 43's deferred estimator) writes
     the forward render's picture and says which path it took; ``auto`` takes deferred on a software rasterizer
     (forward elsewhere) and says why."""
@@ -297,12 +297,9 @@ def test_render_cli_renders_an_environment_on_the_deferred_path(tmp_path):
               "--light", "40,80", "--exposure", "5000", "--size", "24,16", "--spp", "3", "--seed", "2",
               "--weights-path", "texture", "--deferred-weights", "texture", "--quiet"]
     pictures = {}
-    from viewer.context import create_headless_context, release_headless_context
     from viewer.renderer import is_software_rasterizer
 
-    probe = create_headless_context()
-    automatic = "deferred" if is_software_rasterizer(probe) else "forward"
-    release_headless_context(probe)
+    automatic = "deferred" if is_software_rasterizer(ctx) else "forward"  # the same driver as the CLI's context
     for path in ("deferred", "forward", "auto"):
         out = tmp_path / f"{path}.exr"
         assert main([*common, "--render-path", path, "--out", str(out)]) == 0

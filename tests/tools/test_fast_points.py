@@ -118,7 +118,9 @@ def test_no_fast_point_no_section(tmp_path):
 
 def test_mesh_flip_and_view_flips_are_plain_means():
     assert mesh_flip({"views": [{"flip_covered": 0.1}, {"flip_covered": 0.3}]}) == pytest.approx(0.2)
-    assert view_flips({"brdf_slices": [{"flip": 0.1}, {"flip": 0.2}, {"flip": 0.6}]}) == pytest.approx((0.1, 0.3))
+    entries = [{"slice": "(30°, 0°) 5000 RU", "flip": 0.2}, {"slice": "(0°, 0°) 2000 RU", "flip": 0.1},
+               {"slice": "(45°, 60°) 5000 RU", "flip": 0.6}]  # the (0°, 0°) slice found by its label
+    assert view_flips({"brdf_slices": entries}) == pytest.approx((0.1, 0.3))
 
 
 def test_the_baseline_is_read_from_history():
