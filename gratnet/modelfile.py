@@ -542,6 +542,33 @@ def save_model(path: str | os.PathLike[str], model: ModelFile) -> None:
             raise GratNetError(f"cannot write model {target}: {error.strerror or error}") from error
 
 
+def _array_bytes(path: Path) -> dict[str, tuple[str, tuple[int, ...], bytes]]:
+    """Every array of a model archive except the JSON header, as raw bytes with dtype and shape."""
+    with np.load(path, allow_pickle=False) as archive:
+        return {name: (str(archive[name].dtype), archive[name].shape, archive[name].tobytes())
+                for name in archive.files if name != _METADATA_ARRAY}
+
+
+def rewrite_metadata(path: str | os.PathLike[str], metadata: dict[str, Any]) -> None:
+    """Replace the ``metadata`` of the model file at ``path`` in place; only its JSON header changes.
+
+    The rewritten file's weights, biases, grids and packed texture are checked to be bit-identical to the
+    original's; otherwise the original is put back and a GratNetError raised."""
+    import shutil
+    import tempfile
+
+    target = Path(path)
+    before = _array_bytes(target)
+    model = load_model(target)
+    with tempfile.TemporaryDirectory() as folder:
+        backup = Path(folder) / "original.npz"
+        shutil.copy2(target, backup)
+        save_model(target, dataclasses.replace(model, metadata=metadata))
+        if _array_bytes(target) != before:
+            shutil.copy2(backup, target)
+            raise GratNetError(f"{target}: the rewritten arrays differ from the original; restored the original")
+
+
 # --------------------------------------------------------------------------------------------------
 # Loading
 # --------------------------------------------------------------------------------------------------

@@ -7,7 +7,8 @@ surface, ``float64`` ``(N, 3)``.
 
 Value (docs/physics.md "Path tracing: Mitsuba 3"): for light direction ωl and view direction ωv,
 
-    eval = A(ωl, ωv) · M · XYZ(−(ωl + ωv))        (linear sRGB; M = CIE XYZ → linear sRGB)
+    eval = S(ωl, ωv) · A(ωl, ωv) · M · XYZ(−(ωl + ωv))   (linear sRGB; M = CIE XYZ → linear sRGB; S: Smith's
+                                                      shadowing, gratnet.shadowing)
 
 which is Mitsuba's ``eval`` (the BSDF times the cosine of the light-side direction) in radiance transport,
 and exactly what the GLSL runtime shades per unit light. The network runs only where A > 0.
@@ -33,6 +34,7 @@ import numpy as np
 from gratnet.brdf import a_term
 from gratnet.display import xyz_to_linear_srgb
 from gratnet.modelfile import ModelFile, evaluate_keys
+from gratnet.shadowing import slope_covariance_from_metadata, smith_shadowing
 from viewer.meshes import arbitrary_tangents
 
 __all__ = [
@@ -87,13 +89,16 @@ def xyz_to_linear_srgb_matrix() -> np.ndarray:
 
 def eval_linear_srgb(model: ModelFile, light: np.ndarray, view: np.ndarray, ior: float | None,
                      matrix: np.ndarray | None = None) -> np.ndarray:
-    """``A(ωl, ωv) · XYZ(−(ωl + ωv))`` in linear sRGB, ``float64`` ``(N, 3)``, for tangent-frame directions
-    ``(N, 3)`` (broadcast); 0 where A is 0 (either direction at or below the horizon, |w| ≤ 1e-6).
-    ``ior``: the Fresnel index of the A-term (``None``: no Fresnel)."""
+    """``S(ωl, ωv) · A(ωl, ωv) · XYZ(−(ωl + ωv))`` in linear sRGB, ``float64`` ``(N, 3)``, for tangent-frame
+    directions ``(N, 3)`` (broadcast); 0 where A is 0 (either direction at or below the horizon, |w| ≤ 1e-6).
+    ``ior``: the Fresnel index of the A-term (``None``: no Fresnel); S: Smith's shadowing with the slope covariance
+    the model records (gratnet.shadowing; none recorded: S = 1)."""
     light, view = np.broadcast_arrays(np.asarray(light, dtype=np.float64).reshape(-1, 3),
                                       np.asarray(view, dtype=np.float64).reshape(-1, 3))
     matrix = xyz_to_linear_srgb_matrix() if matrix is None else matrix
-    a = a_term(light, view, ior)
+    volume = model.metadata.get("volume")
+    covariance = slope_covariance_from_metadata(volume if isinstance(volume, dict) else {})
+    a = a_term(light, view, ior) * smith_shadowing(light, view, covariance)
     result = np.zeros(light.shape, dtype=np.float64)
     lit = np.flatnonzero(np.isfinite(a) & (a > 0.0))
     for start in range(0, lit.size, CHUNK):

@@ -53,3 +53,30 @@ float a_term(vec3 wi, vec3 wo, float ior) {
     }
     return min(ratio_squared * geometry / (w * w), A_TERM_MAX);
 }
+
+// Smith's Lambda for a Gaussian (Beckmann) slope distribution of covariance (Sxx, Sxy, Syy) = slope_covariance
+// (gratnet.shadowing.smith_lambda): a = cos(theta) / sqrt(2 w_xy^T S w_xy); erf by Abramowitz & Stegun 7.1.26,
+// written as exp(-a^2)/2 * (1/(a sqrt(pi)) - t P(t)) so that nothing cancels or overflows. 0 with no slope
+// along the direction or at normal incidence; the caller handles the horizon.
+float smith_lambda(vec3 w, vec3 slope_covariance) {
+    float projected = max(w.x * w.x * slope_covariance.x + 2.0 * w.x * w.y * slope_covariance.y
+                          + w.y * w.y * slope_covariance.z, 0.0);
+    float spread = sqrt(2.0 * projected);
+    if (!(spread > 0.0)) {
+        return 0.0;
+    }
+    float a = w.z / spread;
+    float t = 1.0 / (1.0 + 0.3275911 * a);
+    float polynomial = t * (0.254829592 + t * (-0.284496736 + t * (1.421413741 + t * (-1.453152027
+                                                                                      + t * 1.061405429))));
+    return max(0.5 * exp(-a * a) * (0.5641895835477563 / a - polynomial), 0.0);
+}
+
+// Smith's height-correlated shadowing-masking S = 1 / (1 + Lambda(wi) + Lambda(wo)) (gratnet.shadowing,
+// physics.md "Shadowing and masking"); 0 with either direction at or below the horizon; 1 for a zero covariance.
+float smith_shadowing(vec3 wi, vec3 wo, vec3 slope_covariance) {
+    if (!(wi.z > 0.0) || !(wo.z > 0.0)) {
+        return 0.0;
+    }
+    return 1.0 / (1.0 + smith_lambda(wi, slope_covariance) + smith_lambda(wo, slope_covariance));
+}

@@ -3,7 +3,8 @@
 //   MODE_XYZ       key vector (u, v, w) -> CIE XYZ (eq. 6 -> MLP -> eq. 7)
 //   MODE_NETWORK   key vector -> the network's outputs (range-transformed XYZ, before eq. 7's inverse)
 //   MODE_ENCODING  key vector -> encoded input features 4*u_block ... 4*u_block+3 (eq. 6)
-//   MODE_A_TERM    light direction (u_inputs), view direction (u_inputs2) -> A (eq. 5) in .x
+//   MODE_A_TERM    light direction (u_inputs), view direction (u_inputs2) -> A (eq. 5) in .x, Smith's
+//                  shadowing for u_slope_covariance in .y
 // Needs the defines of mlp.glsl and encoding.glsl; MODE_* come from codes.glsl (gratnet/codes.py).
 #include "codes.glsl"
 #include "fullscreen.glsl"
@@ -23,6 +24,7 @@ uniform highp sampler2D u_inputs2;  // RGBA32F, MODE_A_TERM only
 uniform int u_mode;
 uniform int u_block;                // MODE_ENCODING only
 uniform float u_ior;                // MODE_A_TERM only; <= 0: Fresnel off
+uniform vec3 u_slope_covariance;    // MODE_A_TERM only: (Sxx, Sxy, Syy)
 
 layout(location = 0) out vec4 out_value;
 
@@ -30,7 +32,8 @@ void main() {
     ivec2 pixel = ivec2(gl_FragCoord.xy);
     vec3 value = texelFetch(u_inputs, pixel, 0).xyz;
     if (u_mode == MODE_A_TERM) {
-        out_value = vec4(a_term(value, texelFetch(u_inputs2, pixel, 0).xyz, u_ior), 0.0, 0.0, 0.0);
+        vec3 view = texelFetch(u_inputs2, pixel, 0).xyz;
+        out_value = vec4(a_term(value, view, u_ior), smith_shadowing(value, view, u_slope_covariance), 0.0, 0.0);
         return;
     }
     encoding_set_key(value);

@@ -75,6 +75,7 @@ layout(early_fragment_tests) in;
 uniform vec3 u_eye;              // camera position, metres
 uniform float u_exposure;
 uniform float u_ior;             // <= 0: Fresnel off
+uniform vec3 u_slope_covariance; // the relief's slopes (Sxx, Sxy, Syy): Smith's shadowing; 0: none
 
 in vec3 v_position;
 in vec3 v_normal;
@@ -131,7 +132,9 @@ bool surface_inputs(out vec3 key, out float a, out float factor, out vec3 tint) 
 #endif
     vec3 wi = world_to_tangent * wi_world;
     key = -(wi + wo);  // physics.md "Key vector"
-    a = a_term(wi, wo, u_ior);  // 0 below either horizon, at |w| <= 1e-6, or for a zero vector
+    // eq. 5 times Smith's shadowing (physics.md "Shadowing and masking"): 0 below either horizon, at |w| <= 1e-6,
+    // or for a zero vector
+    a = a_term(wi, wo, u_ior) * smith_shadowing(wi, wo, u_slope_covariance);
     if (!(a > 0.0) || !(irradiance > 0.0)) {
         return false;  // nothing to light
     }

@@ -15,6 +15,7 @@ from gratnet.brdf import a_term, direction
 from gratnet.encoding import EncodingSpec, RangeSpec
 from gratnet.modelfile import ModelFile
 from gratnet.precision import OWN_KEYS, UNIT_ROUNDOFF, DriverErrors, assert_within, driver_bound, raster_key_error
+from gratnet.shadowing import NO_SHADOWING, slope_covariance_from_metadata, smith_shadowing
 from viewer.state import ViewerState
 
 if TYPE_CHECKING:
@@ -172,9 +173,11 @@ def flip_in_member(path: Path, name: str, offset: int | None = None, mask: int =
 # The plane render's numpy reference (the forward and deferred paths, the precision bound)
 
 
-def plane_geometry(camera: Camera, light: Light, size: tuple[int, int]) -> dict[str, np.ndarray]:
+def plane_geometry(camera: Camera, light: Light, size: tuple[int, int],
+                   slope_covariance: tuple[float, float, float] = NO_SHADOWING) -> dict[str, np.ndarray]:
     """Each pixel's ray hitting the infinite plane z = 0 (float64, ``(H, W, …)``): the surface ``point``, the
-    ``key`` −(ωi + ωo), ``a`` = A(ωi, ωo) (ior 1.5) and the point light's ``irradiance`` there (1/d²)."""
+    ``key`` −(ωi + ωo), ``a`` = A(ωi, ωo) (ior 1.5) times Smith's shadowing for ``slope_covariance`` and the
+    point light's ``irradiance`` there (1/d²)."""
     width, height = size
     points, views = [], []
     for row in range(height):
@@ -187,7 +190,7 @@ def plane_geometry(camera: Camera, light: Light, size: tuple[int, int]) -> dict[
     distances = np.linalg.norm(offsets, axis=1, keepdims=True)
     lights = offsets / distances
     return {"point": points.reshape(height, width, 3), "key": (-(lights + views)).reshape(height, width, 3),
-            "a": a_term(lights, views, 1.5).reshape(height, width),
+            "a": (a_term(lights, views, 1.5) * smith_shadowing(lights, views, slope_covariance)).reshape(height, width),
             "irradiance": (light.intensity / distances[:, 0] ** 2).reshape(height, width)}
 
 
@@ -217,11 +220,12 @@ def point_of_key(points: np.ndarray, key: np.ndarray, eye: np.ndarray, light: np
 
 
 def check_plane_against_numpy(image: np.ndarray, key_a: np.ndarray, model, camera: Camera, light: Light,
-                              size: tuple[int, int], exposure: float, errors: DriverErrors = OWN_KEYS) -> None:
+                              size: tuple[int, int], exposure: float, errors: DriverErrors = OWN_KEYS,
+                              slope_covariance: tuple[float, float, float] | None = None) -> None:
     """A plane render against numpy in two well-conditioned steps (docs/physics.md, "Float32 error budget").
 
     1. Geometry: the key layer against float64 rays, within what a rasterizer's sub-pixel snapping moves
-       (``raster_key_error``); A likewise.
+       (``raster_key_error``); A likewise (times Smith's shadowing for ``slope_covariance``; None: the model's).
     2. Shading: ``image`` against exposure · irradiance · A · XYZ(key) at the key and A the shader used
        (``key_a``: the forward path's key layer), within ``driver_bound``; the irradiance at the surface point
        whose key is the shader's (``point_of_key``: the sub-pixel move taken out, so a 0.1 % error in the
@@ -229,7 +233,10 @@ def check_plane_against_numpy(image: np.ndarray, key_a: np.ndarray, model, camer
     Comparing the values through the float64 key instead would let a key error of 1e-5 move this model's
     specular peak (pixel (10, 13): 716.6, v = 0.004, on eq. 6's sqrt) by 3 %: ill-conditioned.
     """
-    geometry = plane_geometry(camera, light, size)
+    if slope_covariance is None:  # the model's own (gratnet.shadowing), as the renderer takes it
+        volume = model.metadata.get("volume")
+        slope_covariance = slope_covariance_from_metadata(volume if isinstance(volume, dict) else {})
+    geometry = plane_geometry(camera, light, size, slope_covariance)
     covered = np.ones(image.shape[:2], dtype=bool)
     assert np.all(image[..., 3] == 1.0)
     key_error = raster_key_error(geometry["key"], covered)

@@ -16,6 +16,7 @@ import numpy as np
 from gratnet import __version__
 from gratnet.config import config_field
 from gratnet.errors import GratNetError
+from gratnet.shadowing import METADATA_KEY as SLOPE_COVARIANCE_KEY
 from gratnet.volume import Volume
 from trainer.fourier import FTerm, OpticsConfig, PreparedSurface, prepare_surface
 from trainer.heightfield import HeightField
@@ -173,6 +174,7 @@ def volume_from_sum(
         "chebyshev_nodes": node_count,
         "interpolation_tolerance": optics.tolerance,
         "source": field.source,
+        SLOPE_COVARIANCE_KEY: list(field.slope_covariance()),  # Smith's shadowing (physics.md)
         "preparation_notes": list(surface.notes),
         "gratnet_version": __version__,
         "created": datetime.datetime.now(datetime.timezone.utc).isoformat(timespec="seconds"),

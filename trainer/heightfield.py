@@ -67,6 +67,14 @@ class HeightField:
         """Peak-to-valley height (µm)."""
         return float(self.heights_um.max() - self.heights_um.min())
 
+    def slope_covariance(self) -> tuple[float, float, float]:
+        """``(Σxx, Σxy, Σyy)``: the covariance of the surface slopes (∂h/∂x, ∂h/∂y) (dimensionless, µm/µm) over its
+        samples, central differences at ``dx_um`` (one-sided at the edges), mean slope removed: the statistics of
+        Smith's shadowing–masking term (gratnet.shadowing; physics.md, "Shadowing and masking")."""
+        gradient_y, gradient_x = np.gradient(self.heights_um, self.dx_um)
+        covariance = np.cov(np.stack([gradient_x.ravel(), gradient_y.ravel()]), bias=True)
+        return float(covariance[0, 0]), float(covariance[0, 1]), float(covariance[1, 1])
+
     def slope_percentile(self, percentile: float = 99.0) -> float:
         """A robust maximum surface slope |∇h| (dimensionless): the given percentile over samples.
 

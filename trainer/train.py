@@ -27,6 +27,8 @@ from gratnet.config import config_to_dict, saved_config_dict
 from gratnet.encoding import EncodingSpec, RangeSpec, encode, network_coordinates, range_forward
 from gratnet.errors import GratNetError
 from gratnet.modelfile import ModelFile
+from gratnet.shadowing import METADATA_KEY as SLOPE_COVARIANCE_KEY
+from gratnet.shadowing import check_slope_covariance
 from gratnet.volume import Volume, volume_axes
 from trainer.allocator import keep_freed_memory
 from trainer.cudagraph import GraphedSteps
@@ -200,6 +202,25 @@ VOLUME_METADATA_KEYS = ("source", "sigma_s_um", "window_extent_um", "dx_um", "pa
                         "scheme", "wavelengths_nm", "illuminant", "observer", "repeat")
 
 
+def model_volume_metadata(volume_metadata: dict[str, Any]) -> dict[str, Any]:
+    """What a model records of its volume: :data:`VOLUME_METADATA_KEYS`, and the height field's slope covariance
+    (gratnet.shadowing), from the volume or, for a volume made before it was recorded, from the height field its
+    ``source`` names (left out, with a warning, where that field cannot be loaded)."""
+    recorded = {key: volume_metadata.get(key) for key in VOLUME_METADATA_KEYS}
+    covariance = volume_metadata.get(SLOPE_COVARIANCE_KEY)
+    if covariance is None:
+        from trainer.loaders import load_heightfield
+
+        try:
+            covariance = list(load_heightfield(str(volume_metadata.get("source", ""))).slope_covariance())
+        except GratNetError as error:
+            logging.getLogger("gratnet.train").warning(
+                "the model records no slope covariance (it renders unshadowed): %s", error)
+            return recorded
+    recorded[SLOPE_COVARIANCE_KEY] = list(check_slope_covariance(covariance))
+    return recorded
+
+
 def trained_model_file(model: FunnelMLP | GridNetwork, config: TrainConfig, volume: Volume,
                        history: dict[str, Any]) -> ModelFile:
     """The model file of ``model`` (moved to the CPU), trained with ``config`` on ``volume``: weights, encoding,
@@ -211,7 +232,7 @@ def trained_model_file(model: FunnelMLP | GridNetwork, config: TrainConfig, volu
         range=config.range_spec(),
         scheme=volume.metadata["scheme"],
         metadata={
-            "volume": {key: volume.metadata.get(key) for key in VOLUME_METADATA_KEYS},
+            "volume": model_volume_metadata(volume.metadata),
             "training": {
                 "config": config_to_dict(config),
                 **{k: v for k, v in history.items() if k != "epochs"},

@@ -339,7 +339,8 @@ class DeferredRenderer:
         per_chunk = max(1, min(len(offsets), max_rows // height, CHUNK_TEXELS // (width * height)))
         tinted = environment is not None
         gbuffer_program = self._gbuffer_program(tinted)
-        set_surface_uniforms(gbuffer_program, camera, light, width, height, float(exposure), ior)
+        set_surface_uniforms(gbuffer_program, camera, light, width, height, float(exposure), ior,
+                             self.network.slope_covariance)
         tint = None
         if environment is not None:
             environment.lighting.set_uniforms(gbuffer_program, environment.delta_light, environment.seed,

@@ -111,7 +111,8 @@ class ForwardRenderer:
             program = self.shading.variant_program(SURFACE_PROGRAM, extra)
         elif statistics is not None:
             _, program = self.shading.counting_program(SURFACE_PROGRAM)
-        set_surface_uniforms(program, camera, light, width, height, float(exposure), ior)
+        set_surface_uniforms(program, camera, light, width, height, float(exposure), ior,
+                             self.shading.slope_covariance)
         if environment is not None:
             environment.lighting.set_uniforms(program, environment.delta_light, environment.seed, environment.sampling)
         bound, unit = self.shading.skip_uniforms(program, skip_threshold)

@@ -28,6 +28,7 @@ import numpy as np
 from gratnet.codes import SCHEME
 from gratnet.errors import GratNetError
 from gratnet.reference import FLOAT16_SCALE, check_precision, check_uniform_slices, stored_values, texture_bytes
+from gratnet.shadowing import slope_covariance_from_metadata
 from gratnet.volume import Volume
 from viewer.shading import MaterialTexture, ShadingPrograms, set_uniform, skip_threshold_value
 
@@ -68,6 +69,8 @@ class ReferenceRenderer(ShadingPrograms):
         volume: the ground-truth volume (``gratnet.volume.read_volume``); its metadata must name its ``scheme``.
         shader_root: folder of the GLSL files (default: the repository's ``shaders/``).
         precision: ``float16`` (default) or ``float32`` storage (:data:`gratnet.reference.PRECISIONS`).
+        slope_covariance: the relief's slopes for Smith's shadowing (gratnet.shadowing); ``None``: the volume's
+            metadata's (none recorded: unshadowed). A volume made before it was recorded takes its model's.
 
     Attributes:
         volume: the volume; ``scheme``: its sampling scheme; ``precision``: the storage;
@@ -75,7 +78,7 @@ class ReferenceRenderer(ShadingPrograms):
     """
 
     def __init__(self, ctx: moderngl.Context, volume: Volume, shader_root: str | Path | None = None,
-                 precision: str = "float16") -> None:
+                 precision: str = "float16", slope_covariance: tuple[float, float, float] | None = None) -> None:
         self.precision = check_precision(precision)
         scheme = volume.metadata.get("scheme")
         if scheme not in SCHEME:
@@ -83,7 +86,9 @@ class ReferenceRenderer(ShadingPrograms):
                                f"{scheme!r}")
         check_uniform_slices(volume.metadata, volume.slices)
         check_reference_limits(volume.slices, volume.resolution, precision, ctx.info)
-        super().__init__(ctx, _DEFINES, shader_root)
+        if slope_covariance is None:
+            slope_covariance = slope_covariance_from_metadata(volume.metadata)
+        super().__init__(ctx, _DEFINES, shader_root, slope_covariance=slope_covariance)
         self.volume = volume
         self.scheme = str(scheme)
         self.values = stored_values(volume.xyz, precision)

@@ -25,6 +25,7 @@ from gratnet.codes import HIDDEN, MODE, OUTPUT, RANGE, SCHEME, WEIGHTS_PATHS, We
 from gratnet.errors import GratNetError
 from gratnet.featuregrid import CHUNK_FEATURES, grid_chunks
 from gratnet.modelfile import LEAKY_RELU_SLOPE, ModelFile, pack_texture, texture_layout
+from gratnet.shadowing import slope_covariance_from_metadata
 from viewer.baked import baked_mlp_source
 from viewer.glsl import GeneratedSource, compile_program
 from viewer.shading import (
@@ -208,7 +209,9 @@ class NetworkRenderer(ShadingPrograms):
         #: The packed weight texture (docs/formats.md), ``float32`` ``(rows, texels per row, 4)``, on either path
         #: (the deferred path's weight buffers hold the same texels).
         self.packed_weights = np.ascontiguousarray(texture, dtype=np.float32)
-        super().__init__(ctx, model_defines(model), shader_root)
+        volume_metadata = model.metadata.get("volume")
+        super().__init__(ctx, model_defines(model), shader_root, slope_covariance=slope_covariance_from_metadata(
+            volume_metadata if isinstance(volume_metadata, dict) else {}))
         self.model = model
         self.layout = layout
         self.weights_path = choose_weights_path(ctx, model, weights_path)
@@ -381,6 +384,7 @@ class NetworkRenderer(ShadingPrograms):
         set_uniform(program, MODE.uniform_name, mode)
         set_uniform(program, "u_block", block)
         set_uniform(program, "u_ior", ior)
+        set_uniform(program, "u_slope_covariance", self.slope_covariance)
         count = first.shape[0]
         result = np.empty((count, 4), dtype=np.float32)
         for start in range(0, count, _PASS_PIXELS):
@@ -455,16 +459,25 @@ class NetworkRenderer(ShadingPrograms):
 
     def a_term(self, light: np.ndarray, view: np.ndarray, ior: float | None = 1.5) -> np.ndarray:
         """The shader's A-term (eq. 5) for direction pairs ``(…, 3)`` (broadcast), ``float32`` ``(…)``."""
+        return self._direction_pairs(light, view, ior)[..., 0]
+
+    def shadowing(self, light: np.ndarray, view: np.ndarray) -> np.ndarray:
+        """The shader's Smith shadowing (gratnet.shadowing.smith_shadowing) with the model's slope covariance, for
+        direction pairs ``(…, 3)`` (broadcast), ``float32`` ``(…)``."""
+        return self._direction_pairs(light, view, None)[..., 1]
+
+    def _direction_pairs(self, light: np.ndarray, view: np.ndarray, ior: float | None) -> np.ndarray:
+        """evaluate_keys' MODE_A_TERM at direction pairs: ``float32`` ``(…, 2)``, A and S."""
         light, view = np.broadcast_arrays(np.asarray(light, dtype=np.float64), np.asarray(view, dtype=np.float64))
         if light.shape[-1:] != (3,):
             raise GratNetError(f"directions must have shape (…, 3), got {light.shape}")
         shape = light.shape[:-1]
         first = light.reshape(-1, 3).astype(np.float32)
         if first.shape[0] == 0:
-            return np.zeros(shape, dtype=np.float32)
+            return np.zeros((*shape, 2), dtype=np.float32)
         values = self._evaluate(MODE.code("a_term"), first, view.reshape(-1, 3).astype(np.float32),
                                 ior=ior_uniform(ior))
-        return values[:, 0].reshape(shape)
+        return values[:, :2].reshape(*shape, 2)
 
     # ---------------------------------------------------------------------------------------------
     # Display

@@ -432,9 +432,11 @@ def with_given_light(config: ConfigT, given: bool) -> ConfigT:
 def load_reference(path: str | Path, precision: str, material: str | None = None) -> Any:
     """The ``--reference`` volume (a :class:`~gratnet.volume.Volume`), checked from its headers first — its scheme,
     uniform slices, texture size and, with ``material``, its source and σs against the material's training
-    volume — then read (pixel checksums). Every problem is one GratNetError, before any GL work."""
+    volume — then read (pixel checksums). Every problem is one GratNetError, before any GL work. A volume that
+    records no slope covariance (Smith's shadowing) takes the material's."""
     from gratnet.modelfile import load_model
     from gratnet.reference import check_uniform_slices, check_volume_matches
+    from gratnet.shadowing import METADATA_KEY as SLOPE_COVARIANCE_KEY
     from gratnet.volume import read_volume, read_volume_header
     from viewer.catalog import resolve_material
     from viewer.reference import check_reference_limits
@@ -445,10 +447,16 @@ def load_reference(path: str | Path, precision: str, material: str | None = None
         raise GratNetError(f"{name}: the volume names no sampling scheme ({', '.join(SCHEME.names)})")
     check_uniform_slices(header.metadata, header.slices, name)
     check_reference_limits(header.slices, header.resolution, precision, name=name)
+    trained_on: dict[str, Any] = {}
     if material is not None:
-        trained_on = load_model(resolve_material(material)).metadata.get("volume")
-        check_volume_matches(header.metadata, trained_on if isinstance(trained_on, dict) else {}, name, material)
-    return read_volume(path)
+        recorded = load_model(resolve_material(material)).metadata.get("volume")
+        trained_on = recorded if isinstance(recorded, dict) else {}
+        check_volume_matches(header.metadata, trained_on, name, material)
+    volume = read_volume(path)
+    if SLOPE_COVARIANCE_KEY not in volume.metadata and SLOPE_COVARIANCE_KEY in trained_on:
+        # A volume made before the ground truth recorded its relief's slopes: its material's (the same field).
+        volume.metadata[SLOPE_COVARIANCE_KEY] = trained_on[SLOPE_COVARIANCE_KEY]
+    return volume
 
 
 def read_render_exr(path: str | Path) -> Any:

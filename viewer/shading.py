@@ -23,6 +23,7 @@ from gratnet.brdf import direction
 from gratnet.codes import BINDINGS, COUNTER, COUNTER_SLOTS
 from gratnet.display import xyz_to_display_srgb8
 from gratnet.errors import GratNetError
+from gratnet.shadowing import NO_SHADOWING, check_slope_covariance
 from viewer.glsl import GeneratedSource, compile_program
 from viewer.pacing import Blocks, Pacer, Progress, disc_block_costs, read_rows
 
@@ -82,14 +83,19 @@ class ShadingPrograms:
         defines: the material's GLSL defines (array capacities, ``REFERENCE``, …; values never substituted).
         shader_root: folder of the GLSL files (default: the repository's ``shaders/``).
         overrides: include → generated source (e.g. the baked mlp.glsl).
+        slope_covariance: the material's relief slopes (Σxx, Σxy, Σyy) for Smith's shadowing (gratnet.shadowing).
 
     Subclasses set their uniforms in :meth:`configure_program`, name their textures in
     :meth:`material_textures` and say how they skip work in :meth:`skip_uniforms`.
     """
 
     def __init__(self, ctx: moderngl.Context, defines: Mapping[str, int | float], shader_root: str | Path | None,
-                 overrides: Mapping[str, GeneratedSource] | None = None) -> None:
+                 overrides: Mapping[str, GeneratedSource] | None = None,
+                 slope_covariance: tuple[float, float, float] = NO_SHADOWING) -> None:
         self.ctx = ctx
+        #: The relief's slope covariance (Σxx, Σxy, Σyy) of Smith's shadowing (gratnet.shadowing): the surface
+        #: programs' ``u_slope_covariance``; NO_SHADOWING renders unshadowed.
+        self.slope_covariance = check_slope_covariance(slope_covariance)
         self.defines = dict(defines)
         self.shader_root = shader_root
         self.overrides: dict[str, GeneratedSource] = dict(overrides or {})

@@ -19,6 +19,7 @@ import numpy as np
 
 from gratnet.errors import GratNetError
 from gratnet.lights import light_kind
+from gratnet.shadowing import NO_SHADOWING, check_slope_covariance
 from viewer.camera import Camera, Light
 from viewer.meshes import Mesh
 from viewer.renderer import ior_uniform, set_uniform
@@ -104,10 +105,12 @@ def upload_mesh(ctx: moderngl.Context, program: moderngl.Program, mesh: Mesh) ->
 
 
 def set_surface_uniforms(program: moderngl.Program, camera: Camera, light: Light, width: int, height: int,
-                         exposure: float, ior: float | None) -> None:
+                         exposure: float, ior: float | None,
+                         slope_covariance: tuple[float, float, float] = NO_SHADOWING) -> None:
     """The camera (view-projection for a ``width`` × ``height`` image, eye in metres), the light (kind,
-    direction or position, irradiance), the exposure and the Fresnel IOR (``None`` or 0: off) of
-    ``shaders/surface.glsl``, checked first (one-line GratNetError)."""
+    direction or position, irradiance), the exposure, the Fresnel IOR (``None`` or 0: off) and the material's
+    slope covariance (Smith's shadowing, gratnet.shadowing) of ``shaders/surface.glsl``, checked first (one-line
+    GratNetError)."""
     if not isinstance(camera, Camera):
         raise GratNetError(f"expected a viewer.camera.Camera, got {type(camera).__name__}")
     if not isinstance(light, Light):
@@ -120,3 +123,4 @@ def set_surface_uniforms(program: moderngl.Program, camera: Camera, light: Light
         set_uniform(program, name, value)
     set_uniform(program, "u_exposure", float(exposure))
     set_uniform(program, "u_ior", ior_uniform(ior))
+    set_uniform(program, "u_slope_covariance", check_slope_covariance(slope_covariance))

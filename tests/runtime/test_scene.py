@@ -341,6 +341,33 @@ def test_plane_render_matches_numpy_at_every_pixel(scene, model):
     check_plane_against_numpy(image, key_a, model, camera, light, size, EXPOSURE)
 
 
+@pytest.mark.parametrize("render_path", ["forward", "deferred"])
+def test_a_shadowed_material_renders_smiths_term_at_every_pixel(ctx, model, render_path):
+    """A model that records its relief's slopes (gratnet.shadowing) renders S · A · XYZ on both paths: a low
+    point light and a steep relief, so S runs from ~1 to well below it across the plane."""
+    import dataclasses
+
+    from viewer.scene import SceneRenderer
+
+    covariance = (0.45, 0.12, 0.3)
+    volume = {**model.metadata.get("volume", {}), "slope_covariance": list(covariance)}
+    shadowed = dataclasses.replace(model, metadata={**model.metadata, "volume": volume})
+    camera = Camera(distance=0.25, azimuth_deg=-70.0, elevation_deg=40.0, fov_deg=40.0)
+    light = Light.point([0.0, 0.15, 0.03], intensity=0.02)
+    size = (20, 16)
+    shadowing = plane_geometry(camera, light, size, covariance)["a"] / plane_geometry(camera, light, size)["a"]
+    assert shadowing.min() < 0.6 and shadowing.max() > 0.85
+    renderer = SceneRenderer(ctx, shadowed, weights_path="texture", render_path=render_path)
+    try:
+        image, key_a = renderer.render_layers(plane(2.0), camera, light, size, exposure=EXPOSURE, ior=1.5)
+        check_plane_against_numpy(image, key_a, shadowed, camera, light, size, EXPOSURE, slope_covariance=covariance)
+        if render_path == "deferred":  # the G-buffer's path: the same pixels as the forward layers' values
+            rgba = renderer.render_rgba(plane(2.0), camera, light, size, exposure=EXPOSURE, ior=1.5)
+            np.testing.assert_allclose(rgba, image, rtol=1e-5, atol=1e-6 * float(image[..., :3].max()))
+    finally:
+        renderer.release()
+
+
 def test_compact_disc_render_is_finite_lit_on_the_disc_and_zero_outside(scene):
     import time
 

@@ -310,6 +310,32 @@ def test_gpu_a_term_matches_numpy(ctx, ior):
     assert_relative(actual, expected, RELATIVE, floor=1e-12)
 
 
+@pytest.mark.parametrize("covariance", [(0.0, 0.0, 0.0), (0.0069, 0.0, 0.030), (0.146, 0.0, 0.0), (0.86, 0.3, 0.85)])
+def test_gpu_shadowing_matches_numpy(ctx, covariance):
+    """brdf.glsl's smith_shadowing against gratnet.shadowing, from normal incidence to within 1e-6 of the horizon."""
+    import dataclasses
+
+    from gratnet.shadowing import smith_shadowing
+    from viewer.renderer import NetworkRenderer
+
+    rng = np.random.default_rng(5)
+    thetas = np.concatenate([rng.uniform(0.0, 90.0, 3000), 90.0 - np.logspace(-4, 0, 200), [0.0, 90.0, 95.0]])
+    phis = rng.uniform(0.0, 360.0, thetas.size)
+    light = np.array([direction(t, p) for t, p in zip(thetas, phis, strict=True)])
+    view = np.array([direction(t, p) for t, p in zip(rng.uniform(0.0, 89.9, thetas.size), phis[::-1], strict=True)])
+    base = random_model([163, 9, 3])
+    model = dataclasses.replace(base, metadata={"volume": {"slope_covariance": list(covariance)}})
+    expected = smith_shadowing(light.astype(np.float32), view.astype(np.float32), covariance)
+    renderer = NetworkRenderer(ctx, model)
+    try:
+        actual = renderer.shadowing(light, view)
+    finally:
+        renderer.release()
+    assert actual.shape == expected.shape and np.all(actual[expected == 0.0] == 0.0)
+    assert np.count_nonzero(expected == 0.0) == 2  # at and below the horizon
+    np.testing.assert_allclose(actual, expected, rtol=2e-5, atol=1e-6)
+
+
 # ------------------------------------------------------------------------------------------------
 # colour.glsl against gratnet.display
 
