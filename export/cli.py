@@ -157,7 +157,10 @@ def _usage_note(export_format: str, materials: list[Material], single_file: bool
                 f"`NAME.grids.bin`) as read-only storage buffers and what its functions compute:\n\n"
                 f"- `gratnet_reflectance(wi: vec3<f32>, wo: vec3<f32>) -> vec3<f32>`: CIE XYZ reflectance, unit "
                 f"vectors in the tangent frame;\n"
-                f"- `gratnet_shade(wi, wo, ior: f32, exposure: f32) -> vec3<f32>`: exposure · A · reflectance.\n\n"
+                f"- `gratnet_shade(wi, wo, ior: f32, exposure: f32) -> vec3<f32>`: exposure · A · S · reflectance, S "
+                f"Smith's shadowing for the material's slope covariance (a mesh pixel of `gratnet render`);\n"
+                f"- `gratnet_shade_unshadowed(wi, wo, ior: f32, exposure: f32) -> vec3<f32>`: exposure · A · "
+                f"reflectance, without S (a BRDF slice).\n\n"
                 f"`export.config.json` lists every file, its bindings and the model it came from. Docs: "
                 f"docs/export.md in the GratNet repository.\n")
     vec, kind = ("vec3", "GLSL") if export_format == "glsl" else ("float3", "HLSL (shader model 5.0)")
@@ -167,7 +170,10 @@ def _usage_note(export_format: str, materials: list[Material], single_file: bool
             f"compute:\n\n"
             f"- `{vec} gratnet_reflectance({vec} wi, {vec} wo)`: CIE XYZ reflectance, unit vectors in the tangent "
             f"frame;\n"
-            f"- `{vec} gratnet_shade({vec} wi, {vec} wo, float ior, float exposure)`: exposure · A · reflectance.\n\n"
+            f"- `{vec} gratnet_shade({vec} wi, {vec} wo, float ior, float exposure)`: exposure · A · S · reflectance, "
+            f"S Smith's shadowing for the material's slope covariance (a mesh pixel of `gratnet render`);\n"
+            f"- `{vec} gratnet_shade_unshadowed({vec} wi, {vec} wo, float ior, float exposure)`: exposure · A · "
+            f"reflectance, without S (a BRDF slice).\n\n"
             f"`export.config.json` lists every file and the model it came from. Per-engine notes: docs/export.md in "
             f"the GratNet repository.\n")
 

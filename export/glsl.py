@@ -21,11 +21,14 @@ The weights stay in the runtime's packed RGBA32F texture (docs/formats.md, "Weig
 raw little-endian float32 file: ``mlp.glsl`` reads them with ``texelFetch`` unchanged, and the shipped nets'
 ~28k weights as GLSL ``const`` arrays would be ~7k ``vec4`` literals that every host recompiles with the shader.
 
-Entry points (documented in the module's header and docs/export.md): ``gratnet_reflectance(wi, wo)`` (CIE XYZ of
-the D65-normalised reflectance, the network after eq. 7's inverse, no A-term) and ``gratnet_shade(wi, wo, ior,
-exposure)`` (``exposure · A(wi, wo) · gratnet_reflectance``, what ``gratnet render`` writes per pixel for a
-directional light), both for unit vectors in the tangent frame (z along the normal); plus colour.glsl's
-``xyz_to_linear_srgb`` and ``xyz_to_display_srgb``.
+Entry points (documented in the module's header and docs/export.md), all for unit vectors in the tangent frame (z
+along the normal): ``gratnet_reflectance(wi, wo)`` (CIE XYZ of the D65-normalised reflectance, the network after
+eq. 7's inverse, no A-term); ``gratnet_shade(wi, wo, ior, exposure)`` (``exposure · A(wi, wo) · S(wi, wo) ·
+gratnet_reflectance``, what ``gratnet render`` writes per pixel for a directional light: eq. 5's A-term times Smith's
+shadowing–masking S of brdf.glsl's ``smith_shadowing`` for the material's slope covariance, baked as
+``GRATNET_SLOPE_COVARIANCE``; docs/physics.md, "Shadowing and masking"); ``gratnet_shade_unshadowed(wi, wo, ior,
+exposure)`` (``exposure · A · gratnet_reflectance`` without S: a BRDF slice's value, as ``gratnet render --slice``
+and the paper's evaluation draw it); plus colour.glsl's ``xyz_to_linear_srgb`` and ``xyz_to_display_srgb``.
 """
 
 from __future__ import annotations
@@ -43,12 +46,14 @@ from gratnet.codes import HIDDEN, OUTPUT, RANGE, SCHEME
 from gratnet.errors import GratNetError
 from gratnet.featuregrid import CHUNK_FEATURES
 from gratnet.modelfile import ModelFile, pack_texture
+from gratnet.shadowing import slope_covariance_from_metadata
 from viewer.glsl import LINE_STRIDE, SHADER_ROOT, preprocess
 from viewer.renderer import frequency_table as runtime_frequency_table
 from viewer.renderer import model_defines, xyz_to_linear_srgb_matrix
 
-__all__ = ["GRID_SAMPLER", "MODULE_INCLUDES", "SAMPLER", "GlslModule", "frequency_table", "glsl_module",
-           "grid_chunks_of", "uniform_values"]
+__all__ = ["ENTRY_POINTS", "GRID_SAMPLER", "MODULE_INCLUDES", "SAMPLER", "SLOPE_COVARIANCE", "GlslModule",
+           "frequency_table", "glsl_module", "grid_chunks_of", "slope_covariance", "slope_covariance_value",
+           "uniform_values"]
 
 #: The runtime's files the module is made of, in include order (featuregrid.glsl before mlp.glsl, as in the
 #: runtime's programs; for a pure MLP it compiles to two empty stand-ins).
@@ -59,12 +64,16 @@ SAMPLER = "u_weights"
 GRID_SAMPLER = "u_grid"
 #: The uniforms that bound loops: globals filled at run time (module docstring, item 3).
 LOOP_BOUNDS = ("u_layer_count", "u_layers")
+#: The constant that holds the material's slope covariance (Σxx, Σxy, Σyy) of Smith's shadowing in gratnet_shade.
+SLOPE_COVARIANCE = "GRATNET_SLOPE_COVARIANCE"
+#: The module's own functions (besides colour.glsl's), in the header's order: every one is kept by export/hlsl.py.
+ENTRY_POINTS = ("gratnet_reflectance", "gratnet_shade", "gratnet_shade_unshadowed")
 _UNIFORM = re.compile(r"^\s*uniform\s+(?:highp\s+)?(?P<type>\w+)\s+(?P<name>\w+)\s*(?P<array>\[[^\]]*\])?\s*;"
                       r"(?P<comment>.*)$")
 _LINE = re.compile(r"^\s*#\s*line\s+(\d+)\s+(\d+)\s*$")
 _DROPPED = re.compile(r"^\s*#\s*(?:version\b|define\s+FRAGMENT_SHADER\s*$)")
 
-_ENTRY_POINTS = """
+_ENTRY_FUNCTIONS = """
 // ---- entry points (gratnet export) ------------------------------------------------------------------------
 
 // Fill the loop bounds (see the header): a zero the compiler cannot fold keeps the loops rolled.
@@ -85,10 +94,23 @@ vec3 gratnet_reflectance(vec3 wi, vec3 wo) {
     return range_inverse(mlp_evaluate());
 }
 
-// exposure * A(wi, wo) * gratnet_reflectance(wi, wo): gratnet render's exposed XYZ for a directional light of
-// irradiance 1. ior: the refractive index of the Fresnel factor (gratnet render's default 1.5; <= 0: no
-// Fresnel). 0, without evaluating the network, where A = 0 (either direction at or below the horizon).
+// exposure * A(wi, wo) * S(wi, wo) * gratnet_reflectance(wi, wo): gratnet render's exposed XYZ of a mesh pixel for
+// a directional light of irradiance 1, S being Smith's shadowing-masking for the material's slope covariance
+// (brdf.glsl's smith_shadowing, GRATNET_SLOPE_COVARIANCE; docs/physics.md "Shadowing and masking"). ior: the
+// refractive index of the Fresnel factor (gratnet render's default 1.5; <= 0: no Fresnel). 0, without evaluating
+// the network, where A * S = 0 (either direction at or below the horizon).
 vec3 gratnet_shade(vec3 wi, vec3 wo, float ior, float exposure) {
+    float a = a_term(wi, wo, ior) * smith_shadowing(wi, wo, GRATNET_SLOPE_COVARIANCE);
+    if (!(a > 0.0)) {
+        return vec3(0.0);
+    }
+    return exposure * a * gratnet_reflectance(wi, wo);
+}
+
+// exposure * A(wi, wo) * gratnet_reflectance(wi, wo), without Smith's shadowing: the value of a BRDF slice
+// (shaders/brdf_slice.glsl, gratnet render --slice, the paper's evaluation), which has no S. Same arguments and
+// zeros as gratnet_shade.
+vec3 gratnet_shade_unshadowed(vec3 wi, vec3 wo, float ior, float exposure) {
     float a = a_term(wi, wo, ior);
     if (!(a > 0.0)) {
         return vec3(0.0);
@@ -233,6 +255,7 @@ def _module_body(model: ModelFile) -> str:
 
 def _header(model: ModelFile, material: str, width: int, height: int) -> str:
     levels = f", {len(model.grids)} feature-grid levels" if model.grids else ""
+    covariance = slope_covariance_value(model)
     return f"""// GratNet material "{material}": a neural BRDF of a diffractive surface, as one GLSL function module.
 // Written by `gratnet export --format glsl` (GratNet {__version__}) from the runtime's shaders/*.glsl; do not edit.
 // Network {'-'.join(str(s) for s in model.layer_sizes)}, {model.activation}/{model.output_activation}, \
@@ -240,8 +263,8 @@ scheme {model.scheme}, range {model.range.kind}{levels}.
 //
 // Needs GLSL 4.00+ (desktop) or GLSL ES 3.20 (`precise`); in GLSL ES declare `precision highp float;` and
 // `precision highp int;` before it. Include it once, before your code; it defines the names of the runtime's
-// includes (encoding_set_key, mlp_evaluate, range_inverse, a_term, sigmoid, PI, the SCHEME_*/HIDDEN_*/OUTPUT_*/
-// RANGE_* defines, u_* constants, ...).
+// includes (encoding_set_key, mlp_evaluate, range_inverse, a_term, smith_shadowing, sigmoid, PI, the SCHEME_*/
+// HIDDEN_*/OUTPUT_*/RANGE_* defines, u_* constants, GRATNET_* constants, ...).
 //
 // Weights: bind the texture `uniform highp sampler2D {SAMPLER}` to an RGBA32F texture of {width} x {height}
 // texels made from the file {material}.weights.bin (raw little-endian float32, RGBA per texel, row 0 first,
@@ -251,7 +274,11 @@ scheme {model.scheme}, range {model.range.kind}{levels}.
 // the normal):
 //   vec3 gratnet_reflectance(vec3 wi, vec3 wo)   CIE XYZ reflectance (network, eq. 7 inverted; no A-term)
 //   vec3 gratnet_shade(vec3 wi, vec3 wo, float ior, float exposure)
-//                                                exposure * A(wi, wo) * reflectance (what gratnet render draws)
+//                              exposure * A(wi, wo) * S(wi, wo) * reflectance (what gratnet render draws on a mesh;
+//                              S: Smith's shadowing-masking for this material's slope covariance
+//                              {SLOPE_COVARIANCE} = {covariance})
+//   vec3 gratnet_shade_unshadowed(vec3 wi, vec3 wo, float ior, float exposure)
+//                              exposure * A(wi, wo) * reflectance, without S (a BRDF slice, as gratnet render --slice)
 //   vec3 xyz_to_linear_srgb(vec3 xyz), vec3 xyz_to_display_srgb(vec3 xyz, float exposure)
 // Physics and conventions: docs/physics.md; this module: docs/export.md.
 
@@ -275,6 +302,27 @@ def _grid_note(model: ModelFile, material: str) -> str:
     return "\n".join(lines) + "\n"
 
 
+def slope_covariance(model: ModelFile) -> tuple[float, float, float]:
+    """The material's slope covariance (Σxx, Σxy, Σyy) of Smith's shadowing, as the runtime takes it
+    (viewer/renderer.py: ``model.metadata["volume"]``); :data:`gratnet.shadowing.NO_SHADOWING` where none is
+    recorded."""
+    volume = model.metadata.get("volume")
+    return slope_covariance_from_metadata(volume if isinstance(volume, dict) else {})
+
+
+def slope_covariance_value(model: ModelFile) -> str:
+    """The GLSL initializer of :data:`SLOPE_COVARIANCE`: ``vec3(Σxx, Σxy, Σyy)``, float32 round-trip literals (the
+    float32 uniform the runtime sets)."""
+    return _vector("vec3", list(slope_covariance(model)))
+
+
+def _material_constants(model: ModelFile) -> str:
+    """The constants of the entry points that are not runtime uniforms of :data:`MODULE_INCLUDES`."""
+    return ("\n// The relief's slope covariance (Sxx, Sxy, Syy) of Smith's shadowing in gratnet_shade (the model's "
+            "metadata;\n// docs/physics.md \"Shadowing and masking\"); vec3(0.0) renders unshadowed.\n"
+            f"const vec3 {SLOPE_COVARIANCE} = {slope_covariance_value(model)};\n")
+
+
 def _layer_constants(layout: list[dict[str, int]]) -> str:
     """The loop bounds' values (``u_layers`` rows: row offset, input blocks, output blocks, 0)."""
     rows = ", ".join(_vector("ivec4", [entry["row_offset"], entry["in_blocks"], entry["out_blocks"], 0])
@@ -291,5 +339,5 @@ def glsl_module(model: ModelFile, material: str) -> GlslModule:
     """
     texture, layout = pack_texture(model)
     text = (_header(model, material, int(texture.shape[1]), int(texture.shape[0])) + _module_body(model)
-            + _layer_constants(layout) + _ENTRY_POINTS)
+            + _layer_constants(layout) + _material_constants(model) + _ENTRY_FUNCTIONS)
     return GlslModule(text, np.ascontiguousarray(texture, np.float32), grid_chunks_of(model))

@@ -1,11 +1,13 @@
 """``gratnet export --format hlsl``: the GLSL module (export/glsl.py) cross-compiled to an HLSL function module.
 
 No HLSL is typed here: the GLSL module, wrapped in a Vulkan GLSL 4.50 compute shader whose ``main`` calls every
-entry point (so that none is dropped), goes through ``glslangValidator -V`` (SPIR-V, with debug names) and
-``spirv-cross --hlsl --shader-model 50``. From spirv-cross's HLSL the wrapper's own parts are cut: its work-group
-size, its output buffer, ``comp_main`` and ``main``. What is left is the functions (``gratnet_reflectance``,
-``gratnet_shade``, ``xyz_to_linear_srgb``, ``xyz_to_display_srgb`` and the runtime's functions under them) and the
-texture declarations. ``precise`` survives: SPIR-V's NoContraction becomes HLSL's ``precise``.
+entry point of export.glsl's ``ENTRY_POINTS`` (so that none is dropped; the export checks that each is there), goes
+through ``glslangValidator -V`` (SPIR-V, with debug names) and ``spirv-cross --hlsl --shader-model 50``. From
+spirv-cross's HLSL the wrapper's own parts are cut: its work-group size, its output buffer, ``comp_main`` and
+``main``. What is left is the functions (``gratnet_reflectance``, ``gratnet_shade``, ``gratnet_shade_unshadowed``,
+``xyz_to_linear_srgb``, ``xyz_to_display_srgb`` and the runtime's functions under them, ``smith_shadowing`` among
+them) and the texture declarations. ``precise`` survives: SPIR-V's NoContraction becomes HLSL's ``precise``. The
+material's slope covariance is the GLSL module's constant, folded into the functions by the compilers.
 
 Needs the Debian packages ``glslang-tools`` and ``spirv-cross`` at export time (scripts/setup.sh installs them);
 without them the format is refused in one line.
@@ -19,7 +21,7 @@ import subprocess
 import tempfile
 from pathlib import Path
 
-from export.glsl import GRID_SAMPLER, SAMPLER, GlslModule
+from export.glsl import ENTRY_POINTS, GRID_SAMPLER, SAMPLER, SLOPE_COVARIANCE, GlslModule
 from gratnet import __version__
 from gratnet.errors import GratNetError
 
@@ -42,6 +44,7 @@ void main() {
     vec3 xyz = gratnet_reflectance(wi, wo);
     gratnet_calls[4].xyz = xyz_to_linear_srgb(xyz);
     gratnet_calls[5].xyz = xyz_to_display_srgb(xyz, gratnet_calls[3].y);
+    gratnet_calls[6].xyz = gratnet_shade_unshadowed(wi, wo, gratnet_calls[3].x, gratnet_calls[3].y);
 }
 """
 
@@ -93,6 +96,10 @@ def _functions_only(hlsl: str) -> str:
 
 def _header(module: GlslModule, material: str) -> str:
     width, height = module.weights_size
+    baked = re.search(rf"^const vec3 {SLOPE_COVARIANCE} = vec3\((.*)\);$", module.text, re.MULTILINE)
+    if baked is None:
+        raise GratNetError(f"the GLSL module has no {SLOPE_COVARIANCE}; export/hlsl.py expects one")
+    covariance = f"({baked.group(1)})"
     grids = "".join(
         f"//   u_grid[{k}]: {material}.grid{k}.bin, {chunk.shape[2]} x {chunk.shape[1]} x {chunk.shape[0]} texels, "
         f"{chunk.shape[3]} channel(s) of {chunk.dtype}\n" for k, chunk in enumerate(module.grids))
@@ -111,7 +118,11 @@ def _header(module: GlslModule, material: str) -> str:
 // the normal):
 //   float3 gratnet_reflectance(float3 wi, float3 wo)   CIE XYZ reflectance (network, eq. 7 inverted; no A-term)
 //   float3 gratnet_shade(float3 wi, float3 wo, float ior, float exposure)
-//                                                      exposure * A(wi, wo) * reflectance (what gratnet render draws)
+//                              exposure * A(wi, wo) * S(wi, wo) * reflectance (what gratnet render draws on a mesh;
+//                              S: Smith's shadowing-masking for this material's slope covariance
+//                              (Sxx, Sxy, Syy) = {covariance})
+//   float3 gratnet_shade_unshadowed(float3 wi, float3 wo, float ior, float exposure)
+//                              exposure * A(wi, wo) * reflectance, without S (a BRDF slice, as gratnet render --slice)
 //   float3 xyz_to_linear_srgb(float3 xyz), float3 xyz_to_display_srgb(float3 xyz, float exposure)
 // Docs: docs/export.md in the GratNet repository.
 
@@ -135,4 +146,9 @@ def hlsl_module(module: GlslModule, material: str) -> str:
         _run([tools["spirv-cross"], str(spirv), "--hlsl", "--shader-model", "50", "--output", str(hlsl)],
              "spirv-cross (SPIR-V → HLSL)")
         text = hlsl.read_text(encoding="utf-8")
-    return _header(module, material) + _functions_only(text)
+    functions = _functions_only(text)
+    dropped = [name for name in ENTRY_POINTS if not re.search(rf"^float3 {name}\(", functions, re.MULTILINE)]
+    if dropped:
+        raise GratNetError(f"spirv-cross's HLSL lacks the entry point(s) {', '.join(dropped)}: export/hlsl.py's "
+                           f"wrapper must call every one")
+    return _header(module, material) + functions

@@ -16,7 +16,9 @@ The page's network is the GLSL module of ``--format glsl`` as GLSL ES 3.00: a he
 ``#define precise`` (empty: WebGL2's GLSL ES 3.00 has no ``precise``; what that costs is measured in
 tests/tools/test_export_web.py), then the module unchanged. The defaults of every view (light, camera, exposure
 per mesh, and the BRDF slice's) are viewer.defaults' own, computed here at export time, so that a URL without
-parameters shows what ``gratnet render`` would.
+parameters shows what ``gratnet render`` would. As there, a mesh pixel is the module's ``gratnet_shade`` (exposure ·
+A · S · XYZ, S: Smith's shadowing for the material's slope covariance) and the BRDF slice its
+``gratnet_shade_unshadowed`` (no S), in both backends.
 
 Feature-grid models: shaders/featuregrid.glsl indexes ``u_grid`` by constants only (GLSL ES 3.00 allows nothing
 else for sampler arrays); the page loads each grid file as a 3D texture (R/RG/RGB/RGBA 16F or 32F, NEAREST, read with

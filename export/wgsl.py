@@ -11,6 +11,8 @@ text must not do is type a number that Python owns. Everything of that kind is g
   the GLSL module bakes, re-spelled in WGSL; a value this module cannot spell is an error) and viewer.renderer's
   ``model_defines`` (array sizes, ``LEAKY_RELU_SLOPE``, the grid shape);
 - the A-term's limits from gratnet.brdf (``W_EPSILON``, ``A_MAX``) and ``PI``;
+- the material's slope covariance of Smith's shadowing, ``GRATNET_SLOPE_COVARIANCE`` (the GLSL module's constant,
+  export/glsl.py's :func:`~export.glsl.slope_covariance_value`);
 - the layer table that fills the loop bounds (``gratnet_set_layers``, as the GLSL module's ``GRATNET_LAYERS``).
 
 Weights: storage buffers, not textures. ``NAME.weights.bin`` is the GLSL module's file byte for byte (the packed
@@ -19,8 +21,10 @@ feature-grid model's grids are one buffer, ``NAME.grids.bin`` (``array<u32>``: e
 in turn, float16 pairs or float32 bits): WebGPU has no three-channel texture format, and one binding for all levels
 keeps a model with many grid textures (paper-scratches: 12) under WebGPU's 8 storage buffers a stage.
 
-Entry points (as the GLSL module's): ``gratnet_reflectance(wi, wo)`` (CIE XYZ, no A-term) and ``gratnet_shade(wi, wo,
-ior, exposure)`` (``exposure · A · gratnet_reflectance``), plus ``xyz_to_linear_srgb`` and ``xyz_to_display_srgb``.
+Entry points (as the GLSL module's): ``gratnet_reflectance(wi, wo)`` (CIE XYZ, no A-term), ``gratnet_shade(wi, wo,
+ior, exposure)`` (``exposure · A · S · gratnet_reflectance``, S: Smith's shadowing–masking for the material's slope
+covariance: a mesh pixel of ``gratnet render``) and ``gratnet_shade_unshadowed(wi, wo, ior, exposure)`` (``exposure ·
+A · gratnet_reflectance``: a BRDF slice's value), plus ``xyz_to_linear_srgb`` and ``xyz_to_display_srgb``.
 """
 
 from __future__ import annotations
@@ -32,7 +36,7 @@ from pathlib import Path
 
 import numpy as np
 
-from export.glsl import uniform_values
+from export.glsl import SLOPE_COVARIANCE, slope_covariance_value, uniform_values
 from gratnet import __version__
 from gratnet.brdf import A_MAX, W_EPSILON
 from gratnet.codes import TABLES
@@ -146,7 +150,10 @@ def _model_constants(model: ModelFile) -> list[str]:
     lines += [wgsl_constant(name, glsl) for name, glsl in values.items()]
     lines += ["// The A-term's limits (gratnet/brdf.py W_EPSILON, A_MAX) and pi:",
               f"const A_TERM_MIN_W: f32 = {_f32(W_EPSILON)};", f"const A_TERM_MAX: f32 = {_f32(A_MAX)};",
-              f"const PI: f32 = {_f32(math.pi)};"]
+              f"const PI: f32 = {_f32(math.pi)};",
+              "// The relief's slope covariance (Sxx, Sxy, Syy) of Smith's shadowing in gratnet_shade (export/glsl.py "
+              "slope_covariance_value):",
+              wgsl_constant(SLOPE_COVARIANCE, slope_covariance_value(model))]
     return lines
 
 
@@ -195,6 +202,7 @@ def _set_layers(layout: list[dict[str, int]]) -> str:
 
 def _header(model: ModelFile, material: str, module: WgslModule) -> str:
     width, height = module.weights_size
+    covariance = slope_covariance_value(model).removeprefix("vec3(").removesuffix(")")
     levels = f", {len(model.grids)} feature-grid levels" if model.grids else ""
     grid_note = ""
     if module.grid_levels:
@@ -212,9 +220,9 @@ def _header(model: ModelFile, material: str, module: WgslModule) -> str:
 scheme {model.scheme}, range {model.range.kind}{levels}.
 //
 // Put this text before your own WGSL in one shader module (it has no entry point of its own) and call its
-// functions from any stage. It defines module-scope names of its own (PI, sigmoid, a_term, encoding_set_key,
-// mlp_evaluate, range_inverse, the SCHEME_*/HIDDEN_*/OUTPUT_*/RANGE_* and u_* constants, ...): two materials
-// cannot share one module.
+// functions from any stage. It defines module-scope names of its own (PI, sigmoid, a_term, smith_shadowing,
+// encoding_set_key, mlp_evaluate, range_inverse, the SCHEME_*/HIDDEN_*/OUTPUT_*/RANGE_*, u_* and GRATNET_*
+// constants, ...): two materials cannot share one module.
 //
 // Buffers (read-only storage; change the @group/@binding numbers below to fit your layout):
 //   @group({BIND_GROUP}) @binding({WEIGHTS_BINDING}) gratnet_weights: array<vec4<f32>>, a storage buffer of the \
@@ -227,7 +235,11 @@ row-major).
 //   gratnet_reflectance(wi: vec3<f32>, wo: vec3<f32>) -> vec3<f32>
 //       CIE XYZ reflectance (network, eq. 7 inverted; no A-term)
 //   gratnet_shade(wi: vec3<f32>, wo: vec3<f32>, ior: f32, exposure: f32) -> vec3<f32>
-//       exposure * A(wi, wo) * reflectance (what gratnet render draws for a directional light of irradiance 1)
+//       exposure * A(wi, wo) * S(wi, wo) * reflectance (what gratnet render draws on a mesh for a directional light
+//       of irradiance 1; S: Smith's shadowing-masking for this material's slope covariance
+//       {SLOPE_COVARIANCE} = vec3<f32>({covariance}))
+//   gratnet_shade_unshadowed(wi: vec3<f32>, wo: vec3<f32>, ior: f32, exposure: f32) -> vec3<f32>
+//       exposure * A(wi, wo) * reflectance, without S (a BRDF slice, as gratnet render --slice)
 //   xyz_to_linear_srgb(xyz: vec3<f32>) -> vec3<f32>, xyz_to_display_srgb(xyz: vec3<f32>, exposure: f32) -> vec3<f32>
 // Physics and conventions: docs/physics.md; this module: docs/export.md.
 

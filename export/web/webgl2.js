@@ -11,7 +11,8 @@ void main() {
     gl_Position = vec4(2.0 * p - 1.0, 0.0, 1.0);
 }`;
 
-// The BRDF slice (shaders/brdf_slice.glsl's pixel mapping), as linear sRGB.
+// The BRDF slice (shaders/brdf_slice.glsl's pixel mapping), as linear sRGB: exposure · A · XYZ without Smith's
+// shadowing, as the runtime's slice (the module's gratnet_shade_unshadowed).
 const SLICE_MAIN = `
 uniform int u_size;
 uniform vec3 u_light;
@@ -27,7 +28,7 @@ void main() {
         return;
     }
     vec3 wo = vec3(p, sqrt(max(1.0 - radius_squared, 0.0)));
-    out_linear = vec4(xyz_to_linear_srgb(gratnet_shade(u_light, wo, u_ior, u_exposure)), 1.0);
+    out_linear = vec4(xyz_to_linear_srgb(gratnet_shade_unshadowed(u_light, wo, u_ior, u_exposure)), 1.0);
 }`;
 
 const SURFACE_VERTEX = `#version 300 es
@@ -45,7 +46,8 @@ void main() {
     gl_Position = u_view_projection * vec4(in_position, 1.0);
 }`;
 
-// shaders/surface.glsl's tangent frame for a directional light of irradiance 1, as linear sRGB.
+// shaders/surface.glsl's tangent frame for a directional light of irradiance 1, as linear sRGB: exposure · A · S ·
+// XYZ with Smith's shadowing for the material's slope covariance, as gratnet render draws a mesh (gratnet_shade).
 const SURFACE_MAIN = `
 uniform vec3 u_eye;
 uniform vec3 u_light;

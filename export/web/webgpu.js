@@ -6,8 +6,9 @@
 // shader arithmetic. Shared scene, camera and UI code: gratnet.js (export/web.py puts this file before it).
 
 // The page's WGSL after the module: twins of webgl2.js's SLICE_MAIN and SURFACE_MAIN (host code: pixel mapping and
-// tangent frame); the model's arithmetic is the module's gratnet_shade and xyz_to_linear_srgb. Names start with
-// page_ so that they cannot meet the module's (u_*, g_*, gratnet_*, ...).
+// tangent frame); the model's arithmetic is the module's gratnet_shade (the mesh: with Smith's shadowing),
+// gratnet_shade_unshadowed (the BRDF slice: without it) and xyz_to_linear_srgb. Names start with page_ so that they
+// cannot meet the module's (u_*, g_*, gratnet_*, GRATNET_*, ...).
 const PAGE_WGSL = `
 struct PageFrame {
     view_projection: mat4x4<f32>,
@@ -24,7 +25,8 @@ struct PageFrame {
     return vec4<f32>(2.0 * p - 1.0, 0.0, 1.0);
 }
 
-// The BRDF slice (shaders/brdf_slice.glsl's pixel mapping), as linear sRGB. WebGPU counts pixel rows from the top,
+// The BRDF slice (shaders/brdf_slice.glsl's pixel mapping), as linear sRGB: exposure · A · XYZ without Smith's
+// shadowing, as the runtime's slice (the module's gratnet_shade_unshadowed). WebGPU counts pixel rows from the top,
 // GL (whose mapping this is) from the bottom.
 @fragment fn page_slice(@builtin(position) position: vec4<f32>) -> @location(0) vec4<f32> {
     let pixel = vec2<i32>(i32(position.x), page.size - 1 - i32(position.y));
@@ -34,7 +36,7 @@ struct PageFrame {
         return vec4<f32>(0.0);
     }
     let wo = vec3<f32>(p, sqrt(max(1.0 - radius_squared, 0.0)));
-    return vec4<f32>(xyz_to_linear_srgb(gratnet_shade(page.light, wo, page.ior, page.exposure)), 1.0);
+    return vec4<f32>(xyz_to_linear_srgb(gratnet_shade_unshadowed(page.light, wo, page.ior, page.exposure)), 1.0);
 }
 
 struct PageVarying {
@@ -71,7 +73,8 @@ fn page_safe_normalize(v: vec3<f32>) -> vec3<f32> {
     return vec3<f32>(0.0);
 }
 
-// shaders/surface.glsl's tangent frame for a directional light of irradiance 1, as linear sRGB.
+// shaders/surface.glsl's tangent frame for a directional light of irradiance 1, as linear sRGB: exposure · A · S ·
+// XYZ with Smith's shadowing for the material's slope covariance, as gratnet render draws a mesh (gratnet_shade).
 @fragment fn page_surface(in: PageVarying, @builtin(front_facing) front: bool) -> @location(0) vec4<f32> {
     let n = page_safe_normalize(in.normal);
     if (!front || all(n == vec3<f32>(0.0))) {

@@ -2,7 +2,12 @@
 
 - the exported GLSL module, read back from the files the command wrote (module, weights and grid binaries, bound as
   its header says), compiles in the headless EGL context and its entry points equal the numpy evaluation of the
-  model file within gratnet/precision.py's float32 driver bound, for every shipped material and random models;
+  model file within gratnet/precision.py's float32 driver bound, for every shipped material and random models:
+  ``gratnet_shade`` is exposure · A · S · XYZ with Smith's shadowing S for the model's slope covariance
+  (gratnet.shadowing), ``gratnet_shade_unshadowed`` exposure · A · XYZ;
+- at grazing direction pairs, where S of the steep shipped reliefs (paper-corner-cubes, paper-pits) is far below 1,
+  ``gratnet_shade`` equals numpy's exposure · A · S · XYZ and its ratio to ``gratnet_shade_unshadowed`` equals S
+  (GLSL and HLSL); the module bakes the model's covariance as ``GRATNET_SLOPE_COVARIANCE``;
 - the exported HLSL module, in an HLSL pixel shader, is compiled by glslang's HLSL front end to SPIR-V and by
   spirv-cross back to GLSL 4.30, and run the same way: within the same bound (a check of the HLSL text's meaning
   through glslang, not through Microsoft's compilers);
@@ -25,7 +30,8 @@ from gratnet.brdf import a_term
 from gratnet.cli import main
 from gratnet.encoding import EncodingSpec
 from gratnet.modelfile import evaluate_keys, load_model, save_model
-from gratnet.precision import OWN_KEYS, assert_within, driver_bound
+from gratnet.precision import OWN_KEYS, assert_within, driver_bound, exceeding
+from gratnet.shadowing import smith_shadowing
 from tests.helpers import RELATIVE, random_model
 from viewer.catalog import resolve_material, shipped_materials
 
@@ -36,6 +42,12 @@ needs_glslang = pytest.mark.skipif(GLSLANG is None, reason=TOOLS_MISSING)
 EXPOSURE = 3.0
 IOR = 1.5
 PAIRS = 256  # direction pairs per material: a 16 × 16 target
+#: How far the shader's Smith shadowing may be from gratnet.shadowing's (float64 at the float32 directions):
+#: tests/runtime/test_shader_parity.py's test_gpu_shadowing_matches_numpy holds the runtime's brdf.glsl to this.
+SHADOWING_RTOL = 2e-5
+SHADOWING_ATOL = 1e-6
+#: Shipped materials with steep reliefs (rms slopes 0.93 and 0.73): S is far below 1 towards the horizon.
+STEEP = ("paper-corner-cubes", "paper-pits")
 
 VERTEX = """#version 430 core
 void main() {
@@ -50,6 +62,7 @@ uniform highp sampler2D u_wo;
 layout(location = 0) out vec4 out_reflectance;
 layout(location = 1) out vec4 out_shade;
 layout(location = 2) out vec4 out_linear_srgb;
+layout(location = 3) out vec4 out_unshadowed;
 void main() {{
     ivec2 p = ivec2(gl_FragCoord.xy);
     vec3 wi = texelFetch(u_wi, p, 0).xyz;
@@ -58,6 +71,7 @@ void main() {{
     out_reflectance = vec4(xyz, 1.0);
     out_shade = vec4(gratnet_shade(wi, wo, {IOR!r}, {EXPOSURE!r}), 1.0);
     out_linear_srgb = vec4(xyz_to_linear_srgb(xyz), 1.0);
+    out_unshadowed = vec4(gratnet_shade_unshadowed(wi, wo, {IOR!r}, {EXPOSURE!r}), 1.0);
 }}
 """
 # The same host in HLSL (registers past the module's: weights t0, grids t1…).
@@ -68,6 +82,7 @@ struct HostOutput {{
     float4 reflectance : SV_Target0;
     float4 shade : SV_Target1;
     float4 linear_srgb : SV_Target2;
+    float4 unshadowed : SV_Target3;
 }};
 HostOutput main(float4 position : SV_Position) {{
     int3 p = int3(int2(position.xy), 0);
@@ -78,6 +93,7 @@ HostOutput main(float4 position : SV_Position) {{
     o.reflectance = float4(xyz, 1.0);
     o.shade = float4(gratnet_shade(wi, wo, {IOR!r}, {EXPOSURE!r}), 1.0);
     o.linear_srgb = float4(xyz_to_linear_srgb(xyz), 1.0);
+    o.unshadowed = float4(gratnet_shade_unshadowed(wi, wo, {IOR!r}, {EXPOSURE!r}), 1.0);
     return o;
 }}
 """
@@ -161,7 +177,7 @@ def _sampler(program, name: str) -> str:
 def _evaluate(ctx, folder: Path, entry: dict, wi: np.ndarray, wo: np.ndarray, work: Path | None = None
               ) -> list[np.ndarray]:
     """Compile the exported module as a host would (HLSL: through SPIR-V back to GLSL), bind its files as its
-    header says, draw once: reflectance, shade, linear sRGB per direction pair."""
+    header says, draw once: reflectance, shade, linear sRGB and unshadowed shade per direction pair."""
     import moderngl
 
     text = (folder / entry["module"]).read_text(encoding="utf-8")
@@ -190,14 +206,14 @@ def _evaluate(ctx, folder: Path, entry: dict, wi: np.ndarray, wo: np.ndarray, wo
         program[_sampler(program, "u_grid")] = list(range(1, 1 + len(entry["grids"])))
     program[_sampler(program, "u_wi")] = len(textures) - 2
     program[_sampler(program, "u_wo")] = len(textures) - 1
-    targets = [ctx.texture((side, rows), 4, dtype="f4") for _ in range(3)]
+    targets = [ctx.texture((side, rows), 4, dtype="f4") for _ in range(4)]
     framebuffer = ctx.framebuffer(color_attachments=targets)
     vertex_array = ctx.vertex_array(program, [])
     try:
         framebuffer.use()
         vertex_array.render(moderngl.TRIANGLES, vertices=3)
         return [np.frombuffer(framebuffer.read(components=4, attachment=k, dtype="f4"), np.float32).reshape(-1, 4)[
-            :, :3] for k in range(3)]
+            :, :3] for k in range(4)]
     finally:
         for resource in (vertex_array, framebuffer, *targets, program, *textures):
             resource.release()
@@ -205,6 +221,28 @@ def _evaluate(ctx, folder: Path, entry: dict, wi: np.ndarray, wo: np.ndarray, wo
 
 def _names(exported_config: dict) -> list[str]:
     return sorted(exported_config["materials"])
+
+
+def model_shadowing(model, wi: np.ndarray, wo: np.ndarray) -> np.ndarray:
+    """gratnet.shadowing's S (float64) at the float32 directions, for the model's slope covariance as the runtime
+    takes it (export/glsl.py's slope_covariance: ``metadata["volume"]``, none: S = 1 above the horizon)."""
+    from export.glsl import slope_covariance
+
+    return smith_shadowing(wi.astype(np.float64), wo.astype(np.float64), slope_covariance(model))
+
+
+def shade_expectations(model, wi: np.ndarray, wo: np.ndarray, xyz: np.ndarray, xyz_bound: np.ndarray
+                       ) -> dict[str, np.ndarray]:
+    """numpy's gratnet_shade (exposure · A · S · XYZ) and gratnet_shade_unshadowed (exposure · A · XYZ) with their
+    bounds: the XYZ within ``xyz_bound``, A as the runtime's own A-term test allows it (RELATIVE), S as its shadowing
+    test does (SHADOWING_RTOL, SHADOWING_ATOL)."""
+    a = a_term(wi.astype(np.float64), wo.astype(np.float64), IOR)[:, None]
+    s = model_shadowing(model, wi, wo)[:, None]
+    unshadowed = EXPOSURE * a * xyz
+    unshadowed_bound = EXPOSURE * (a * xyz_bound + RELATIVE * a * np.abs(xyz))
+    return {"a": a[:, 0], "s": s[:, 0], "unshadowed": unshadowed, "unshadowed_bound": unshadowed_bound,
+            "shade": s * unshadowed,
+            "shade_bound": s * unshadowed_bound + (SHADOWING_RTOL * s + SHADOWING_ATOL) * np.abs(unshadowed)}
 
 
 def _check_parity(name: str, entry: dict, results: list[np.ndarray], wi: np.ndarray, wo: np.ndarray) -> None:
@@ -217,11 +255,12 @@ def _check_parity(name: str, entry: dict, results: list[np.ndarray], wi: np.ndar
     expected = evaluate_keys(model, u, v, w)
     assert np.abs(expected).max() > 0  # the comparison sees light
     assert_within(results[0], expected, bound.bound, f"{name}: gratnet_reflectance XYZ", floor=1e-30)
-    # gratnet_shade: exposure · A · XYZ; A as the runtime's own A-term test allows it (RELATIVE), the XYZ as above.
-    a = a_term(wi.astype(np.float64), wo.astype(np.float64), IOR)
-    assert np.all(a[:4] == 0.0) and np.all(results[1][:4] == 0.0)
-    shade_bound = EXPOSURE * (a[:, None] * bound.bound + RELATIVE * a[:, None] * np.abs(expected))
-    assert_within(results[1], EXPOSURE * a[:, None] * expected, shade_bound, f"{name}: gratnet_shade", floor=1e-30)
+    # gratnet_shade: exposure · A · S · XYZ; gratnet_shade_unshadowed: exposure · A · XYZ.
+    shade = shade_expectations(model, wi, wo, expected, bound.bound)
+    assert np.all(shade["a"][:4] == 0.0) and np.all(results[1][:4] == 0.0) and np.all(results[3][:4] == 0.0)
+    assert_within(results[1], shade["shade"], shade["shade_bound"], f"{name}: gratnet_shade", floor=1e-30)
+    assert_within(results[3], shade["unshadowed"], shade["unshadowed_bound"], f"{name}: gratnet_shade_unshadowed",
+                  floor=1e-30)
     linear = results[0].astype(np.float64) @ xyz_to_linear_srgb_matrix().T
     np.testing.assert_allclose(results[2], linear, rtol=1e-5, atol=1e-7 * float(np.abs(linear).max()))
 
@@ -244,6 +283,108 @@ def test_exported_hlsl_module_equals_numpy_through_spirv(ctx, exported_hlsl, nam
     wi, wo = _directions(PAIRS, seed=len(name))
     results = _evaluate(ctx, folder, config["materials"][name], wi, wo, work=tmp_path)
     _check_parity(name, config["materials"][name], results, wi, wo)
+
+
+def grazing_directions(count: int, seed: int) -> tuple[np.ndarray, np.ndarray]:
+    """Unit direction pairs (float32) towards the horizon, where Smith's S of a steep relief is far below 1: a
+    quarter mirror pairs (the specular peak) at 60°…89.5°, a quarter with the light at 75°…89.9° and the view
+    anywhere above the horizon, a quarter the other way round, a quarter both at 75°…89.9°; azimuths at random."""
+    rng = np.random.default_rng(seed)
+    quarter = count // 4
+
+    def at(theta_degrees: np.ndarray, phi_degrees: np.ndarray) -> np.ndarray:
+        theta, phi = np.radians(theta_degrees), np.radians(phi_degrees)
+        return np.stack([np.sin(theta) * np.cos(phi), np.sin(theta) * np.sin(phi), np.cos(theta)], axis=-1)
+
+    def azimuths(n: int = quarter) -> np.ndarray:
+        return rng.uniform(0.0, 360.0, n)
+
+    def grazing(n: int = quarter) -> np.ndarray:
+        return rng.uniform(75.0, 89.9, n)
+
+    def anywhere(n: int = quarter) -> np.ndarray:
+        return np.degrees(np.arccos(rng.uniform(0.02, 1.0, n)))
+
+    mirror_theta, mirror_phi = rng.uniform(60.0, 89.5, quarter), azimuths()
+    wi = np.concatenate([at(mirror_theta, mirror_phi), at(grazing(), azimuths()), at(anywhere(), azimuths()),
+                         at(grazing(), azimuths())])
+    wo = np.concatenate([at(mirror_theta, mirror_phi + 180.0), at(anywhere(), azimuths()), at(grazing(), azimuths()),
+                         at(grazing(), azimuths())])
+    assert wi.shape == (count, 3)
+    return wi.astype(np.float32), wo.astype(np.float32)
+
+
+def check_grazing_shadowing(name: str, model, results: list[np.ndarray], wi: np.ndarray, wo: np.ndarray,
+                            errors=OWN_KEYS) -> dict[str, float]:
+    """gratnet_shade against numpy's exposure · A · S · XYZ and gratnet_shade_unshadowed against exposure · A · XYZ
+    at :func:`grazing_directions`; the ratio of the two against S. ``results``: (shade, unshadowed). Returns the
+    largest relative difference of the shade from numpy (over values above 10⁻³ of its peak) and of the ratio
+    from S."""
+    shade, unshadowed = results
+    key = -(wi + wo)
+    u, v, w = (key[:, i].astype(np.float64) for i in range(3))
+    xyz = evaluate_keys(model, u, v, w)
+    expected = shade_expectations(model, wi, wo, xyz, driver_bound(model, u, v, w, errors).bound)
+    s = expected["s"]
+    # The test can see S: a shader without it (or with S = 1) would be off by 1/S, far beyond the bounds.
+    assert np.all(expected["a"] > 0) and np.median(s) < 0.6 and s.min() < 0.1, (name, np.median(s), s.min())
+    assert_within(shade, expected["shade"], expected["shade_bound"], f"{name}: gratnet_shade at grazing angles",
+                  floor=1e-30)
+    assert_within(unshadowed, expected["unshadowed"], expected["unshadowed_bound"],
+                  f"{name}: gratnet_shade_unshadowed at grazing angles", floor=1e-30)
+    # ...and a shader without S would not pass: the unshadowed value is outside the shadowed bound almost everywhere.
+    assert np.mean(exceeding(unshadowed, expected["shade"], expected["shade_bound"], floor=1e-30).any(axis=1)) > 0.9
+    # The same network value in both: their ratio is the shader's S alone, free of the network's error.
+    lit = np.abs(unshadowed) > 1e-30
+    assert np.count_nonzero(lit.all(axis=1)) > 0.9 * len(s), f"{name}: {np.count_nonzero(lit.all(axis=1))} pairs lit"
+    ratio = np.where(lit, shade / np.where(lit, unshadowed, 1.0), np.nan)
+    ratio_error = np.abs(ratio - s[:, None])
+    assert np.nanmax(ratio_error / (SHADOWING_RTOL * s[:, None] + SHADOWING_ATOL)) <= 1.0, (
+        f"{name}: gratnet_shade / gratnet_shade_unshadowed is not S: off by {np.nanmax(ratio_error):.3g}")
+    bright = np.abs(expected["shade"]) > 1e-3 * np.abs(expected["shade"]).max()
+    return {"shade": float((np.abs(shade - expected["shade"])[bright] / np.abs(expected["shade"])[bright]).max()),
+            "ratio": float(np.nanmax(ratio_error / s[:, None]))}
+
+
+@pytest.mark.parametrize("name", STEEP)
+def test_glsl_gratnet_shade_applies_smiths_shadowing_at_grazing_angles(ctx, exported, name):
+    folder, config = exported
+    entry = config["materials"][name]
+    wi, wo = grazing_directions(PAIRS, seed=7)
+    results = _evaluate(ctx, folder, entry, wi, wo)
+    check_grazing_shadowing(name, load_model(entry["model"]), [results[1], results[3]], wi, wo)
+
+
+@pytest.mark.parametrize("name", STEEP)
+def test_hlsl_gratnet_shade_applies_smiths_shadowing_at_grazing_angles(ctx, exported_hlsl, name, tmp_path):
+    folder, config = exported_hlsl
+    entry = config["materials"][name]
+    wi, wo = grazing_directions(PAIRS, seed=7)
+    results = _evaluate(ctx, folder, entry, wi, wo, work=tmp_path)
+    check_grazing_shadowing(name, load_model(entry["model"]), [results[1], results[3]], wi, wo)
+
+
+def test_the_module_bakes_the_models_slope_covariance(exported):
+    """GRATNET_SLOPE_COVARIANCE is the model's covariance (metadata["volume"]) as float32, for every export; a model
+    without one (the random models) gets zero: S = 1."""
+    import re
+
+    from gratnet.shadowing import slope_covariance_from_metadata
+
+    folder, config = exported
+    for name, entry in config["materials"].items():
+        text = (folder / entry["module"]).read_text(encoding="utf-8")
+        found = re.findall(r"^const vec3 GRATNET_SLOPE_COVARIANCE = vec3\(([^()]*)\);$", text, re.MULTILINE)
+        assert len(found) == 1, name
+        baked = np.array([float(x) for x in found[0].split(",")], np.float32)
+        model = load_model(entry["model"])
+        expected = np.array(slope_covariance_from_metadata(model.metadata.get("volume") or {}), np.float32)
+        np.testing.assert_array_equal(baked, expected, err_msg=name)
+        assert expected.any() == (name in shipped_materials()), name  # shipped: recorded; random: none
+        assert "float a = a_term(wi, wo, ior) * smith_shadowing(wi, wo, GRATNET_SLOPE_COVARIANCE);" in text
+        for entry_point in ("gratnet_reflectance(vec3 wi, vec3 wo)", "gratnet_shade(vec3 wi, vec3 wo, float ior, "
+                            "float exposure)", "gratnet_shade_unshadowed(vec3 wi, vec3 wo, float ior, float exposure)"):
+            assert f"//   vec3 {entry_point}" in text and f"\nvec3 {entry_point} {{" in text, (name, entry_point)
 
 
 def test_every_shipped_material_and_random_model_was_exported(exported):

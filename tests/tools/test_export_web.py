@@ -9,12 +9,16 @@ three; those of the shared parameter, defaults and panel code on the WebGL2 two,
 64 px a side, the every-material slices 32.
 
 - a BRDF slice (``slice=1``) read back with ``window.gratnetReadPixels()`` equals the numpy evaluation of the model
-  file (exposure · A · XYZ, as linear sRGB) within gratnet/precision.py's float32 driver bound: the default bound
+  file (exposure · A · XYZ, as linear sRGB: no Smith shadowing, as the runtime's slice; the steep shipped reliefs
+  among the shipped slices would be off by 1/S with it) within gratnet/precision.py's float32 driver bound: the
+  default bound
   on llvmpipe, and on SwiftShader (WebGL2 and WebGPU) the bound with its sin/cos taken as accurate to 2⁻¹⁰
   (measured: its 2⁻¹² bound is exceeded);
 - a page without parameters takes gratnet render's defaults (viewer.defaults), on every mesh and the slice;
 - a mesh render (the CD disc, the sphere) at the default view equals ``gratnet render``'s EXR of the same view, and
-  the canvas its PNG within LDR-FLIP 0.005 (llvmpipe; SwiftShader is held to its measured, looser level);
+  the canvas its PNG within LDR-FLIP 0.005 (llvmpipe; SwiftShader is held to its measured, looser level): exposure ·
+  A · S · XYZ with Smith's shadowing S for the material's slope covariance, as gratnet render draws it, seen most on
+  paper-pits' sphere (rms slope 0.73: S falls from 1 at the centre to near 0 at the rim);
 - a mesh render is drawn (finite, lit pixels, black background); ``ui=0`` shows the picture alone, ``ui=1`` the
   panel;
 - a bad URL parameter shows one line and no picture; so does ``backend=webgpu`` in a browser without WebGPU;
@@ -96,8 +100,8 @@ class _QuietHandler(http.server.SimpleHTTPRequestHandler):
 
 @pytest.fixture(scope="module")
 def site(tmp_path_factory) -> Iterator[tuple[str, Path]]:
-    """cd, paper-cd, paper-scratches, a random model (simple scheme, log range) and two random grid models exported
-    once, served on 127.0.0.1."""
+    """cd, paper-cd, paper-scratches, paper-pits (a steep relief: Smith's shadowing), a random model (simple scheme,
+    log range) and two random grid models exported once, served on 127.0.0.1."""
     folder = tmp_path_factory.mktemp("web")
     models = {"random-simple": random_model([163, 21, 13, 3], "relu", "sigmoid", "simple", "log", seed=3),
               "random-grid16": random_grid_model(5, 3, "float16", "smoothstep", seed=5),
@@ -106,7 +110,7 @@ def site(tmp_path_factory) -> Iterator[tuple[str, Path]]:
         save_model(folder / f"{name}.npz", model)
     out = folder / "site"
     assert main(["export", "cd", *(str(folder / f"{name}.npz") for name in models), "paper-cd", "paper-scratches",
-                 "--format", "web", "--out", str(out), "--quiet"]) == 0
+                 "paper-pits", "--format", "web", "--out", str(out), "--quiet"]) == 0
     server, url = _serve(out)
     try:
         yield url, out
@@ -328,6 +332,9 @@ def _exr_rgb(path: Path) -> np.ndarray:
 @pytest.mark.parametrize(("browser", "material", "mesh"), [
     *((name, material, mesh) for name in WEBGL2_BROWSERS
       for material, mesh in (("cd", "cd"), ("cd", "sphere"), ("paper-cd", "cd"))),
+    # Smith's shadowing of a steep relief (gratnet render's S · A: the page's gratnet_shade, not the unshadowed slice
+    # value), through both backends' mesh shaders.
+    ("llvmpipe", "paper-pits", "sphere"), ("webgpu", "paper-pits", "sphere"),
     ("webgpu", "cd", "cd")], indirect=["browser"])
 def test_a_mesh_render_equals_gratnet_renders_exr_and_its_png_within_flip(site, browser, material, mesh, tmp_path):
     """The page's default view of a mesh against ``gratnet render`` of the same material and mesh (its defaults too):

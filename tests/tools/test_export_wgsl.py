@@ -5,10 +5,15 @@
   its functions for 256 direction pairs. ``gratnet_reflectance`` equals the numpy evaluation of the model file
   (gratnet.modelfile.evaluate_keys, float64, at the same float32 key) within gratnet/precision.py's float32 bound
   with sin/cos taken as accurate to 2⁻¹⁰ (SwiftShader's, as tests/tools/test_export_web.py holds its WebGL2 page);
-  ``gratnet_shade`` adds the A-term tolerance of the runtime's A-term test and is exactly 0 below the horizon;
-  ``xyz_to_linear_srgb`` and ``xyz_to_display_srgb`` equal colour-science's. Materials: cd (a shipped pure MLP),
-  paper-cd (a shipped feature-grid model, float16, smoothstep), three random MLPs (every hidden and output
-  activation, scheme and range kind) and two random grid models (float16 with 5 features; float32 with 6);
+  ``gratnet_shade`` (exposure · A · S · XYZ, S: Smith's shadowing for the model's slope covariance) adds the A-term
+  and shadowing tolerances of the runtime's own tests, ``gratnet_shade_unshadowed`` (exposure · A · XYZ) the
+  A-term's, both exactly 0 below the horizon; ``xyz_to_linear_srgb`` and ``xyz_to_display_srgb`` equal
+  colour-science's. Materials: every shipped material (pure MLPs and feature-grid models), three random MLPs (every
+  hidden and output activation, scheme and range kind) and two random grid models (float16 with 5 features; float32
+  with 6);
+- at grazing direction pairs, where S of the steep shipped reliefs (paper-corner-cubes, paper-pits) is far below 1,
+  ``gratnet_shade`` equals numpy's exposure · A · S · XYZ and its ratio to ``gratnet_shade_unshadowed`` equals S;
+  brdf.wgsl's smith_lambda types the numbers of brdf.glsl's (gratnet.shadowing's erf approximation);
 - the encoding's reduced phases (half-turns), written out by a second host for the keys of tests/helpers.py's
   ``parity_keys`` (the rim u² + v² → 4 included), equal float64 within 2⁻²⁰: WGSL has no ``precise``, and the
   reflectance test's 2⁻¹⁰ sin/cos bound cannot see whether the error-free transforms survived the compiler;
@@ -35,13 +40,13 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from gratnet.brdf import a_term
 from gratnet.cli import main
 from gratnet.codes import HIDDEN, OUTPUT, RANGE, SCHEME
 from gratnet.encoding import network_coordinates
 from gratnet.modelfile import ModelFile, evaluate_keys, load_model, pack_texture, save_model
 from gratnet.precision import DriverErrors, assert_within, driver_bound
-from tests.helpers import RELATIVE, parity_keys, random_grid_model, random_model
+from tests.helpers import parity_keys, random_grid_model, random_model
+from tests.tools.test_export_shaders import STEEP, check_grazing_shadowing, grazing_directions, shade_expectations
 from viewer.catalog import shipped_materials
 
 CHROMIUM = shutil.which("chromium") or ("/usr/bin/chromium" if Path("/usr/bin/chromium").exists() else None)
@@ -66,10 +71,11 @@ PAIRS = 256
 SHIPPED = tuple(shipped_materials())
 MATERIALS = (*SHIPPED, "random0", "random1", "random2", "random-grid16", "random-grid32")
 
-#: The host's compute shader after the module: per pair, reflectance, shade, linear and display sRGB.
+#: The host's compute shader after the module: per pair, reflectance, shade, linear and display sRGB, unshadowed
+#: shade.
 HOST = f"""
 @group(1) @binding(0) var<storage, read> host_pairs: array<vec4<f32>>;        // wi, wo of pair n at 2n, 2n + 1
-@group(1) @binding(1) var<storage, read_write> host_out: array<vec4<f32>>;    // 4 results of pair n from 4n
+@group(1) @binding(1) var<storage, read_write> host_out: array<vec4<f32>>;    // 5 results of pair n from 5n
 @compute @workgroup_size(64)
 fn host_main(@builtin(global_invocation_id) id: vec3<u32>) {{
     let n = id.x;
@@ -79,10 +85,11 @@ fn host_main(@builtin(global_invocation_id) id: vec3<u32>) {{
     let wi = host_pairs[2u * n].xyz;
     let wo = host_pairs[2u * n + 1u].xyz;
     let xyz = gratnet_reflectance(wi, wo);
-    host_out[4u * n] = vec4<f32>(xyz, 0.0);
-    host_out[4u * n + 1u] = vec4<f32>(gratnet_shade(wi, wo, {IOR!r}, {EXPOSURE!r}), 0.0);
-    host_out[4u * n + 2u] = vec4<f32>(xyz_to_linear_srgb(xyz), 0.0);
-    host_out[4u * n + 3u] = vec4<f32>(xyz_to_display_srgb(xyz, {EXPOSURE!r}), 0.0);
+    host_out[5u * n] = vec4<f32>(xyz, 0.0);
+    host_out[5u * n + 1u] = vec4<f32>(gratnet_shade(wi, wo, {IOR!r}, {EXPOSURE!r}), 0.0);
+    host_out[5u * n + 2u] = vec4<f32>(xyz_to_linear_srgb(xyz), 0.0);
+    host_out[5u * n + 3u] = vec4<f32>(xyz_to_display_srgb(xyz, {EXPOSURE!r}), 0.0);
+    host_out[5u * n + 4u] = vec4<f32>(gratnet_shade_unshadowed(wi, wo, {IOR!r}, {EXPOSURE!r}), 0.0);
 }}
 """
 
@@ -235,12 +242,12 @@ def directions(count: int, seed: int) -> tuple[np.ndarray, np.ndarray]:
 
 
 def run_module(page, entry: dict, wi: np.ndarray, wo: np.ndarray, module: str | None = None) -> dict:
-    """The module's functions on the pairs in WebGPU: ``values`` (pairs, 4 results, 3) or ``error``."""
+    """The module's functions on the pairs in WebGPU: ``values`` (pairs, 5 results, 3) or ``error``."""
     pairs = np.zeros((wi.shape[0], 2, 4), np.float32)
     pairs[:, 0, :3], pairs[:, 1, :3] = wi, wo
-    result = _run(page, entry, HOST, pairs, wi.shape[0], 4 * wi.shape[0], module)
+    result = _run(page, entry, HOST, pairs, wi.shape[0], 5 * wi.shape[0], module)
     if "values" in result:
-        result["values"] = np.asarray(result["values"], np.float64).reshape(-1, 4, 4)[:, :, :3]
+        result["values"] = np.asarray(result["values"], np.float64).reshape(-1, 5, 4)[:, :, :3]
     return result
 
 
@@ -263,7 +270,7 @@ def _run(page, entry: dict, host: str, inputs: np.ndarray, invocations: int, out
 
 def parity(entry: dict, results: np.ndarray, wi: np.ndarray, wo: np.ndarray,
            errors: DriverErrors = SWIFTSHADER) -> dict[str, float]:
-    """Assert the four results against numpy; the largest |difference| and |difference| / bound of each."""
+    """Assert the five results against numpy; the largest |difference| and |difference| / bound of each."""
     import colour
 
     from viewer.renderer import xyz_to_linear_srgb_matrix
@@ -274,16 +281,17 @@ def parity(entry: dict, results: np.ndarray, wi: np.ndarray, wo: np.ndarray,
     bound = driver_bound(model, u, v, w, errors).bound
     expected = evaluate_keys(model, u, v, w)
     assert np.abs(expected).max() > 0  # the comparison sees light
-    a = a_term(wi.astype(np.float64), wo.astype(np.float64), IOR)[:, None]
-    shade_bound = EXPOSURE * (a * bound + RELATIVE * a * np.abs(expected))
+    shade = shade_expectations(model, wi, wo, expected, bound)
     found = {"xyz": float(np.abs(results[:, 0] - expected).max()),
              "xyz/bound": float((np.abs(results[:, 0] - expected) / np.maximum(bound, 1e-30)).max()),
-             "shade/bound": float((np.abs(results[:, 1] - EXPOSURE * a * expected)
-                                   / np.maximum(shade_bound, 1e-30)).max())}
+             "shade/bound": float((np.abs(results[:, 1] - shade["shade"])
+                                   / np.maximum(shade["shade_bound"], 1e-30)).max())}
     assert_within(results[:, 0], expected, bound, f"{entry['module']}: gratnet_reflectance XYZ", floor=1e-30)
-    assert np.all(a[:4] == 0.0) and np.all(results[:4, 1] == 0.0)
-    assert_within(results[:, 1], EXPOSURE * a * expected, shade_bound, f"{entry['module']}: gratnet_shade",
+    assert np.all(shade["a"][:4] == 0.0) and np.all(results[:4, 1] == 0.0) and np.all(results[:4, 4] == 0.0)
+    assert_within(results[:, 1], shade["shade"], shade["shade_bound"], f"{entry['module']}: gratnet_shade",
                   floor=1e-30)
+    assert_within(results[:, 4], shade["unshadowed"], shade["unshadowed_bound"],
+                  f"{entry['module']}: gratnet_shade_unshadowed", floor=1e-30)
     linear = results[:, 0] @ xyz_to_linear_srgb_matrix().T
     np.testing.assert_allclose(results[:, 2], linear, rtol=1e-5, atol=1e-7 * float(np.abs(linear).max()))
     display = colour.cctf_encoding(np.clip(results[:, 2] * EXPOSURE, 0.0, 1.0), function="sRGB")
@@ -300,6 +308,66 @@ def test_exported_wgsl_module_equals_numpy_in_webgpu(exported, page, name):
     result = run_module(page, entry, wi, wo)
     assert "error" not in result, result.get("error")
     parity(entry, result["values"], wi, wo)
+
+
+@needs_browser
+@pytest.mark.parametrize("name", STEEP)
+def test_wgsl_gratnet_shade_applies_smiths_shadowing_at_grazing_angles(exported, page, name):
+    """As tests/tools/test_export_shaders.py's GLSL and HLSL twins, with SwiftShader's sin/cos bound."""
+    _, config = exported
+    entry = config["materials"][name]
+    wi, wo = grazing_directions(PAIRS, seed=7)
+    result = run_module(page, entry, wi, wo)
+    assert "error" not in result, result.get("error")
+    values = result["values"]
+    check_grazing_shadowing(name, load_model(entry["model"]), [values[:, 1], values[:, 4]], wi, wo, SWIFTSHADER)
+
+
+def _numbers(text: str) -> list[float]:
+    return [float(x) for x in re.findall(r"(?<![\w.])\d+\.\d+(?:[eE][+-]?\d+)?", text)]
+
+
+def _function(text: str, signature: str) -> str:
+    start = text.index(signature)
+    return text[start:text.index("\n}\n", start)]
+
+
+def test_the_wgsl_shadowing_types_brdf_glsls_numbers():
+    """brdf.wgsl's smith_lambda is brdf.glsl's, number for number (A&S 7.1.26's p and coefficients, 1/√π), and
+    those are gratnet.shadowing's; smith_shadowing has the same form."""
+    import math
+
+    from export.wgsl import TEMPLATE_ROOT
+    from gratnet import shadowing
+    from viewer.glsl import SHADER_ROOT
+
+    glsl = (Path(SHADER_ROOT) / "brdf.glsl").read_text(encoding="utf-8")
+    wgsl = (TEMPLATE_ROOT / "brdf.wgsl").read_text(encoding="utf-8")
+    glsl_lambda = _numbers(_function(glsl, "float smith_lambda("))
+    wgsl_lambda = _numbers(_function(wgsl, "fn smith_lambda("))
+    assert glsl_lambda == wgsl_lambda
+    for constant in (shadowing._P, *(abs(a) for a in shadowing._A), 1.0 / math.sqrt(math.pi)):
+        assert any(abs(number - constant) <= 1e-15 * constant for number in wgsl_lambda), constant
+    assert (_numbers(_function(glsl, "float smith_shadowing(")) == _numbers(_function(wgsl, "fn smith_shadowing("))
+            == [0.0, 0.0, 0.0, 1.0, 1.0])
+
+
+def test_the_module_bakes_the_models_slope_covariance(exported):
+    """GRATNET_SLOPE_COVARIANCE is the GLSL module's constant (the model's covariance as float32), and gratnet_shade
+    applies it while gratnet_shade_unshadowed does not."""
+    from export.glsl import glsl_module
+
+    folder, config = exported
+    for name in (*STEEP, "cd", "random0"):
+        entry = config["materials"][name]
+        text = (folder / entry["module"]).read_text(encoding="utf-8")
+        glsl = re.search(r"^const vec3 GRATNET_SLOPE_COVARIANCE = vec3\(([^()]*)\);$",
+                         glsl_module(load_model(entry["model"]), name).text, re.MULTILINE)
+        assert glsl is not None
+        assert f"const GRATNET_SLOPE_COVARIANCE: vec3<f32> = vec3<f32>({glsl.group(1)});" in text
+        assert ("let a = a_term(wi, wo, ior) * smith_shadowing(wi, wo, GRATNET_SLOPE_COVARIANCE);"
+                in _function(text, "fn gratnet_shade("))
+        assert "smith_shadowing" not in _function(text, "fn gratnet_shade_unshadowed(")
 
 
 def phase_errors(model: ModelFile, keys: np.ndarray, values: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
