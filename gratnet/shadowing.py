@@ -37,7 +37,8 @@ import numpy as np
 
 from gratnet.errors import GratNetError
 
-__all__ = ["METADATA_KEY", "NO_SHADOWING", "check_slope_covariance", "slope_covariance_from_metadata",
+__all__ = ["ERFC_COEFFICIENTS", "ERFC_P", "METADATA_KEY", "NO_SHADOWING", "check_slope_covariance",
+           "slope_covariance_from_metadata",
            "smith_lambda", "smith_shadowing"]
 
 #: Key of the slope covariance ``[Σxx, Σxy, Σyy]`` in a volume's metadata (and so in ``model.metadata["volume"]``).
@@ -45,9 +46,10 @@ METADATA_KEY = "slope_covariance"
 #: The covariance of a surface that never shadows itself: S = 1 everywhere.
 NO_SHADOWING = (0.0, 0.0, 0.0)
 
-# Abramowitz & Stegun 7.1.26: erfc(a) ≈ t·(A1 + t·(A2 + t·(A3 + t·(A4 + t·A5))))·exp(−a²), t = 1/(1 + P·a), a ≥ 0.
-_P = 0.3275911
-_A = (0.254829592, -0.284496736, 1.421413741, -1.453152027, 1.061405429)
+#: Abramowitz & Stegun 7.1.26 (the GLSL repeats these numbers): erfc(a) ≈ t·(A1 + t·(A2 + t·(A3 + t·(A4 + t·A5))))
+#: · exp(−a²), t = 1/(1 + P·a), a ≥ 0.
+ERFC_P = 0.3275911
+ERFC_COEFFICIENTS = (0.254829592, -0.284496736, 1.421413741, -1.453152027, 1.061405429)
 _INV_SQRT_PI = 1.0 / math.sqrt(math.pi)
 
 
@@ -86,8 +88,9 @@ def smith_lambda(direction: np.ndarray, covariance: Sequence[float]) -> np.ndarr
     spread = np.sqrt(2.0 * projected)  # cos θ / a
     with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
         a = cos_theta / spread
-        t = 1.0 / (1.0 + _P * a)
-        polynomial = t * (_A[0] + t * (_A[1] + t * (_A[2] + t * (_A[3] + t * _A[4]))))
+        t = 1.0 / (1.0 + ERFC_P * a)
+        c0, c1, c2, c3, c4 = ERFC_COEFFICIENTS
+        polynomial = t * (c0 + t * (c1 + t * (c2 + t * (c3 + t * c4))))
         value = 0.5 * np.exp(-a * a) * (_INV_SQRT_PI / a - polynomial)
     value = np.where(spread > 0.0, value, 0.0)
     return np.where(cos_theta > 0.0, np.maximum(value, 0.0), np.inf)

@@ -204,20 +204,11 @@ VOLUME_METADATA_KEYS = ("source", "sigma_s_um", "window_extent_um", "dx_um", "pa
 
 def model_volume_metadata(volume_metadata: dict[str, Any]) -> dict[str, Any]:
     """What a model records of its volume: :data:`VOLUME_METADATA_KEYS`, and the height field's slope covariance
-    (gratnet.shadowing), from the volume or, for a volume made before it was recorded, from the height field its
-    ``source`` names (left out, with a warning, where that field cannot be loaded)."""
+    (gratnet.shadowing) where the volume has it (`gratnet train` fills it in for an older volume:
+    trainer.train_cli.with_slope_covariance)."""
     recorded = {key: volume_metadata.get(key) for key in VOLUME_METADATA_KEYS}
-    covariance = volume_metadata.get(SLOPE_COVARIANCE_KEY)
-    if covariance is None:
-        from trainer.loaders import load_heightfield
-
-        try:
-            covariance = list(load_heightfield(str(volume_metadata.get("source", ""))).slope_covariance())
-        except GratNetError as error:
-            logging.getLogger("gratnet.train").warning(
-                "the model records no slope covariance (it renders unshadowed): %s", error)
-            return recorded
-    recorded[SLOPE_COVARIANCE_KEY] = list(check_slope_covariance(covariance))
+    if volume_metadata.get(SLOPE_COVARIANCE_KEY) is not None:
+        recorded[SLOPE_COVARIANCE_KEY] = list(check_slope_covariance(volume_metadata[SLOPE_COVARIANCE_KEY]))
     return recorded
 
 

@@ -137,6 +137,26 @@ def interrupted_state(checkpoint: Path, epochs: int) -> str:
             f"as the uninterrupted run would have")
 
 
+def with_slope_covariance(arguments: argparse.Namespace, volume_metadata: dict[str, Any]) -> None:
+    """Fill in the volume's ``slope_covariance`` (Smith's shadowing, gratnet.shadowing) where a volume made before
+    the ground truth recorded it lacks it: from ``--heightfield`` or the height field its ``source`` names. Where
+    that cannot be loaded, say so once: the model will render unshadowed."""
+    from gratnet.shadowing import METADATA_KEY
+    from trainer.heightfile import LoadOptions
+    from trainer.loaders import load_heightfield
+
+    if volume_metadata.get(METADATA_KEY) is not None:
+        return
+    spec = arguments.heightfield or str(volume_metadata.get("source", ""))
+    try:
+        field = load_heightfield(spec, from_arguments(LoadOptions, arguments))
+    except GratNetError as error:
+        print(f"gratnet train: the volume records no slope covariance and its height field cannot be loaded "
+              f"({error}); the model will render unshadowed", file=sys.stderr)
+        return
+    volume_metadata[METADATA_KEY] = list(field.slope_covariance())
+
+
 def run_train(arguments: argparse.Namespace) -> int:
     """Train, save, evaluate."""
     from gratnet.volume import read_volume
@@ -152,6 +172,7 @@ def run_train(arguments: argparse.Namespace) -> int:
         raise GratNetError(f"--resume: there is no {checkpoint} to continue from; leave out --resume to start afresh")
     held_out = config.held_out_slices() if config.split == "slices" else []
     volume = read_volume(arguments.volume)
+    with_slope_covariance(arguments, volume.metadata)
     out = Path(arguments.out)
     per_epoch = _epoch_flip(arguments, config, volume.metadata) if config.epoch_flip_size else None
     try:

@@ -1,8 +1,8 @@
 """The Mitsuba 3 plugin (mitsuba_plugin/): the contract's value, the mesh's tangent frame, sampling, and
 agreement with the GL renderer.
 
-- eval parity: the plugin's ``eval`` equals evaluate_keys × a_term → linear sRGB (computed here from the
-  contract's own functions) at random directions, in ``scalar_rgb`` (one lookup per call) and ``llvm_ad_rgb``;
+- eval parity: the plugin's ``eval`` equals evaluate_keys × a_term × smith_shadowing → linear sRGB (computed here
+  from the contract's own functions) at random directions, in ``scalar_rgb`` (one lookup per call) and ``llvm_ad_rgb``;
 - tangent frame: on the CD, rays hit the disc and ``eval`` equals the contract in the frame whose x is the
   interpolated vertex tangent, as the GL rasterizer's (along the tracks: viewer.meshes.compact_disc);
 - sampling: χ² of the sampled directions against ``pdf`` (Mitsuba's own ChiSquareTest, as its BSDF tests do,
@@ -25,6 +25,7 @@ mi_module = pytest.importorskip("mitsuba", reason="the mitsuba extra is not inst
 
 from gratnet.brdf import a_term  # noqa: E402
 from gratnet.modelfile import evaluate_keys, load_model  # noqa: E402
+from gratnet.shadowing import slope_covariance_from_metadata, smith_shadowing  # noqa: E402
 from mitsuba_plugin import shading  # noqa: E402
 from mitsuba_plugin.runtime import llvm_usable, set_variant  # noqa: E402
 from tests.helpers import solid_angle_chi2  # noqa: E402
@@ -36,12 +37,16 @@ needs_llvm = pytest.mark.skipif(not llvm_usable(),
 
 
 def _contract_rgb(model_path: object, light: np.ndarray, view: np.ndarray, ior: float | None) -> np.ndarray:
-    """A · XYZ(−(ωl + ωv)) → linear sRGB straight from the contract's functions (colour-science matrix)."""
+    """S · A · XYZ(−(ωl + ωv)) → linear sRGB straight from the contract's functions (colour-science matrix; S with
+    the model's slope covariance)."""
     import colour
 
     model = load_model(model_path)
+    covariance = slope_covariance_from_metadata(model.metadata["volume"])
+    assert covariance != (0.0, 0.0, 0.0)  # the shipped model records its relief's slopes: S is checked too
     key = -(light + view)
-    xyz = evaluate_keys(model, key[:, 0], key[:, 1], key[:, 2]) * a_term(light, view, ior)[:, None]
+    factor = a_term(light, view, ior) * smith_shadowing(light, view, covariance)
+    xyz = evaluate_keys(model, key[:, 0], key[:, 1], key[:, 2]) * factor[:, None]
     return np.asarray(colour.XYZ_to_RGB(xyz, "sRGB"))
 
 

@@ -26,13 +26,11 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from gratnet.brdf import a_term
 from gratnet.cli import main
 from gratnet.encoding import EncodingSpec
 from gratnet.modelfile import evaluate_keys, load_model, save_model
-from gratnet.precision import OWN_KEYS, assert_within, driver_bound, exceeding
-from gratnet.shadowing import smith_shadowing
-from tests.helpers import RELATIVE, random_model
+from gratnet.precision import OWN_KEYS, assert_within, driver_bound
+from tests.helpers import STEEP, check_grazing_shadowing, grazing_directions, random_model, shade_expectations
 from viewer.catalog import resolve_material, shipped_materials
 
 GLSLANG = shutil.which("glslangValidator")
@@ -42,12 +40,6 @@ needs_glslang = pytest.mark.skipif(GLSLANG is None, reason=TOOLS_MISSING)
 EXPOSURE = 3.0
 IOR = 1.5
 PAIRS = 256  # direction pairs per material: a 16 × 16 target
-#: How far the shader's Smith shadowing may be from gratnet.shadowing's (float64 at the float32 directions):
-#: tests/runtime/test_shader_parity.py's test_gpu_shadowing_matches_numpy holds the runtime's brdf.glsl to this.
-SHADOWING_RTOL = 2e-5
-SHADOWING_ATOL = 1e-6
-#: Shipped materials with steep reliefs (rms slopes 0.93 and 0.73): S is far below 1 towards the horizon.
-STEEP = ("paper-corner-cubes", "paper-pits")
 
 VERTEX = """#version 430 core
 void main() {
@@ -223,26 +215,7 @@ def _names(exported_config: dict) -> list[str]:
     return sorted(exported_config["materials"])
 
 
-def model_shadowing(model, wi: np.ndarray, wo: np.ndarray) -> np.ndarray:
-    """gratnet.shadowing's S (float64) at the float32 directions, for the model's slope covariance as the runtime
-    takes it (export/glsl.py's slope_covariance: ``metadata["volume"]``, none: S = 1 above the horizon)."""
-    from export.glsl import slope_covariance
 
-    return smith_shadowing(wi.astype(np.float64), wo.astype(np.float64), slope_covariance(model))
-
-
-def shade_expectations(model, wi: np.ndarray, wo: np.ndarray, xyz: np.ndarray, xyz_bound: np.ndarray
-                       ) -> dict[str, np.ndarray]:
-    """numpy's gratnet_shade (exposure · A · S · XYZ) and gratnet_shade_unshadowed (exposure · A · XYZ) with their
-    bounds: the XYZ within ``xyz_bound``, A as the runtime's own A-term test allows it (RELATIVE), S as its shadowing
-    test does (SHADOWING_RTOL, SHADOWING_ATOL)."""
-    a = a_term(wi.astype(np.float64), wo.astype(np.float64), IOR)[:, None]
-    s = model_shadowing(model, wi, wo)[:, None]
-    unshadowed = EXPOSURE * a * xyz
-    unshadowed_bound = EXPOSURE * (a * xyz_bound + RELATIVE * a * np.abs(xyz))
-    return {"a": a[:, 0], "s": s[:, 0], "unshadowed": unshadowed, "unshadowed_bound": unshadowed_bound,
-            "shade": s * unshadowed,
-            "shade_bound": s * unshadowed_bound + (SHADOWING_RTOL * s + SHADOWING_ATOL) * np.abs(unshadowed)}
 
 
 def _check_parity(name: str, entry: dict, results: list[np.ndarray], wi: np.ndarray, wo: np.ndarray) -> None:
@@ -285,65 +258,7 @@ def test_exported_hlsl_module_equals_numpy_through_spirv(ctx, exported_hlsl, nam
     _check_parity(name, config["materials"][name], results, wi, wo)
 
 
-def grazing_directions(count: int, seed: int) -> tuple[np.ndarray, np.ndarray]:
-    """Unit direction pairs (float32) towards the horizon, where Smith's S of a steep relief is far below 1: a
-    quarter mirror pairs (the specular peak) at 60°…89.5°, a quarter with the light at 75°…89.9° and the view
-    anywhere above the horizon, a quarter the other way round, a quarter both at 75°…89.9°; azimuths at random."""
-    rng = np.random.default_rng(seed)
-    quarter = count // 4
 
-    def at(theta_degrees: np.ndarray, phi_degrees: np.ndarray) -> np.ndarray:
-        theta, phi = np.radians(theta_degrees), np.radians(phi_degrees)
-        return np.stack([np.sin(theta) * np.cos(phi), np.sin(theta) * np.sin(phi), np.cos(theta)], axis=-1)
-
-    def azimuths(n: int = quarter) -> np.ndarray:
-        return rng.uniform(0.0, 360.0, n)
-
-    def grazing(n: int = quarter) -> np.ndarray:
-        return rng.uniform(75.0, 89.9, n)
-
-    def anywhere(n: int = quarter) -> np.ndarray:
-        return np.degrees(np.arccos(rng.uniform(0.02, 1.0, n)))
-
-    mirror_theta, mirror_phi = rng.uniform(60.0, 89.5, quarter), azimuths()
-    wi = np.concatenate([at(mirror_theta, mirror_phi), at(grazing(), azimuths()), at(anywhere(), azimuths()),
-                         at(grazing(), azimuths())])
-    wo = np.concatenate([at(mirror_theta, mirror_phi + 180.0), at(anywhere(), azimuths()), at(grazing(), azimuths()),
-                         at(grazing(), azimuths())])
-    assert wi.shape == (count, 3)
-    return wi.astype(np.float32), wo.astype(np.float32)
-
-
-def check_grazing_shadowing(name: str, model, results: list[np.ndarray], wi: np.ndarray, wo: np.ndarray,
-                            errors=OWN_KEYS) -> dict[str, float]:
-    """gratnet_shade against numpy's exposure · A · S · XYZ and gratnet_shade_unshadowed against exposure · A · XYZ
-    at :func:`grazing_directions`; the ratio of the two against S. ``results``: (shade, unshadowed). Returns the
-    largest relative difference of the shade from numpy (over values above 10⁻³ of its peak) and of the ratio
-    from S."""
-    shade, unshadowed = results
-    key = -(wi + wo)
-    u, v, w = (key[:, i].astype(np.float64) for i in range(3))
-    xyz = evaluate_keys(model, u, v, w)
-    expected = shade_expectations(model, wi, wo, xyz, driver_bound(model, u, v, w, errors).bound)
-    s = expected["s"]
-    # The test can see S: a shader without it (or with S = 1) would be off by 1/S, far beyond the bounds.
-    assert np.all(expected["a"] > 0) and np.median(s) < 0.6 and s.min() < 0.1, (name, np.median(s), s.min())
-    assert_within(shade, expected["shade"], expected["shade_bound"], f"{name}: gratnet_shade at grazing angles",
-                  floor=1e-30)
-    assert_within(unshadowed, expected["unshadowed"], expected["unshadowed_bound"],
-                  f"{name}: gratnet_shade_unshadowed at grazing angles", floor=1e-30)
-    # ...and a shader without S would not pass: the unshadowed value is outside the shadowed bound almost everywhere.
-    assert np.mean(exceeding(unshadowed, expected["shade"], expected["shade_bound"], floor=1e-30).any(axis=1)) > 0.9
-    # The same network value in both: their ratio is the shader's S alone, free of the network's error.
-    lit = np.abs(unshadowed) > 1e-30
-    assert np.count_nonzero(lit.all(axis=1)) > 0.9 * len(s), f"{name}: {np.count_nonzero(lit.all(axis=1))} pairs lit"
-    ratio = np.where(lit, shade / np.where(lit, unshadowed, 1.0), np.nan)
-    ratio_error = np.abs(ratio - s[:, None])
-    assert np.nanmax(ratio_error / (SHADOWING_RTOL * s[:, None] + SHADOWING_ATOL)) <= 1.0, (
-        f"{name}: gratnet_shade / gratnet_shade_unshadowed is not S: off by {np.nanmax(ratio_error):.3g}")
-    bright = np.abs(expected["shade"]) > 1e-3 * np.abs(expected["shade"]).max()
-    return {"shade": float((np.abs(shade - expected["shade"])[bright] / np.abs(expected["shade"])[bright]).max()),
-            "ratio": float(np.nanmax(ratio_error / s[:, None]))}
 
 
 @pytest.mark.parametrize("name", STEEP)

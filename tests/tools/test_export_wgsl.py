@@ -45,8 +45,15 @@ from gratnet.codes import HIDDEN, OUTPUT, RANGE, SCHEME
 from gratnet.encoding import network_coordinates
 from gratnet.modelfile import ModelFile, evaluate_keys, load_model, pack_texture, save_model
 from gratnet.precision import DriverErrors, assert_within, driver_bound
-from tests.helpers import parity_keys, random_grid_model, random_model
-from tests.tools.test_export_shaders import STEEP, check_grazing_shadowing, grazing_directions, shade_expectations
+from tests.helpers import (
+    STEEP,
+    check_grazing_shadowing,
+    grazing_directions,
+    parity_keys,
+    random_grid_model,
+    random_model,
+    shade_expectations,
+)
 from viewer.catalog import shipped_materials
 
 CHROMIUM = shutil.which("chromium") or ("/usr/bin/chromium" if Path("/usr/bin/chromium").exists() else None)
@@ -346,7 +353,7 @@ def test_the_wgsl_shadowing_types_brdf_glsls_numbers():
     glsl_lambda = _numbers(_function(glsl, "float smith_lambda("))
     wgsl_lambda = _numbers(_function(wgsl, "fn smith_lambda("))
     assert glsl_lambda == wgsl_lambda
-    for constant in (shadowing._P, *(abs(a) for a in shadowing._A), 1.0 / math.sqrt(math.pi)):
+    for constant in (shadowing.ERFC_P, *(abs(a) for a in shadowing.ERFC_COEFFICIENTS), 1.0 / math.sqrt(math.pi)):
         assert any(abs(number - constant) <= 1e-15 * constant for number in wgsl_lambda), constant
     assert (_numbers(_function(glsl, "float smith_shadowing(")) == _numbers(_function(wgsl, "fn smith_shadowing("))
             == [0.0, 0.0, 0.0, 1.0, 1.0])

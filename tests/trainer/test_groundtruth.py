@@ -47,6 +47,9 @@ def test_volume_zeroes_impossible_samples_and_records_parameters():
     assert metadata["scheme"] == "regular" and metadata["slice_w"] == [0.0, -2.0]
     assert metadata["sigma_s_um"] == 1.5 and len(metadata["wavelengths_nm"]) == 5
     assert metadata["source"].startswith("generator:blazed(")
+    # The relief's slopes for Smith's shadowing (gratnet.shadowing), of the field as loaded.
+    assert metadata["slope_covariance"] == list(generate("blazed", size_um=5.0).slope_covariance())
+    assert metadata["slope_covariance"][0] > 0.1 and metadata["slope_covariance"][2] == 0.0
 
 
 def test_groundtruth_cli_writes_volume_config_and_preview(tmp_path):

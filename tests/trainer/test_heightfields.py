@@ -16,6 +16,7 @@ from gratnet.cli import main
 from gratnet.errors import GratNetError
 from tests.helpers import SHARED_DATA
 from trainer import generators
+from trainer.heightfield import HeightField
 from trainer.heightfile import LoadOptions, preview_png, save_heightfield, write_gsf
 from trainer.loaders import load_heightfield
 
@@ -65,6 +66,19 @@ def test_sinusoid_period_and_peak_to_peak():
     frequency = np.fft.rfftfreq(row.size, field.dx_um)[np.argmax(spectrum)]  # cycles per µm
     assert 1 / frequency == pytest.approx(1000 / 600, rel=1e-6)
     assert np.all(field.heights_um == field.heights_um[:1])  # grooves along y: every row the same
+
+
+def test_slope_covariance_of_a_sinusoid_is_its_analytic_value():
+    """h = a sin(kx): slopes a k cos(kx), variance (a k)²/2 along x, none along y; central differences see
+    a k cos(kx) · sinc(k dx) exactly (the shadowing statistics, gratnet.shadowing)."""
+    field = generators.generate("sinusoidal", size_um=10.0)
+    amplitude, k = 0.075, 2.0 * np.pi * 0.6  # 0.15 µm peak to peak, 600 lines/mm
+    sinc = np.sin(k * field.dx_um) / (k * field.dx_um)
+    xx, xy, yy = field.slope_covariance()
+    assert xx == pytest.approx((amplitude * k * sinc) ** 2 / 2.0, rel=2e-3)
+    assert xy == pytest.approx(0.0, abs=1e-12) and yy == pytest.approx(0.0, abs=1e-12)
+    rotated = HeightField(field.heights_um.T.copy(), field.dx_um)
+    assert rotated.slope_covariance() == pytest.approx((yy, xy, xx), abs=1e-12)
 
 
 def test_blazed_height_and_rising_along_plus_x():

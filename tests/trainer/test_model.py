@@ -68,6 +68,28 @@ def test_smoke_train_lowers_the_loss_and_round_trips(tiny_volume, tmp_path):
         expected = range_inverse(model.predict(encoded).double(), model_file.range).numpy()
     np.testing.assert_allclose(evaluate_keys(loaded, u, v, w), expected, rtol=2e-4, atol=1e-12)
     assert json.loads((tmp_path / "history.json").read_text())["parameters"] == model.parameter_count
+    # The model carries its relief's slopes (Smith's shadowing at render time, gratnet.shadowing).
+    assert loaded.metadata["volume"]["slope_covariance"] == volume.metadata["slope_covariance"]
+
+
+def test_a_model_of_an_older_volume_gets_the_slope_covariance_from_its_height_field(tiny_volume, capsys):
+    import argparse
+
+    from trainer.generators import generate
+    from trainer.train import model_volume_metadata
+    from trainer.train_cli import with_slope_covariance
+
+    volume, _ = tiny_volume
+    older = {key: value for key, value in volume.metadata.items() if key != "slope_covariance"}
+    assert "slope_covariance" not in model_volume_metadata(older)
+    arguments = argparse.Namespace(heightfield=None)
+    with_slope_covariance(arguments, older)
+    assert older["slope_covariance"] == list(generate("blazed", size_um=5.0).slope_covariance())
+    assert model_volume_metadata(older)["slope_covariance"] == older["slope_covariance"]
+    unknown = {**older, "source": "no-such-field.npy"}
+    del unknown["slope_covariance"]
+    with_slope_covariance(arguments, unknown)
+    assert "slope_covariance" not in unknown and "render unshadowed" in capsys.readouterr().err
 
 
 def test_zero_unseen_features_silences_exactly_the_top_sines_and_keeps_them_silent(tiny_volume, tmp_path):
