@@ -180,6 +180,27 @@ def cd_volume(path: Path, **overrides: object) -> Path:
     return path
 
 
+def test_a_reference_volume_shadows_with_its_own_slopes_or_else_its_materials(ctx, tmp_path):
+    """Smith's shadowing (gratnet.shadowing) in a --reference render: the volume's recorded slope covariance, or,
+    for a volume made before it was recorded, the material's; without a material, none."""
+    from viewer.reference import ReferenceRenderer
+    from viewer.scene_config import load_reference
+
+    materials = load_model(CD_MODEL).metadata["volume"]["slope_covariance"]
+    older = load_reference(cd_volume(tmp_path / "older.exr"), "float16", "cd")
+    assert older.metadata["slope_covariance"] == materials
+    own = [0.2, 0.01, 0.1]
+    recorded = load_reference(cd_volume(tmp_path / "own.exr", slope_covariance=own), "float16", "cd")
+    assert recorded.metadata["slope_covariance"] == own
+    alone = load_reference(cd_volume(tmp_path / "alone.exr"), "float16")
+    for volume, expected in ((older, materials), (recorded, own), (alone, [0.0, 0.0, 0.0])):
+        renderer = ReferenceRenderer(ctx, volume)
+        try:
+            assert list(renderer.slope_covariance) == expected
+        finally:
+            renderer.release()
+
+
 def test_render_reference_writes_png_and_config(tmp_path, capsys):
     volume = cd_volume(tmp_path / "cd.exr")
     out = tmp_path / "truth.png"
