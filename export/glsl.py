@@ -46,13 +46,13 @@ from gratnet.codes import HIDDEN, OUTPUT, RANGE, SCHEME
 from gratnet.errors import GratNetError
 from gratnet.featuregrid import CHUNK_FEATURES
 from gratnet.modelfile import ModelFile, pack_texture
-from gratnet.shadowing import slope_covariance_from_metadata
+from gratnet.shadowing import model_slope_covariance
 from viewer.glsl import LINE_STRIDE, SHADER_ROOT, preprocess
 from viewer.renderer import frequency_table as runtime_frequency_table
 from viewer.renderer import model_defines, xyz_to_linear_srgb_matrix
 
 __all__ = ["ENTRY_POINTS", "GRID_SAMPLER", "MODULE_INCLUDES", "SAMPLER", "SLOPE_COVARIANCE", "GlslModule",
-           "frequency_table", "glsl_module", "grid_chunks_of", "slope_covariance", "slope_covariance_value",
+           "frequency_table", "glsl_module", "grid_chunks_of", "slope_covariance_value",
            "uniform_values"]
 
 #: The runtime's files the module is made of, in include order (featuregrid.glsl before mlp.glsl, as in the
@@ -302,18 +302,10 @@ def _grid_note(model: ModelFile, material: str) -> str:
     return "\n".join(lines) + "\n"
 
 
-def slope_covariance(model: ModelFile) -> tuple[float, float, float]:
-    """The material's slope covariance (Σxx, Σxy, Σyy) of Smith's shadowing, as the runtime takes it
-    (viewer/renderer.py: ``model.metadata["volume"]``); :data:`gratnet.shadowing.NO_SHADOWING` where none is
-    recorded."""
-    volume = model.metadata.get("volume")
-    return slope_covariance_from_metadata(volume if isinstance(volume, dict) else {})
-
-
 def slope_covariance_value(model: ModelFile) -> str:
     """The GLSL initializer of :data:`SLOPE_COVARIANCE`: ``vec3(Σxx, Σxy, Σyy)``, float32 round-trip literals (the
     float32 uniform the runtime sets)."""
-    return _vector("vec3", list(slope_covariance(model)))
+    return _vector("vec3", list(model_slope_covariance(model)))
 
 
 def _material_constants(model: ModelFile) -> str:

@@ -38,8 +38,7 @@ import numpy as np
 from gratnet.errors import GratNetError
 
 __all__ = ["ERFC_COEFFICIENTS", "ERFC_P", "METADATA_KEY", "NO_SHADOWING", "check_slope_covariance",
-           "slope_covariance_from_metadata",
-           "smith_lambda", "smith_shadowing"]
+           "model_slope_covariance", "slope_covariance_from_metadata", "smith_lambda", "smith_shadowing"]
 
 #: Key of the slope covariance ``[Σxx, Σxy, Σyy]`` in a volume's metadata (and so in ``model.metadata["volume"]``).
 METADATA_KEY = "slope_covariance"
@@ -75,6 +74,14 @@ def slope_covariance_from_metadata(metadata: Mapping[str, object]) -> tuple[floa
     if value is None:
         return NO_SHADOWING
     return check_slope_covariance(value, f"the metadata's {METADATA_KEY!r}")
+
+
+def model_slope_covariance(model: object) -> tuple[float, float, float]:
+    """The slope covariance a model file records under ``metadata["volume"]`` (every renderer of the model takes this
+    one); :data:`NO_SHADOWING` when it records none."""
+    metadata = getattr(model, "metadata", None)
+    volume = metadata.get("volume") if isinstance(metadata, Mapping) else None
+    return slope_covariance_from_metadata(volume if isinstance(volume, Mapping) else {})
 
 
 def smith_lambda(direction: np.ndarray, covariance: Sequence[float]) -> np.ndarray:

@@ -34,7 +34,7 @@ import numpy as np
 from gratnet.brdf import a_term
 from gratnet.display import xyz_to_linear_srgb
 from gratnet.modelfile import ModelFile, evaluate_keys
-from gratnet.shadowing import slope_covariance_from_metadata, smith_shadowing
+from gratnet.shadowing import model_slope_covariance, smith_shadowing
 from viewer.meshes import arbitrary_tangents
 
 __all__ = [
@@ -96,9 +96,7 @@ def eval_linear_srgb(model: ModelFile, light: np.ndarray, view: np.ndarray, ior:
     light, view = np.broadcast_arrays(np.asarray(light, dtype=np.float64).reshape(-1, 3),
                                       np.asarray(view, dtype=np.float64).reshape(-1, 3))
     matrix = xyz_to_linear_srgb_matrix() if matrix is None else matrix
-    volume = model.metadata.get("volume")
-    covariance = slope_covariance_from_metadata(volume if isinstance(volume, dict) else {})
-    a = a_term(light, view, ior) * smith_shadowing(light, view, covariance)
+    a = a_term(light, view, ior) * smith_shadowing(light, view, model_slope_covariance(model))
     result = np.zeros(light.shape, dtype=np.float64)
     lit = np.flatnonzero(np.isfinite(a) & (a > 0.0))
     for start in range(0, lit.size, CHUNK):

@@ -23,7 +23,7 @@ from gratnet.precision import (
     exceeding,
     raster_key_error,
 )
-from gratnet.shadowing import NO_SHADOWING, slope_covariance_from_metadata, smith_shadowing
+from gratnet.shadowing import NO_SHADOWING, model_slope_covariance, smith_shadowing
 from viewer.state import ViewerState
 
 if TYPE_CHECKING:
@@ -242,8 +242,7 @@ def check_plane_against_numpy(image: np.ndarray, key_a: np.ndarray, model, camer
     specular peak (pixel (10, 13): 716.6, v = 0.004, on eq. 6's sqrt) by 3 %: ill-conditioned.
     """
     if slope_covariance is None:  # the model's own (gratnet.shadowing), as the renderer takes it
-        volume = model.metadata.get("volume")
-        slope_covariance = slope_covariance_from_metadata(volume if isinstance(volume, dict) else {})
+        slope_covariance = model_slope_covariance(model)
     geometry = plane_geometry(camera, light, size, slope_covariance)
     covered = np.ones(image.shape[:2], dtype=bool)
     assert np.all(image[..., 3] == 1.0)
@@ -428,10 +427,8 @@ STEEP = ("paper-corner-cubes", "paper-pits")
 
 def model_shadowing(model, wi: np.ndarray, wo: np.ndarray) -> np.ndarray:
     """gratnet.shadowing's S (float64) at the float32 directions, for the model's slope covariance as the runtime
-    takes it (export/glsl.py's slope_covariance: ``metadata["volume"]``, none: S = 1 above the horizon)."""
-    from export.glsl import slope_covariance
-
-    return smith_shadowing(wi.astype(np.float64), wo.astype(np.float64), slope_covariance(model))
+    takes it (gratnet.shadowing.model_slope_covariance; none recorded: S = 1 above the horizon)."""
+    return smith_shadowing(wi.astype(np.float64), wo.astype(np.float64), model_slope_covariance(model))
 
 
 def shade_expectations(model, wi: np.ndarray, wo: np.ndarray, xyz: np.ndarray, xyz_bound: np.ndarray,

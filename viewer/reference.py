@@ -69,8 +69,6 @@ class ReferenceRenderer(ShadingPrograms):
         volume: the ground-truth volume (``gratnet.volume.read_volume``); its metadata must name its ``scheme``.
         shader_root: folder of the GLSL files (default: the repository's ``shaders/``).
         precision: ``float16`` (default) or ``float32`` storage (:data:`gratnet.reference.PRECISIONS`).
-        slope_covariance: the relief's slopes for Smith's shadowing (gratnet.shadowing); ``None``: the volume's
-            metadata's (none recorded: unshadowed). A volume made before it was recorded takes its model's.
 
     Attributes:
         volume: the volume; ``scheme``: its sampling scheme; ``precision``: the storage;
@@ -78,7 +76,7 @@ class ReferenceRenderer(ShadingPrograms):
     """
 
     def __init__(self, ctx: moderngl.Context, volume: Volume, shader_root: str | Path | None = None,
-                 precision: str = "float16", slope_covariance: tuple[float, float, float] | None = None) -> None:
+                 precision: str = "float16") -> None:
         self.precision = check_precision(precision)
         scheme = volume.metadata.get("scheme")
         if scheme not in SCHEME:
@@ -86,9 +84,9 @@ class ReferenceRenderer(ShadingPrograms):
                                f"{scheme!r}")
         check_uniform_slices(volume.metadata, volume.slices)
         check_reference_limits(volume.slices, volume.resolution, precision, ctx.info)
-        if slope_covariance is None:
-            slope_covariance = slope_covariance_from_metadata(volume.metadata)
-        super().__init__(ctx, _DEFINES, shader_root, slope_covariance=slope_covariance)
+        # Smith's shadowing with the volume's recorded slopes (viewer.scene_config.load_reference gives an older
+        # volume its material's); none recorded: unshadowed.
+        super().__init__(ctx, _DEFINES, shader_root, slope_covariance=slope_covariance_from_metadata(volume.metadata))
         self.volume = volume
         self.scheme = str(scheme)
         self.values = stored_values(volume.xyz, precision)

@@ -25,7 +25,7 @@ from gratnet.codes import HIDDEN, MODE, OUTPUT, RANGE, SCHEME, WEIGHTS_PATHS, We
 from gratnet.errors import GratNetError
 from gratnet.featuregrid import CHUNK_FEATURES, grid_chunks
 from gratnet.modelfile import LEAKY_RELU_SLOPE, ModelFile, pack_texture, texture_layout
-from gratnet.shadowing import slope_covariance_from_metadata
+from gratnet.shadowing import model_slope_covariance
 from viewer.baked import baked_mlp_source
 from viewer.glsl import GeneratedSource, compile_program
 from viewer.shading import (
@@ -209,9 +209,7 @@ class NetworkRenderer(ShadingPrograms):
         #: The packed weight texture (docs/formats.md), ``float32`` ``(rows, texels per row, 4)``, on either path
         #: (the deferred path's weight buffers hold the same texels).
         self.packed_weights = np.ascontiguousarray(texture, dtype=np.float32)
-        volume_metadata = model.metadata.get("volume")
-        super().__init__(ctx, model_defines(model), shader_root, slope_covariance=slope_covariance_from_metadata(
-            volume_metadata if isinstance(volume_metadata, dict) else {}))
+        super().__init__(ctx, model_defines(model), shader_root, slope_covariance=model_slope_covariance(model))
         self.model = model
         self.layout = layout
         self.weights_path = choose_weights_path(ctx, model, weights_path)

@@ -19,6 +19,7 @@ from gratnet.errors import GratNetError
 from gratnet.shadowing import (
     NO_SHADOWING,
     check_slope_covariance,
+    model_slope_covariance,
     slope_covariance_from_metadata,
     smith_lambda,
     smith_shadowing,
@@ -119,3 +120,10 @@ def test_metadata_without_a_covariance_means_unshadowed():
     assert slope_covariance_from_metadata({"slope_covariance": [0.1, 0.0, 0.2]}) == (0.1, 0.0, 0.2)
     with pytest.raises(GratNetError, match="slope_covariance"):
         slope_covariance_from_metadata({"slope_covariance": [0.1, 0.0, -0.2]})
+    # A model's: under metadata["volume"]; a model without one, or with another kind of entry there, is unshadowed.
+    from types import SimpleNamespace
+
+    assert model_slope_covariance(SimpleNamespace(metadata={"volume": {"slope_covariance": [0.1, 0.0, 0.2]}})) == (
+        0.1, 0.0, 0.2)
+    for metadata in ({}, {"volume": None}, {"volume": "text"}):
+        assert model_slope_covariance(SimpleNamespace(metadata=metadata)) == NO_SHADOWING
