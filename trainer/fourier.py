@@ -237,6 +237,8 @@ class FTerm:
         w_slices: Sequence[float | np.ndarray],
         progress: bool | str = False,
         wavelengths: Sequence[int] | None = None,
+        initial: np.ndarray | None = None,
+        after_wavelength: Callable[[int, Callable[[], np.ndarray]], None] | None = None,
     ) -> np.ndarray:
         """CIE XYZ on the grid u (columns) × v (rows) for each entry of ``w_slices``.
 
@@ -246,7 +248,10 @@ class FTerm:
         bar over wavelengths (a string sets its label). ``wavelengths`` (indices into the spectral
         samples) sums only those wavelengths' terms: XYZ is a sum over λ, so parts computed apart add
         up to the whole (the Chebyshev plan still follows the full spectrum, so every part uses the
-        same nodes).
+        same nodes). ``initial`` (float64, the result's shape) is a sum to continue from, and
+        ``after_wavelength(done, fetch)`` is called after each wavelength with the number done and a function
+        returning the sum so far as numpy: together they make a resumable computation whose sum is the
+        uninterrupted one's, bit for bit (trainer.groundtruth's checkpoints).
         """
         u = np.asarray(u, dtype=np.float64)
         v = np.asarray(v, dtype=np.float64)
@@ -260,7 +265,10 @@ class FTerm:
                                    f"expected {(v.size, u.size)}")
         ops = _NumpyOps() if self.device is None else _TorchOps(self.device)
         heights = ops.put(self.heights)  # the integration grid's heights where the products run
-        result = ops.zeros((len(w_slices), v.size, u.size, 3), complex_=False)
+        shape = (len(w_slices), v.size, u.size, 3)
+        if initial is not None and initial.shape != shape:
+            raise GratNetError(f"the sum to continue from has shape {initial.shape}, expected {shape}")
+        result = ops.zeros(shape, complex_=False) if initial is None else ops.put(np.array(initial, dtype=np.float64))
         interpolation = _ChebyshevPlan(
             np.stack([np.asarray(w_slices[i], dtype=np.float64) for i in varying]) if varying else None,
             self.surface.half_span_um,
@@ -274,8 +282,8 @@ class FTerm:
             unit="λ", disable=not progress, leave=False,
         )
         with bar, ops.exact_products():
-            for wavelength, weights in zip(self.spectral.wavelengths_um[chosen], self.spectral.xyz_weights[chosen],
-                                           strict=True):
+            for done, (wavelength, weights) in enumerate(
+                    zip(self.spectral.wavelengths_um[chosen], self.spectral.xyz_weights[chosen], strict=True), 1):
                 wavenumber = 2.0 * np.pi / wavelength
                 kernel_x = ops.put(self._kernel(u, self.surface.x_um, self.surface.window_x, wavenumber))
                 kernel_y = ops.put(self._kernel(v, self.surface.y_um, self.surface.window_y, wavenumber))
@@ -292,6 +300,8 @@ class FTerm:
                     power = interpolation.power(transform, ops)
                     result[varying] += power[..., None] * xyz_weights
                 bar.update(1)
+                if after_wavelength is not None:
+                    after_wavelength(done, lambda: ops.fetch(result))
         return ops.fetch(result)
 
     def xyz_points(self, u: np.ndarray, v: np.ndarray, w: np.ndarray, chunk: int = 4096,
@@ -373,7 +383,9 @@ class _ChebyshevPlan:
             value = (self.barycentric[j] / (self.s - self.nodes[j])) / self.denominator
         value = np.where(self.exact_node >= 0, (self.exact_node == j).astype(np.float64), value)
         if self.cache is not None:
-            self.cache[j] = value.astype(np.float32)
+            # The float32 copy from the first wavelength on, so that every wavelength (and a run resumed at any
+            # of them) sums the same numbers.
+            self.cache[j] = value = value.astype(np.float32)
         return value
 
     def power(self, transform: Callable[[float], Any], ops: _NumpyOps | _TorchOps | None = None) -> Any:

@@ -8,12 +8,18 @@ from __future__ import annotations
 
 import dataclasses
 import datetime
+import hashlib
+import json
 import os
+import time
+import zipfile
 from collections.abc import Callable
+from pathlib import Path
 
 import numpy as np
 
 from gratnet import __version__
+from gratnet.atomic import atomic_path
 from gratnet.config import config_field
 from gratnet.errors import GratNetError
 from gratnet.shadowing import METADATA_KEY as SLOPE_COVARIANCE_KEY
@@ -111,6 +117,79 @@ def compute_volume_part(
     return xyz, engine.last_node_count
 
 
+def checkpoint_path_for(out: str | os.PathLike[str]) -> Path:
+    """Where ``gratnet groundtruth --out VOLUME.exr`` keeps its partial sum while it runs: VOLUME.exr.partial.npz."""
+    out = Path(out)
+    return out.with_name(out.name + ".partial.npz")
+
+
+def checkpoint_fingerprint(surface: PreparedSurface, config: VolumeConfig, optics: OpticsConfig,
+                           device: str | None) -> str:
+    """What a partial sum depends on (the grid, the optics, the prepared heights, the device's rounding), as a
+    SHA-256: a checkpoint is continued only by the computation that wrote it."""
+    digest = hashlib.sha256()
+    settings = {"volume": dataclasses.asdict(config), "optics": dataclasses.asdict(optics),
+                "device": _device_name(device), "dx_um": surface.dx_um, "half_span_um": surface.half_span_um}
+    digest.update(json.dumps(settings, sort_keys=True).encode("utf-8"))
+    for array in (surface.heights_um, surface.x_um, surface.y_um, surface.window_x, surface.window_y):
+        digest.update(np.ascontiguousarray(array).tobytes())
+    return digest.hexdigest()
+
+
+def compute_volume_sum_resumable(
+    surface: PreparedSurface,
+    config: VolumeConfig,
+    optics: OpticsConfig,
+    checkpoint: Path,
+    resume: bool,
+    save_every_s: float = 600.0,
+    progress: bool = True,
+    device: str | None = None,
+) -> tuple[np.ndarray, int]:
+    """:func:`compute_volume_part` over all wavelengths, its partial sum saved to ``checkpoint`` (atomically,
+    at most every ``save_every_s`` seconds) so that an interrupted run continues with ``resume`` instead of
+    starting again; the sum is the uninterrupted run's, bit for bit. The checkpoint is removed at the end."""
+    spectral = spectral_weights(optics.wavelength_start_nm, optics.wavelength_end_nm, optics.wavelength_step_nm)
+    count = len(spectral.wavelengths_nm)
+    fingerprint = checkpoint_fingerprint(surface, config, optics, device)
+    start, initial = 0, None
+    if resume:
+        start, initial = read_checkpoint(checkpoint, fingerprint)
+    u, v, w_slices = volume_key_vectors(config)
+    engine = FTerm(surface, spectral, optics.tolerance, device=device)
+    last_save = time.monotonic()
+
+    def save(done: int, fetch: Callable[[], np.ndarray]) -> None:
+        nonlocal last_save
+        if start + done < count and time.monotonic() - last_save >= save_every_s:
+            with atomic_path(checkpoint, output=False) as temporary, open(temporary, "wb") as stream:
+                np.savez(stream, xyz=fetch(), done=start + done, fingerprint=fingerprint)
+            last_save = time.monotonic()
+
+    label = "ground truth" if start == 0 else f"ground truth ({start} of {count} λ from the checkpoint)"
+    xyz = engine.xyz_grid(u, v, w_slices, progress=label if progress else False, wavelengths=range(start, count),
+                          initial=initial, after_wavelength=save)
+    checkpoint.unlink(missing_ok=True)
+    return xyz, engine.last_node_count
+
+
+def read_checkpoint(checkpoint: Path, fingerprint: str) -> tuple[int, np.ndarray]:
+    """The wavelengths done and the partial sum of a checkpoint written for ``fingerprint``; one clear error
+    where there is none, it is unreadable, or it belongs to another computation."""
+    if not checkpoint.is_file():
+        raise GratNetError(f"--resume: there is no {checkpoint} to continue from; leave out --resume to start afresh")
+    try:
+        with np.load(checkpoint) as stored:
+            done, xyz, written_for = int(stored["done"]), np.array(stored["xyz"]), str(stored["fingerprint"])
+    except (OSError, KeyError, ValueError, zipfile.BadZipFile) as error:
+        raise GratNetError(f"--resume: {checkpoint} is unreadable ({error}); leave out --resume to start "
+                           "afresh") from error
+    if written_for != fingerprint:
+        raise GratNetError(f"--resume: {checkpoint} was written for another height field, grid, optics or device; "
+                           "leave out --resume to start afresh")
+    return done, xyz
+
+
 def compute_volume(
     field: HeightField,
     config: VolumeConfig,
@@ -119,11 +198,19 @@ def compute_volume(
     progress: bool = True,
     surface: PreparedSurface | None = None,
     device: str | None = None,
+    checkpoint: Path | None = None,
+    resume: bool = False,
+    save_every_s: float = 600.0,
 ) -> Volume:
     """Sample CIE XYZ(u, v, w) of ``field`` on ``config``'s grid (eq. 1–3 of physics.md); ``device`` as
-    :class:`trainer.fourier.FTerm`'s (None: numpy), recorded in the metadata."""
+    :class:`trainer.fourier.FTerm`'s (None: numpy), recorded in the metadata. With ``checkpoint`` the partial
+    sum is kept there as it grows and ``resume`` continues from it (:func:`compute_volume_sum_resumable`)."""
     surface = surface or prepare_surface(field, optics, report)
-    xyz, node_count = compute_volume_part(surface, config, optics, progress=progress, device=device)
+    if checkpoint is None:
+        xyz, node_count = compute_volume_part(surface, config, optics, progress=progress, device=device)
+    else:
+        xyz, node_count = compute_volume_sum_resumable(surface, config, optics, checkpoint, resume, save_every_s,
+                                                       progress, device)
     volume = volume_from_sum(field, config, optics, surface, xyz, node_count)
     volume.metadata["compute_device"] = _device_name(device)
     return volume

@@ -6,6 +6,7 @@ Public flags (keep them): --out, --res, --slices, --sampling, --sigma-s, --previ
 from __future__ import annotations
 
 import argparse
+import sys
 import time
 from pathlib import Path
 
@@ -36,6 +37,12 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                         help="slice shown by --preview, 0 to SLICES−1 or negative from the end (default: -1, the last)")
     parser.add_argument("--exposure", type=parse_float, default=None,
                         help="preview exposure, > 0 (default: chosen so the slice's brightest 0.1%% is white)")
+    parser.add_argument("--resume", action="store_true",
+                        help="continue from VOLUME.exr.partial.npz, the partial sum an interrupted run left (the "
+                        "same command and height field; the result is the uninterrupted run's, bit for bit)")
+    parser.add_argument("--checkpoint-minutes", type=parse_float, default=10.0,
+                        help="save the partial sum to VOLUME.exr.partial.npz at most this often, in minutes of "
+                        "wall time, > 0 (default: 10); it is removed when the volume is written")
     add_arguments(parser, VolumeConfig)
     add_arguments(parser, ComputeConfig)
     parser.set_defaults(handler=run)
@@ -49,7 +56,7 @@ def run(arguments: argparse.Namespace) -> int:
     from gratnet.config import config_path_for, config_text
     from gratnet.errors import GratNetError
     from trainer.cli_support import check_volume_limits, read_heightfield_input, reporter, require_suffix
-    from trainer.groundtruth import ComputeConfig, VolumeConfig, compute_volume
+    from trainer.groundtruth import ComputeConfig, VolumeConfig, checkpoint_path_for, compute_volume
     from trainer.preview import save_slice_preview
 
     # Every output is checked before minutes of computation.
@@ -68,12 +75,22 @@ def run(arguments: argparse.Namespace) -> int:
                            f"{volume_config.slices} slices")
     if arguments.exposure is not None and not arguments.exposure > 0:
         raise GratNetError(f"--exposure must be > 0, got {arguments.exposure:g}")
+    if not arguments.checkpoint_minutes > 0:
+        raise GratNetError(f"--checkpoint-minutes must be > 0, got {arguments.checkpoint_minutes:g}")
+    checkpoint = checkpoint_path_for(arguments.out)
+    if arguments.resume and not checkpoint.is_file():  # computing afresh would silently ignore --resume
+        raise GratNetError(f"--resume: there is no {checkpoint} to continue from; leave out --resume to start afresh")
     compute_config = from_arguments(ComputeConfig, arguments)
     device = compute_config.resolve()
     field, optics, load_options = read_heightfield_input(arguments)
     started = time.perf_counter()
-    volume = compute_volume(field, volume_config, optics, report=reporter("groundtruth"),
-                            progress=not arguments.quiet, device=device)
+    try:
+        volume = compute_volume(field, volume_config, optics, report=reporter("groundtruth"),
+                                progress=not arguments.quiet, device=device, checkpoint=checkpoint,
+                                resume=arguments.resume, save_every_s=60.0 * arguments.checkpoint_minutes)
+    except KeyboardInterrupt:
+        print(f"gratnet groundtruth: interrupted; {interrupted_state(checkpoint)}", file=sys.stderr)
+        return 130
     elapsed = time.perf_counter() - started
     volume.metadata["compute_seconds"] = round(elapsed, 3)
     slice_index, exposure = arguments.preview_slice, arguments.exposure
@@ -95,3 +112,20 @@ def run(arguments: argparse.Namespace) -> int:
     if arguments.preview:
         print(f"wrote {arguments.preview} (slice {slice_index}, exposure {exposure:.4g})")
     return 0
+
+
+def interrupted_state(checkpoint: Path) -> str:
+    """What an interrupted ground truth leaves, in words: the checkpoint's wavelengths and how to continue."""
+    import zipfile
+
+    import numpy as np
+
+    if not checkpoint.is_file():
+        return "no checkpoint was saved yet, so there is nothing to resume from"
+    try:
+        with np.load(checkpoint) as stored:
+            done = int(stored["done"])
+    except (OSError, KeyError, ValueError, zipfile.BadZipFile):
+        return f"{checkpoint} is unreadable; start afresh without --resume"
+    return (f"{checkpoint} holds {done} wavelengths: the same command with --resume continues from there, "
+            "as the uninterrupted run would have")
