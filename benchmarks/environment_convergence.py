@@ -7,14 +7,14 @@
         --figure docs/images/environment_convergence_256.png
 
 For one material, mesh and environment (the map as it is, unturned; the camera of the material's default view,
-``gratnet render``'s), a
-reference is rendered with multiple importance sampling at ``--reference-spp`` passes (seed 1000), then each
-strategy of ``--environment-sampling`` (mis, light, material; seed 0) progressively up to ``--max-spp``: after
-1, 2, 4, … passes the mean so far is scored against the reference by FLIP (``gratnet.display.ldr_flip``, both
-at the exposure the reference's picture calls for: gratnet.showcase.suggest_exposure) and by the relative
-RMSE of the lit pixels. Each pass is timed (wall, this machine's GL: llvmpipe on a CPU machine; the load
-average is recorded). Writes a JSON record (atomically) and a figure (FLIP against spp and against seconds,
-log-log), and prints one line per point. docs/benchmarks.md shows the figure of the shipped run.
+``gratnet render``'s), a reference is rendered with the default sampling (resampled) at ``--reference-spp`` passes
+(seed 1000), then each strategy of ``--environment-sampling`` (mis, light, material, resampled; seed 0)
+progressively up to ``--max-spp``: after 1, 2, 4, … passes the mean so far is scored against the reference by FLIP
+(``gratnet.display.ldr_flip``, both at the exposure the reference's picture calls for:
+gratnet.showcase.suggest_exposure) and by the relative RMSE of the lit pixels. Each pass is timed (wall, this
+machine's GL: llvmpipe on a CPU machine; the load average is recorded). Writes a JSON record (atomically) and a
+figure (FLIP against spp and against seconds, log-log), and prints one line per point. docs/benchmarks.md shows the
+figure of the shipped run.
 
 ``--volume``: shade with the material's ground-truth volume looked up per pixel (``gratnet render --reference``)
 instead of its network: the same estimator and the same noise at a small fraction of the network's cost per pass,
@@ -35,7 +35,7 @@ from typing import Any
 import numpy as np
 
 from gratnet.atomic import atomic_paths
-from gratnet.codes import ENVIRONMENT_SAMPLING
+from gratnet.codes import DEFAULT_ENVIRONMENT_SAMPLING, ENVIRONMENT_SAMPLING
 from gratnet.display import ldr_flip, xyz_to_display_srgb8
 from gratnet.environment import load_environment
 from gratnet.errors import GratNetError
@@ -108,12 +108,13 @@ def main(argv: list[str] | None = None) -> int:
                                          first_sample=first, environment=environment, seed=seed,
                                          sampling=sampling).astype(np.float64)
 
-            passes(0, 1, 0, "mis")  # compiles the program and builds the importance table: not timed
+            # Compiles the program and builds the importance table: not timed.
+            passes(0, 1, 0, DEFAULT_ENVIRONMENT_SAMPLING)
             reference_sum = np.zeros((*size[::-1], 4))
             done = 0
             while done < arguments.reference_spp:
                 count = min(_PASSES_PER_CALL, arguments.reference_spp - done)
-                reference_sum += passes(done, count, 1000, "mis") * count
+                reference_sum += passes(done, count, 1000, DEFAULT_ENVIRONMENT_SAMPLING) * count
                 done += count
                 print(f"reference: {done}/{arguments.reference_spp} passes", file=sys.stderr, end="\r")
             print(file=sys.stderr)

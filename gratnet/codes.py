@@ -26,7 +26,7 @@ from __future__ import annotations
 import dataclasses
 import enum
 
-from gratnet.area_lights import AREA_KINDS
+from gratnet.area_lights import AREA_KINDS, MAX_AREA_LIGHTS
 from gratnet.errors import GratNetError
 from gratnet.lights import LIGHT_KINDS
 
@@ -37,6 +37,7 @@ __all__ = [
     "COUNTER_SLOTS",
     "DEFERRED_TILE",
     "DEFERRED_WEIGHTS",
+    "DEFAULT_ENVIRONMENT_SAMPLING",
     "ENVIRONMENT_SAMPLING",
     "GLSL_INCLUDE",
     "HIDDEN",
@@ -136,9 +137,15 @@ COUNTER = Codes("COUNTER", "work counter",
 #: Light kinds, from the light registry (gratnet.lights): shaders/lights.glsl.
 LIGHT = Codes("LIGHT", "light kind", tuple(kind.name for kind in LIGHT_KINDS), "u_light_kind")
 #: How an environment light is sampled (shaders/environment.glsl): both strategies weighted by multiple importance
-#: sampling (``mis``, the default), or one alone (``light``: the map's luminance; ``material``: the material's table).
-ENVIRONMENT_SAMPLING = Codes("SAMPLING", "environment sampling", ("mis", "light", "material"),
+#: sampling (``mis``), one alone (``light``: the map's luminance; ``material``: the material's table), or
+#: ``resampled``: candidates from both, one kept in proportion to the expected shading (resampled importance
+#: sampling; the GL renderer's default).
+ENVIRONMENT_SAMPLING = Codes("SAMPLING", "environment sampling", ("mis", "light", "material", "resampled"),
                              "u_environment_sampling")
+#: The GL renderer's sampling when none is asked for (the least noise per pass: docs/benchmarks.md).
+DEFAULT_ENVIRONMENT_SAMPLING = "resampled"
+#: The most candidates one pass of ``resampled`` sampling may draw (shaders/environment.glsl's loop bound).
+MAX_CANDIDATES = 64
 #: Area light kinds, from their registry (gratnet.area_lights): shaders/area_lights.glsl.
 AREA = Codes("AREA", "area light kind", tuple(kind.name for kind in AREA_KINDS), "u_area_kind")
 #: Every table, for the generated defines and the tests.
@@ -163,7 +170,8 @@ GLSL_INCLUDE = "codes.glsl"
 def glsl_defines() -> dict[str, int]:
     """Every generated define: the tables' codes, ``COUNTER_COUNT``, the bindings and ``DEFERRED_TILE``."""
     entries = [item for table in TABLES for item in table.defines().items()]
-    entries += [("COUNTER_COUNT", COUNTER_SLOTS), *BINDINGS.items(), ("DEFERRED_TILE", DEFERRED_TILE)]
+    entries += [("COUNTER_COUNT", COUNTER_SLOTS), *BINDINGS.items(), ("DEFERRED_TILE", DEFERRED_TILE),
+                ("MAX_AREA_LIGHTS", MAX_AREA_LIGHTS), ("MAX_CANDIDATES", MAX_CANDIDATES)]
     defines = dict(entries)
     if len(defines) != len(entries):
         raise GratNetError("gratnet.codes: two codes have the same GLSL name")

@@ -104,6 +104,8 @@ __all__ = [
     "DEFENSIVE_SHARE",
     "FLOOR_SHARE",
     "KEY_LIMIT",
+    "RESAMPLING_CANDIDATES",
+    "RESAMPLING_MATERIAL_SHARE",
     "MAX_RESOLUTION",
     "MIN_RESOLUTION",
     "Luminance",
@@ -127,6 +129,10 @@ FLAT_RESOLUTION = 64
 #: Share of samples drawn cosine-weighted over the upper hemisphere: every direction above the horizon keeps a
 #: density ≥ DEFENSIVE_SHARE · cos θ / π, so the estimator's weight is bounded where the table is too low.
 DEFENSIVE_SHARE = 0.1
+#: Resampled sampling (gratnet.codes.ENVIRONMENT_SAMPLING ``resampled``, shaders/environment.glsl): candidates per
+#: pass, and the share of them drawn by the material's table (the rest by the environment's luminance).
+RESAMPLING_CANDIDATES = 8
+RESAMPLING_MATERIAL_SHARE = 0.25
 #: The table's square is [−KEY_LIMIT, KEY_LIMIT]² in (u, v): the volume's axes (gratnet.volume.AXIS_LIMIT).
 KEY_LIMIT = 2.0
 #: Cells per axis of the default table.

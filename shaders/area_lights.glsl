@@ -3,9 +3,8 @@
 // its branches here. gratnet.area_lights holds the numpy twins (radiance_towards, solid_angle_pdf).
 // Included by environment.glsl; no visibility: a light neither shadows the surface nor hides another light.
 
-#include "codes.glsl"
+#include "codes.glsl"  // the AREA_* codes and MAX_AREA_LIGHTS (gratnet.area_lights)
 
-#define MAX_AREA_LIGHTS 8
 #define PI_AREA 3.14159265358979
 
 uniform int u_area_count;                          // lights in use, 0 … MAX_AREA_LIGHTS

@@ -37,9 +37,11 @@ uniform float u_defensive_share;              // share of cosine-weighted materi
 uniform int u_sample_index;                   // the render pass (sample) index k
 uniform ivec2 u_pixel_origin;                 // this target's place in the whole picture (a band of it: viewer)
 uniform uint u_seed;                          // the render's seed
-uniform int u_environment_sampling;           // SAMPLING_MIS, SAMPLING_LIGHT or SAMPLING_MATERIAL
+uniform int u_environment_sampling;           // SAMPLING_MIS, SAMPLING_LIGHT, SAMPLING_MATERIAL or SAMPLING_RESAMPLED
 uniform bool u_delta_light;                   // the delta light of lights.glsl takes its turn too
 uniform bool u_has_environment;               // false: area lights only (the map's textures are placeholders)
+uniform int u_candidates;                     // SAMPLING_RESAMPLED: candidates per pass, 1 .. MAX_CANDIDATES
+uniform float u_candidate_material_share;     // SAMPLING_RESAMPLED: the share of candidates from material sampling
 
 // The map's unit-square point (x: azimuth, y: polar angle / pi) of a world direction (gratnet.environment).
 vec2 environment_point(vec3 world) {
@@ -131,6 +133,73 @@ bool sample_material(vec3 wo, vec3 xi, out vec3 wi) {
     return planar_squared < 1.0;
 }
 
+// Resampled importance sampling of the environment (SAMPLING_RESAMPLED; Talbot, Cline & Egbert 2005): u_candidates
+// directions drawn from the mixture q = (1 - m) p_light + m p_material (m = u_candidate_material_share; each candidate
+// weighed by the mixture's density, whichever strategy drew it), one of them kept with probability proportional to
+// target / q, where the target is what the network is expected to give there, A * S * T(u, v) * Y(L): the A-term and
+// Smith's shadowing exactly, the material's (u, v) table T for XYZ (its floor keeps it > 0 wherever light can come
+// from) and the luminance of the radiance. Returns L(y) * (sum of target/q) / (candidates * target(y)) for the kept
+// direction y (world, `wi_world`), so that the pass's A * S * XYZ(y) times it is an unbiased estimate of the
+// environment's integral (invalid candidates count in the mean as zeros); 0 when every candidate was. The first
+// candidate's 2-D numbers are the strategy's stratified ones (`first`), the rest hashed per pixel, pass and candidate.
+vec3 resample_environment(vec3 wo, mat3 world_to_tangent, uvec2 pixel, vec2 first, out vec3 wi_world) {
+    mat3 tangent_to_world = transpose(world_to_tangent);
+    float share = u_candidate_material_share;
+    float total = 0.0;  // sum of target / q over the candidates
+    float kept_target = 0.0;
+    vec3 kept_radiance = vec3(0.0);
+    wi_world = vec3(0.0, 0.0, 1.0);
+    for (int k = 0; k < MAX_CANDIDATES; ++k) {
+        if (k >= u_candidates) {
+            break;
+        }
+        uvec3 hashed = pcg3d(uvec3(pixel, (uint(u_sample_index) * 0x9e3779b9u) ^ (uint(k) * 0x85ebca6bu)
+                                           ^ (u_seed * 0xc2b2ae35u) ^ 0x27d4eb2fu));
+        vec4 xi = vec4(vec3(hashed >> 8u), float(pcg3d(hashed).x >> 8u)) * (1.0 / 16777216.0);
+        if (k == 0) {
+            xi.yz = first;
+        }
+        vec3 world;
+        vec3 wi;
+        if (xi.x < share) {  // material sampling, its branch chosen by xi.x / share (uniform on [0, 1) again)
+            if (!sample_material(wo, vec3(xi.x / share, xi.yz), wi)) {
+                continue;
+            }
+            wi = normalize(wi);
+            world = tangent_to_world * wi;
+        } else {
+            float density;
+            world = sample_environment(xi.yz, density);
+            if (!(density > 0.0)) {
+                continue;
+            }
+            wi = world_to_tangent * world;
+        }
+        if (!(wi.z > 0.0)) {
+            continue;  // below this point's horizon: no light from there
+        }
+        float material = material_pdf(wo, wi);
+        float source = (1.0 - share) * environment_pdf(world) + share * material;
+        vec3 radiance = environment_radiance(world);
+        float target = a_term(wi, wo, u_ior) * smith_shadowing(wi, wo, u_slope_covariance) * (material / wi.z)
+                       * dot(radiance, vec3(0.2126, 0.7152, 0.0722));  // linear sRGB's luminance
+        float weight = target / source;
+        if (!(source > 0.0) || !(weight > 0.0) || isinf(weight)) {
+            continue;
+        }
+        total += weight;
+        if (xi.w * total < weight) {  // keep this candidate with probability weight / total (a one-slot reservoir)
+            kept_target = target;
+            kept_radiance = radiance;
+            wi_world = world;
+        }
+    }
+    if (!(total > 0.0) || !(kept_target > 0.0)) {
+        return vec3(0.0);
+    }
+    return kept_radiance * (total / (float(u_candidates) * kept_target));
+}
+
 // The power heuristic's weight of a strategy of density `chosen` beside one of density `other`.
 float power_weight(float chosen, float other) {
     if (!(chosen > 0.0)) {
@@ -147,9 +216,10 @@ float power_weight(float chosen, float other) {
 // material sampling (power heuristic), so a material sample adds every emitter it meets, each with its weight.
 void environment_incidence(vec3 position, mat3 world_to_tangent, vec3 wo, out vec3 wi_world, out float irradiance,
                            out vec3 tint) {
-    bool mis = u_environment_sampling == SAMPLING_MIS;
+    bool resampled = u_environment_sampling == SAMPLING_RESAMPLED;  // the environment by resample_environment
+    bool mis = u_environment_sampling == SAMPLING_MIS || resampled;  // area lights: MIS as ever
     bool by_light = u_environment_sampling != SAMPLING_MATERIAL;
-    bool by_material = u_environment_sampling != SAMPLING_LIGHT;
+    bool by_material = u_environment_sampling != SAMPLING_LIGHT && !(resampled && u_area_count == 0);
     int emitters = (u_has_environment ? 1 : 0) + u_area_count;
     uint light_strategies = by_light ? uint(emitters) : 0u;
     uint sampled = light_strategies + (by_material ? 1u : 0u);  // sampling strategies
@@ -182,6 +252,11 @@ void environment_incidence(vec3 position, mat3 world_to_tangent, vec3 wo, out ve
         int emitter = int(strategy) - (u_has_environment ? 1 : 0);  // -1: the environment, else an area light
         float chosen;
         vec3 radiance;
+        if (emitter < 0 && resampled) {
+            tint = resample_environment(wo, world_to_tangent, pixel, xi.yz, wi_world) * strategies;
+            irradiance = 1.0;
+            return;
+        }
         if (emitter < 0) {
             wi_world = sample_environment(xi.yz, chosen);
             radiance = environment_radiance(wi_world);
@@ -208,7 +283,7 @@ void environment_incidence(vec3 position, mat3 world_to_tangent, vec3 wo, out ve
             return;
         }
         wi_world = tangent_to_world * wi;
-        if (u_has_environment) {
+        if (u_has_environment && !resampled) {  // resampled: the environment's passes hold all of its light
             float weight = mis ? power_weight(chosen, environment_pdf(wi_world)) : 1.0;
             light += environment_radiance(wi_world) * weight;
         }

@@ -5,6 +5,7 @@ conftest.py), never from one another: tests/contract/test_architecture.py checks
 
 from __future__ import annotations
 
+import math
 from collections.abc import Callable
 from pathlib import Path
 from typing import TYPE_CHECKING
@@ -13,6 +14,7 @@ import numpy as np
 
 from gratnet.brdf import a_term, direction
 from gratnet.encoding import EncodingSpec, RangeSpec
+from gratnet.environment import Environment
 from gratnet.modelfile import ModelFile, evaluate_keys
 from gratnet.precision import (
     OWN_KEYS,
@@ -24,6 +26,7 @@ from gratnet.precision import (
     raster_key_error,
 )
 from gratnet.shadowing import NO_SHADOWING, model_slope_covariance, smith_shadowing
+from viewer.renderer import xyz_to_linear_srgb_matrix
 from viewer.state import ViewerState
 
 if TYPE_CHECKING:
@@ -504,3 +507,34 @@ def check_grazing_shadowing(name: str, model, results: list[np.ndarray], wi: np.
     bright = np.abs(expected["shade"]) > 1e-3 * np.abs(expected["shade"]).max()
     return {"shade": float((np.abs(shade - expected["shade"])[bright] / np.abs(expected["shade"])[bright]).max()),
             "ratio": float(np.nanmax(ratio_error / s[:, None]))}
+
+
+def structured_map(height: int = 64) -> np.ndarray:
+    """Linear sRGB radiance with colour, azimuthal structure and a bright blob, dark within 20° of the horizon
+    and below it (A · XYZ grows as 1/cos θi at grazing light: a dark horizon keeps the integral's variance finite)."""
+    width = 2 * height
+    theta = np.pi * (np.arange(height) + 0.5) / height
+    phi = 2 * np.pi * (np.arange(width) + 0.5) / width
+    t, p = np.meshgrid(theta, phi, indexing="ij")
+    radiance = np.stack([1.0 + 0.5 * np.cos(p), 0.8 + 0.3 * np.sin(2 * p), 0.6 + 0.4 * np.cos(t)], axis=-1)
+    blob = np.exp(-((t - 0.6) ** 2 + np.angle(np.exp(1j * (p - 2.0))) ** 2) / 0.02)
+    radiance = radiance + 20.0 * blob[..., None] * np.array([1.0, 0.9, 0.7])
+    radiance[t > math.radians(70.0)] = 0.0
+    return radiance.astype(np.float32)
+
+
+def hemisphere_integral(model, environment: Environment, wo: np.ndarray, ior: float = 1.5,
+                        steps: int = 600) -> np.ndarray:
+    """∫ A(ωi, ωo) · XYZ(−(ωi + ωo)) ⊙ L(ωi) dωi over the upper hemisphere (plane: tangent frame = world), CIE XYZ,
+    midpoint rule in (θ, φ) with ``steps`` × 2·``steps`` cells; the colour product in linear sRGB."""
+    theta = (np.arange(steps) + 0.5) / steps * (np.pi / 2)
+    phi = (np.arange(2 * steps) + 0.5) / (2 * steps) * (2 * np.pi)
+    t, p = np.meshgrid(theta, phi, indexing="ij")
+    wi = np.stack([np.sin(t) * np.cos(p), np.sin(t) * np.sin(p), np.cos(t)], axis=-1)
+    key = -(wi + wo)
+    xyz = evaluate_keys(model, key[..., 0], key[..., 1], key[..., 2])
+    a = a_term(wi.reshape(-1, 3), np.broadcast_to(wo, (wi.size // 3, 3)), ior).reshape(t.shape)
+    to_rgb = xyz_to_linear_srgb_matrix()
+    rgb = np.einsum("ij,...j->...i", to_rgb, xyz) * environment.radiance(wi.reshape(-1, 3)).reshape(wi.shape)
+    cell = (np.pi / 2 / steps) * (np.pi / steps) * np.sin(t)
+    return np.linalg.inv(to_rgb) @ np.einsum("ijc,ij->c", rgb * a[..., None], cell)

@@ -22,10 +22,10 @@ import moderngl
 import numpy as np
 
 from gratnet.area_lights import MAX_AREA_LIGHTS, AreaLight
-from gratnet.codes import ENVIRONMENT_SAMPLING
+from gratnet.codes import DEFAULT_ENVIRONMENT_SAMPLING, ENVIRONMENT_SAMPLING
 from gratnet.environment import Environment
 from gratnet.errors import GratNetError
-from gratnet.importance import DEFENSIVE_SHARE, MaterialTable
+from gratnet.importance import DEFENSIVE_SHARE, RESAMPLING_CANDIDATES, RESAMPLING_MATERIAL_SHARE, MaterialTable
 from gratnet.sampling2d import PiecewiseConstant2D
 from viewer.shading import MaterialTexture, set_uniform
 from viewer.srgb import XYZ_TO_LINEAR_SRGB
@@ -110,8 +110,8 @@ class EnvironmentLighting:
         units = list(ENVIRONMENT_UNITS.values())
         return tuple(zip(self._textures, units, strict=True))
 
-    def set_uniforms(self, program: moderngl.Program, delta_light: bool, seed: int, sampling: str = "mis",
-                     tinted: bool = True) -> None:
+    def set_uniforms(self, program: moderngl.Program, delta_light: bool, seed: int,
+                     sampling: str = DEFAULT_ENVIRONMENT_SAMPLING, tinted: bool = True) -> None:
         """The uniforms of shaders/environment.glsl but the pass index: ``delta_light``: the light of lights.glsl
         takes its turn too; ``sampling``: :data:`gratnet.codes.ENVIRONMENT_SAMPLING`; ``tinted``: the program
         applies the tint (False: the deferred path's G-buffer, whose compiler drops the colour matrices; its TINT
@@ -129,6 +129,8 @@ class EnvironmentLighting:
         set_uniform(program, "u_environment_rotation", (math.cos(angle), math.sin(angle)))
         set_uniform(program, "u_material_key_range", (float(self.table.key_min), float(self.table.key_max)))
         set_uniform(program, "u_defensive_share", float(DEFENSIVE_SHARE))
+        set_uniform(program, "u_candidates", RESAMPLING_CANDIDATES)
+        set_uniform(program, "u_candidate_material_share", float(RESAMPLING_MATERIAL_SHARE))
         set_uniform(program, "u_seed", check_seed(seed))
         if tinted:
             self.set_colour_uniforms(program)
@@ -187,7 +189,7 @@ class EnvironmentPass:
     lighting: EnvironmentLighting
     delta_light: bool
     seed: int = 0
-    sampling: str = "mis"
+    sampling: str = DEFAULT_ENVIRONMENT_SAMPLING
     pixel_origin: tuple[int, int] = (0, 0)
 
     def __post_init__(self) -> None:

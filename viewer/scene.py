@@ -50,7 +50,7 @@ import numpy as np
 
 from gratnet.area_lights import AreaLight
 from gratnet.atomic import cache_folder
-from gratnet.codes import RENDER_PATHS, WeightForm
+from gratnet.codes import DEFAULT_ENVIRONMENT_SAMPLING, RENDER_PATHS, WeightForm
 from gratnet.display import xyz_to_display_srgb8, xyz_to_linear_srgb
 from gratnet.environment import Environment
 from gratnet.errors import GratNetError
@@ -218,7 +218,7 @@ class SceneRenderer:
                     depth_prepass: bool = True, statistics: dict[str, int] | None = None, samples: int = 1,
                     first_sample: int = 0, offsets_px: np.ndarray | None = None,
                     render_path: str | None = None, environment: Environment | None = None,
-                    seed: int = 0, sampling: str = "mis", pixel_origin: tuple[int, int] = (0, 0),
+                    seed: int = 0, sampling: str = DEFAULT_ENVIRONMENT_SAMPLING, pixel_origin: tuple[int, int] = (0, 0),
                     area_lights: tuple[AreaLight, ...] = ()) -> np.ndarray:
         """Exposed CIE XYZ and coverage, ``float32`` ``(H, W, 4)``, row 0 at the top.
 
@@ -250,7 +250,8 @@ class SceneRenderer:
         ``first_sample + k`` for sample k, with random numbers from ``seed``; the mean over samples converges to
         the integral (physics.md "Environment light"), so more samples mean less noise. Both paths give the same
         estimate, on the path :meth:`path_for_render` gives (deferred on a software rasterizer unless asked otherwise).
-        ``sampling``: ``mis`` (default), or ``light`` / ``material`` alone (gratnet.codes.ENVIRONMENT_SAMPLING).
+        ``sampling``: gratnet.codes.ENVIRONMENT_SAMPLING: ``resampled`` (the default), ``mis``, or ``light`` /
+        ``material`` alone.
         ``pixel_origin``: this image's lower-left pixel in a larger picture (GL pixels, y up), when it is a band of
         one: the light samples are keyed by the whole picture's pixels, so the bands of N passes make the picture of
         one N-pass render of the whole.
@@ -277,7 +278,7 @@ class SceneRenderer:
                 exposure: float, ior: float | None, layers: int, skip_threshold: float | None,
                 depth_prepass: bool, statistics: dict[str, int] | None, offsets: np.ndarray,
                 path: str, first_sample: int = 0, environment: Environment | None = None,
-                seed: int = 0, sampling: str = "mis", pixel_origin: tuple[int, int] = (0, 0),
+                seed: int = 0, sampling: str = DEFAULT_ENVIRONMENT_SAMPLING, pixel_origin: tuple[int, int] = (0, 0),
                 area_lights: tuple[AreaLight, ...] = ()) -> list[np.ndarray]:
         """Every render method's checks (before any GL work), then ``path``; a :class:`Mesh` is uploaded for
         this render only."""
@@ -305,7 +306,7 @@ class SceneRenderer:
                exposure: float = 1.0, ior: float | None = 1.5, *, skip_threshold: float | None = None,
                depth_prepass: bool = True, statistics: dict[str, int] | None = None, samples: int = 1,
                first_sample: int = 0, environment: Environment | None = None, seed: int = 0,
-               sampling: str = "mis", area_lights: tuple[AreaLight, ...] = (),
+               sampling: str = DEFAULT_ENVIRONMENT_SAMPLING, area_lights: tuple[AreaLight, ...] = (),
                render_path: str | None = None) -> np.ndarray:
         """Exposed CIE XYZ, ``float32`` ``(H, W, 3)``, row 0 at the top (see :meth:`render_rgba`)."""
         rgba = self.render_rgba(mesh, camera, light, size, exposure, ior, skip_threshold=skip_threshold,

@@ -29,7 +29,15 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any, TypeVar
 
 from gratnet.area_lights import AREA_FLAG, AREA_HELP, parse_area_lights
-from gratnet.codes import DEFERRED_WEIGHTS, ENVIRONMENT_SAMPLING, RENDER_PATHS, SCHEME, WEIGHTS_PATHS, WeightForm
+from gratnet.codes import (
+    DEFAULT_ENVIRONMENT_SAMPLING,
+    DEFERRED_WEIGHTS,
+    ENVIRONMENT_SAMPLING,
+    RENDER_PATHS,
+    SCHEME,
+    WEIGHTS_PATHS,
+    WeightForm,
+)
 from gratnet.config import config_field, parse_float, parse_numbers
 from gratnet.errors import GratNetError
 from gratnet.lights import DISTANCE_RANGE_METRES, LIGHT_KINDS, LightFlag, light_kind
@@ -253,8 +261,10 @@ class RenderConfig(LightingConfig, SceneConfig):
     render_path: str = config_field("auto", RENDER_PATH_HELP, choices=RENDER_PATHS)
     deferred_weights: str = config_field("auto", DEFERRED_WEIGHTS_HELP, choices=DEFERRED_WEIGHTS)
     environment_sampling: str = config_field(
-        "mis", "how an environment's light is sampled: mis (the map's luminance and the material's own diffraction "
-        "table, weighted by multiple importance sampling), light or material (one alone: for comparisons)",
+        DEFAULT_ENVIRONMENT_SAMPLING, "how an environment's light is sampled: resampled (candidates from the map's "
+        "luminance and the material's own diffraction table, one kept in proportion to the expected shading: the "
+        "least noise per sample), mis (one of the two, weighted by multiple importance sampling), light or material "
+        "(one alone: for comparisons)",
         choices=ENVIRONMENT_SAMPLING.names)
     skip_dark: bool = config_field(
         False, "PNG only: skip the network where exposure · A · (the model's cached output bound) cannot reach the "

@@ -17,8 +17,9 @@ import pytest
 
 from gratnet.area_lights import AreaLight, parse_area_light
 from gratnet.brdf import a_term
+from gratnet.environment import Environment
 from gratnet.modelfile import evaluate_keys
-from tests.helpers import covered_mean, random_model, smooth_random_model
+from tests.helpers import covered_mean, hemisphere_integral, random_model, smooth_random_model, structured_map
 from viewer.camera import Camera, Light, world_direction
 from viewer.meshes import compact_disc, plane
 from viewer.renderer import xyz_to_linear_srgb_matrix
@@ -96,7 +97,7 @@ def light_integral(model, lights: list[AreaLight], ior: float = 1.5) -> np.ndarr
     return total
 
 
-@pytest.mark.parametrize("sampling", ["mis", "light", "material"])
+@pytest.mark.parametrize("sampling", ["mis", "light", "material", "resampled"])
 def test_rectangle_matches_quadrature_over_its_area(scene, model, sampling):
     light = parse_area_light(RECT)
     rgba = scene.render_rgba(plane(), FAR, NO_LIGHT, SIZE, 1.0, 1.5, samples=64, seed=1, sampling=sampling,
@@ -117,6 +118,21 @@ def test_several_lights_add_up(scene, model):
     mean, error = covered_mean(rgba)
     expected = light_integral(model, lights) + alone[..., :3][alone[..., 3] == 1.0].mean(axis=0)
     assert np.all(np.abs(mean - expected) <= 4.0 * error + 2e-3 * np.abs(expected)), (mean, error, expected)
+
+
+@pytest.mark.parametrize("sampling", ["mis", "resampled"])
+def test_environment_and_area_light_add_up(scene, model, sampling):
+    """An environment and a rectangle at once: the mean is the environment's hemisphere integral plus the
+    rectangle's. Under ``resampled`` the environment's passes hold all of its light and material sampling serves
+    the rectangle alone: an environment counted twice or not at all would miss by its whole integral."""
+    light = parse_area_light(RECT)
+    environment = Environment("test", structured_map(), 30.0, 1.0, "test")
+    rgba = scene.render_rgba(plane(), FAR, NO_LIGHT, SIZE, 1.0, 1.5, samples=96, seed=4, sampling=sampling,
+                             environment=environment, area_lights=(light,))
+    mean, error = covered_mean(rgba)
+    expected = light_integral(model, [light]) + hemisphere_integral(model, environment, WO)
+    assert np.all(np.abs(mean - expected) <= 4.0 * error + 2e-3 * np.abs(expected)), (mean, error, expected)
+    assert np.all(error < 0.05 * np.abs(expected))
 
 
 @pytest.fixture(scope="module")

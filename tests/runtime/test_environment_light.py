@@ -15,14 +15,11 @@ import math
 import numpy as np
 import pytest
 
-from gratnet.brdf import a_term
 from gratnet.environment import Environment, texel_coordinates
 from gratnet.errors import GratNetError
-from gratnet.modelfile import evaluate_keys
-from tests.helpers import covered_mean, random_model, smooth_random_model
+from tests.helpers import covered_mean, hemisphere_integral, random_model, smooth_random_model, structured_map
 from viewer.camera import Camera, Light, world_direction
 from viewer.meshes import compact_disc, plane
-from viewer.renderer import xyz_to_linear_srgb_matrix
 from viewer.scene import SceneRenderer
 
 ELEVATION, AZIMUTH = 50.0, -60.0
@@ -47,38 +44,7 @@ def scene(ctx, model):
         yield renderer
 
 
-def structured_map(height: int = 64) -> np.ndarray:
-    """Linear sRGB radiance with colour, azimuthal structure and a bright blob, dark within 20° of the horizon
-    and below it (A · XYZ grows as 1/cos θi at grazing light: a dark horizon keeps the integral's variance finite)."""
-    width = 2 * height
-    theta = np.pi * (np.arange(height) + 0.5) / height
-    phi = 2 * np.pi * (np.arange(width) + 0.5) / width
-    t, p = np.meshgrid(theta, phi, indexing="ij")
-    radiance = np.stack([1.0 + 0.5 * np.cos(p), 0.8 + 0.3 * np.sin(2 * p), 0.6 + 0.4 * np.cos(t)], axis=-1)
-    blob = np.exp(-((t - 0.6) ** 2 + np.angle(np.exp(1j * (p - 2.0))) ** 2) / 0.02)
-    radiance = radiance + 20.0 * blob[..., None] * np.array([1.0, 0.9, 0.7])
-    radiance[t > math.radians(70.0)] = 0.0
-    return radiance.astype(np.float32)
-
-
-def hemisphere_integral(model, environment: Environment, wo: np.ndarray, ior: float = 1.5,
-                        steps: int = 600) -> np.ndarray:
-    """∫ A(ωi, ωo) · XYZ(−(ωi + ωo)) ⊙ L(ωi) dωi over the upper hemisphere (plane: tangent frame = world), CIE XYZ,
-    midpoint rule in (θ, φ) with ``steps`` × 2·``steps`` cells; the colour product in linear sRGB."""
-    theta = (np.arange(steps) + 0.5) / steps * (np.pi / 2)
-    phi = (np.arange(2 * steps) + 0.5) / (2 * steps) * (2 * np.pi)
-    t, p = np.meshgrid(theta, phi, indexing="ij")
-    wi = np.stack([np.sin(t) * np.cos(p), np.sin(t) * np.sin(p), np.cos(t)], axis=-1)
-    key = -(wi + wo)
-    xyz = evaluate_keys(model, key[..., 0], key[..., 1], key[..., 2])
-    a = a_term(wi.reshape(-1, 3), np.broadcast_to(wo, (wi.size // 3, 3)), ior).reshape(t.shape)
-    to_rgb = xyz_to_linear_srgb_matrix()
-    rgb = np.einsum("ij,...j->...i", to_rgb, xyz) * environment.radiance(wi.reshape(-1, 3)).reshape(wi.shape)
-    cell = (np.pi / 2 / steps) * (np.pi / steps) * np.sin(t)
-    return np.linalg.inv(to_rgb) @ np.einsum("ijc,ij->c", rgb * a[..., None], cell)
-
-
-@pytest.mark.parametrize("sampling", ["mis", "light", "material"])
+@pytest.mark.parametrize("sampling", ["mis", "light", "material", "resampled"])
 def test_environment_matches_quadrature_over_the_hemisphere(scene, model, sampling):
     environment = Environment("test", structured_map(), rotation_degrees=30.0, scale=1.0, source="test")
     rgba = scene.render_rgba(plane(), FAR, NO_LIGHT, SIZE, 1.0, 1.5, samples=64, environment=environment, seed=1,
@@ -162,7 +128,9 @@ def test_bands_with_their_pixel_origin_make_the_whole_picture(scene):
                                        environment=environment, seed=4, pixel_origin=(0, height - row1)))
     together = np.concatenate(bands, axis=0)
     assert np.abs(whole[..., :3]).max() > 0
-    np.testing.assert_allclose(together, whole, rtol=1e-5, atol=1e-6 * float(np.abs(whole).max()))
+    # A band's projection moves each pixel's point and frame in the last float32 bits, which resampling's sum of
+    # candidate weights amplifies to ~1e-4 (measured ≤ 1e-4); a pixel keyed wrongly differs by the noise itself.
+    np.testing.assert_allclose(together, whole, rtol=5e-4, atol=1e-6 * float(np.abs(whole).max()))
 
 
 def test_delta_light_takes_its_turn(scene, model):

@@ -37,10 +37,11 @@ VARIANT = "surface#ENVIRONMENT=1"  # ShadingPrograms.variant_program's key of th
 def _assert_close_to_the_n_pass_render(accumulated: np.ndarray, reference: np.ndarray, scale: float) -> None:
     """The window's passes (one render each) against the N-pass render (on the deferred path its N G-buffers stacked
     in one texture, docs: viewer.deferred): the stacked rows' fragment positions round differently in float32, which
-    moved 5 of 3,840 values by up to 5e-4 of their value (measured). Nearly every value to 1e-4, all to 1e-3: a
-    wrong seed, pass number or pixel origin changes every lit pixel by far more."""
+    moved 5 of 3,840 values by up to 5e-4 of their value (measured), and resampled sampling's sum of candidate
+    weights 1 of 3,840 by 1.1e-3. Nearly every value to 1e-4, all to 1e-2: a wrong seed, pass number or pixel origin
+    changes every lit pixel by far more."""
     assert np.isclose(accumulated, reference, rtol=1e-4, atol=1e-5 * scale).mean() >= 0.99
-    np.testing.assert_allclose(accumulated, reference, rtol=1e-3, atol=1e-5 * scale)
+    np.testing.assert_allclose(accumulated, reference, rtol=1e-2, atol=1e-5 * scale)
 
 
 def _assert_drawn_on_the_scenes_path(renderer: Any) -> None:
@@ -158,8 +159,11 @@ def test_banded_passes_make_the_n_pass_render(ctx):
         scale = float(np.abs(reference).max())
         assert scale > 0
         # A band's cropped projection rounds a pixel's surface point (and so its key) differently in float32: a few
-        # pixels differ in the fourth digit; a band with the wrong pixel origin differs everywhere.
-        np.testing.assert_allclose(accumulated, reference, rtol=1e-3, atol=1e-5 * scale)
+        # pixels differ in the fourth digit, more under resampled sampling, whose candidates' weights read
+        # piecewise-constant densities: a candidate on a cell's edge may change cells (measured: 14 of 1,152 values
+        # beyond 1e-4, one by 4e-3 of a small value); a band with the wrong pixel origin differs everywhere.
+        assert np.isclose(accumulated, reference, rtol=1e-4, atol=1e-5 * scale).mean() >= 0.95
+        np.testing.assert_allclose(accumulated, reference, rtol=1e-2, atol=1e-5 * scale)
     finally:
         viewer.release()
 

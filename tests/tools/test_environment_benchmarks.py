@@ -38,7 +38,7 @@ def test_convergence_scores_every_strategy(tmp_path, ctx, tiny_material):  # ctx
                 cache=tmp_path / "cache")
     assert done.returncode == 0, done.stderr
     record = json.loads(out.read_text())
-    assert set(record["strategies"]) == {"mis", "light", "material"}
+    assert set(record["strategies"]) == {"mis", "light", "material", "resampled"}
     for points in record["strategies"].values():
         assert [point["spp"] for point in points] == [1, 2]
         assert all(0.0 <= point["flip"] <= 1.0 and point["seconds"] > 0.0 for point in points)
