@@ -92,7 +92,8 @@ def main(argv: list[str] | None = None) -> int:
     record: dict[str, Any] = {
         "date": time.strftime("%Y-%m-%d"), "command": shlex.join(["python", *sys.argv]),
         "material": arguments.material, "mesh": arguments.mesh, "environment": environment.name,
-        "size": list(size), "reference_spp": arguments.reference_spp, "gl_renderer": None,
+        "size": list(size), "reference_spp": arguments.reference_spp,
+        "reference_sampling": DEFAULT_ENVIRONMENT_SAMPLING, "gl_renderer": None,
         "shading": f"reference volume {Path(arguments.volume).name}" if arguments.volume else "network",
         "load_average_before": round(load_before, 2), "strategies": {}}
     try:
@@ -165,7 +166,7 @@ def _write(record: dict[str, Any], out: Path, figure: Path) -> None:
     axes[0].set_xlabel("samples per pixel")
     axes[1].set_xlabel("seconds (this machine's GL)")
     for axis in axes:
-        axis.set_ylabel(f"FLIP vs {record['reference_spp']}-spp MIS")
+        axis.set_ylabel(f"FLIP vs {record['reference_spp']}-spp {record.get('reference_sampling', 'mis')}")
         axis.grid(True, which="both", alpha=0.3)
         axis.legend()
     shading = "" if record.get("shading", "network") == "network" else " (ground-truth look-up)"
