@@ -54,10 +54,16 @@ class ComputeConfig:
         "auto", "auto (CUDA when torch sees a GPU, else cpu), cpu (numpy: the reference) or cuda[:N] (torch on "
         "the GPU: the same complex64 products and float64 sums, equal to cpu to float32 rounding)",
     )
+    checkpoint_minutes: float = config_field(
+        10.0, "save the partial sum over wavelengths to VOLUME.exr.partial.npz at most this often, in minutes of wall "
+        "time, > 0; --resume continues from it, and it is removed when the volume is written",
+    )
 
     def __post_init__(self) -> None:
         if self.device not in ("auto", "cpu") and not self.device.startswith("cuda"):
             raise GratNetError(f"--device must be auto, cpu or cuda[:N], got {self.device!r}")
+        if not self.checkpoint_minutes > 0:
+            raise GratNetError(f"--checkpoint-minutes must be > 0, got {self.checkpoint_minutes:g}")
 
     def resolve(self) -> str | None:
         """The torch device for :class:`trainer.fourier.FTerm`, or None for numpy; checked before any work."""
@@ -173,21 +179,34 @@ def compute_volume_sum_resumable(
     return xyz, engine.last_node_count
 
 
-def read_checkpoint(checkpoint: Path, fingerprint: str) -> tuple[int, np.ndarray]:
-    """The wavelengths done and the partial sum of a checkpoint written for ``fingerprint``; one clear error
-    where there is none, it is unreadable, or it belongs to another computation."""
+def _stored(checkpoint: Path, *names: str) -> list[np.ndarray]:
+    """The members ``names`` of a checkpoint (only those are read); one clear error where there is none or it is
+    unreadable."""
     if not checkpoint.is_file():
         raise GratNetError(f"--resume: there is no {checkpoint} to continue from; leave out --resume to start afresh")
     try:
         with np.load(checkpoint) as stored:
-            done, xyz, written_for = int(stored["done"]), np.array(stored["xyz"]), str(stored["fingerprint"])
+            return [stored[name] for name in names]
     except (OSError, KeyError, ValueError, zipfile.BadZipFile) as error:
         raise GratNetError(f"--resume: {checkpoint} is unreadable ({error}); leave out --resume to start "
                            "afresh") from error
-    if written_for != fingerprint:
+
+
+def checkpoint_wavelengths(checkpoint: Path) -> int:
+    """How many wavelengths a checkpoint holds (its partial sum is not read); GratNetError where there is none or
+    it is unreadable."""
+    (done,) = _stored(checkpoint, "done")
+    return int(done)
+
+
+def read_checkpoint(checkpoint: Path, fingerprint: str) -> tuple[int, np.ndarray]:
+    """The wavelengths done and the partial sum of a checkpoint written for ``fingerprint``; one clear error
+    where there is none, it is unreadable, or it belongs to another computation."""
+    done, xyz, written_for = _stored(checkpoint, "done", "xyz", "fingerprint")
+    if str(written_for) != fingerprint:
         raise GratNetError(f"--resume: {checkpoint} was written for another height field, grid, optics or device; "
                            "leave out --resume to start afresh")
-    return done, xyz
+    return int(done), xyz
 
 
 def compute_volume(

@@ -40,9 +40,6 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     parser.add_argument("--resume", action="store_true",
                         help="continue from VOLUME.exr.partial.npz, the partial sum an interrupted run left (the "
                         "same command and height field; the result is the uninterrupted run's, bit for bit)")
-    parser.add_argument("--checkpoint-minutes", type=parse_float, default=10.0,
-                        help="save the partial sum to VOLUME.exr.partial.npz at most this often, in minutes of "
-                        "wall time, > 0 (default: 10); it is removed when the volume is written")
     add_arguments(parser, VolumeConfig)
     add_arguments(parser, ComputeConfig)
     parser.set_defaults(handler=run)
@@ -56,7 +53,13 @@ def run(arguments: argparse.Namespace) -> int:
     from gratnet.config import config_path_for, config_text
     from gratnet.errors import GratNetError
     from trainer.cli_support import check_volume_limits, read_heightfield_input, reporter, require_suffix
-    from trainer.groundtruth import ComputeConfig, VolumeConfig, checkpoint_path_for, compute_volume
+    from trainer.groundtruth import (
+        ComputeConfig,
+        VolumeConfig,
+        checkpoint_path_for,
+        checkpoint_wavelengths,
+        compute_volume,
+    )
     from trainer.preview import save_slice_preview
 
     # Every output is checked before minutes of computation.
@@ -75,19 +78,17 @@ def run(arguments: argparse.Namespace) -> int:
                            f"{volume_config.slices} slices")
     if arguments.exposure is not None and not arguments.exposure > 0:
         raise GratNetError(f"--exposure must be > 0, got {arguments.exposure:g}")
-    if not arguments.checkpoint_minutes > 0:
-        raise GratNetError(f"--checkpoint-minutes must be > 0, got {arguments.checkpoint_minutes:g}")
-    checkpoint = checkpoint_path_for(arguments.out)
-    if arguments.resume and not checkpoint.is_file():  # computing afresh would silently ignore --resume
-        raise GratNetError(f"--resume: there is no {checkpoint} to continue from; leave out --resume to start afresh")
     compute_config = from_arguments(ComputeConfig, arguments)
+    checkpoint = checkpoint_path_for(arguments.out)
+    if arguments.resume:  # none or unreadable: refused now (computing afresh would silently ignore --resume)
+        checkpoint_wavelengths(checkpoint)
     device = compute_config.resolve()
     field, optics, load_options = read_heightfield_input(arguments)
     started = time.perf_counter()
     try:
         volume = compute_volume(field, volume_config, optics, report=reporter("groundtruth"),
                                 progress=not arguments.quiet, device=device, checkpoint=checkpoint,
-                                resume=arguments.resume, save_every_s=60.0 * arguments.checkpoint_minutes)
+                                resume=arguments.resume, save_every_s=60.0 * compute_config.checkpoint_minutes)
     except KeyboardInterrupt:
         print(f"gratnet groundtruth: interrupted; {interrupted_state(checkpoint)}", file=sys.stderr)
         return 130
@@ -116,16 +117,14 @@ def run(arguments: argparse.Namespace) -> int:
 
 def interrupted_state(checkpoint: Path) -> str:
     """What an interrupted ground truth leaves, in words: the checkpoint's wavelengths and how to continue."""
-    import zipfile
-
-    import numpy as np
+    from gratnet.errors import GratNetError
+    from trainer.groundtruth import checkpoint_wavelengths
 
     if not checkpoint.is_file():
         return "no checkpoint was saved yet, so there is nothing to resume from"
     try:
-        with np.load(checkpoint) as stored:
-            done = int(stored["done"])
-    except (OSError, KeyError, ValueError, zipfile.BadZipFile):
+        done = checkpoint_wavelengths(checkpoint)
+    except GratNetError:
         return f"{checkpoint} is unreadable; start afresh without --resume"
     return (f"{checkpoint} holds {done} wavelengths: the same command with --resume continues from there, "
             "as the uninterrupted run would have")

@@ -165,6 +165,15 @@ def test_the_generated_defines_are_the_python_tables():
     assert CODES_SOURCE.text == glsl_source()
 
 
+def test_resampling_fits_the_shader_loop():
+    """shaders/environment.glsl's candidate loop stops at MAX_CANDIDATES but divides by u_candidates: more
+    candidates than the loop holds would bias every pass."""
+    from gratnet.importance import RESAMPLING_CANDIDATES, RESAMPLING_MATERIAL_SHARE
+
+    assert 1 <= RESAMPLING_CANDIDATES <= glsl_defines()["MAX_CANDIDATES"]
+    assert 0.0 < RESAMPLING_MATERIAL_SHARE < 1.0
+
+
 def test_the_shaders_type_no_code_of_their_own():
     assert shader_problems(SHADERS) == []
 
