@@ -105,7 +105,7 @@ __all__ = [
     "FLOOR_SHARE",
     "KEY_LIMIT",
     "RESAMPLING_CANDIDATES",
-    "RESAMPLING_MATERIAL_SHARE",
+    "RESAMPLING_MATERIAL_CANDIDATES",
     "MAX_RESOLUTION",
     "MIN_RESOLUTION",
     "Luminance",
@@ -130,9 +130,9 @@ FLAT_RESOLUTION = 64
 #: density ≥ DEFENSIVE_SHARE · cos θ / π, so the estimator's weight is bounded where the table is too low.
 DEFENSIVE_SHARE = 0.1
 #: Resampled sampling (gratnet.codes.ENVIRONMENT_SAMPLING ``resampled``, shaders/environment.glsl): candidates per
-#: pass, and the share of them drawn by the material's table (the rest by the environment's luminance).
+#: pass, and how many of them material sampling draws (the rest the environment's luminance): a share of 0.25.
 RESAMPLING_CANDIDATES = 8
-RESAMPLING_MATERIAL_SHARE = 0.25
+RESAMPLING_MATERIAL_CANDIDATES = 2
 #: The table's square is [−KEY_LIMIT, KEY_LIMIT]² in (u, v): the volume's axes (gratnet.volume.AXIS_LIMIT).
 KEY_LIMIT = 2.0
 #: Cells per axis of the default table.

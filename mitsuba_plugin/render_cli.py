@@ -123,8 +123,9 @@ def run(arguments: argparse.Namespace) -> int:
 
     from gratnet.modelfile import load_model
     from mitsuba_plugin.runtime import resolve_variant
+    from mitsuba_plugin.scene import traced_mesh
     from viewer.camera import Camera, Light
-    from viewer.catalog import build_mesh, model_label
+    from viewer.catalog import model_label
     from viewer.scene_config import resolve_scene_command, warn_if_black, write_render
 
     out = Path(arguments.out)
@@ -143,7 +144,7 @@ def run(arguments: argparse.Namespace) -> int:
         light = Light.from_config(config, config.effective_light_intensity)
     model_path, config = resolve_point(config)  # the saved config records the point that renders
     load_model(model_path)  # a corrupt model file: one line now, not a Mitsuba traceback later
-    mesh = build_mesh(config.mesh)
+    mesh = traced_mesh(config.mesh)  # Mitsuba's sphere is finer than GL's (mitsuba_plugin.scene.TRACED_SPHERE)
     config = dataclasses.replace(config, environment_rotation=environment_rotation(config))  # saved as resolved
     environment = environment_of(config)
     # Under an environment the unit light's default exposure means nothing: the exposure comes from the picture

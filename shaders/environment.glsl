@@ -41,7 +41,7 @@ uniform int u_environment_sampling;           // SAMPLING_MIS, SAMPLING_LIGHT, S
 uniform bool u_delta_light;                   // the delta light of lights.glsl takes its turn too
 uniform bool u_has_environment;               // false: area lights only (the map's textures are placeholders)
 uniform int u_candidates;                     // SAMPLING_RESAMPLED: candidates per pass, 1 .. MAX_CANDIDATES
-uniform float u_candidate_material_share;     // SAMPLING_RESAMPLED: the share of candidates from material sampling
+uniform int u_material_candidates;           // SAMPLING_RESAMPLED: how many of them material sampling draws
 
 // The map's unit-square point (x: azimuth, y: polar angle / pi) of a world direction (gratnet.environment).
 vec2 environment_point(vec3 world) {
@@ -134,17 +134,23 @@ bool sample_material(vec3 wo, vec3 xi, out vec3 wi) {
 }
 
 // Resampled importance sampling of the environment (SAMPLING_RESAMPLED; Talbot, Cline & Egbert 2005): u_candidates
-// directions drawn from the mixture q = (1 - m) p_light + m p_material (m = u_candidate_material_share; each candidate
-// weighed by the mixture's density, whichever strategy drew it), one of them kept with probability proportional to
-// target / q, where the target is what the network is expected to give there, A * S * T(u, v) * Y(L): the A-term and
-// Smith's shadowing exactly, the material's (u, v) table T for XYZ (its floor keeps it > 0 wherever light can come
-// from) and the luminance of the radiance. Returns L(y) * (sum of target/q) / (candidates * target(y)) for the kept
-// direction y (world, `wi_world`), so that the pass's A * S * XYZ(y) times it is an unbiased estimate of the
-// environment's integral (invalid candidates count in the mean as zeros); 0 when every candidate was. The first
-// candidate's 2-D numbers are the strategy's stratified ones (`first`), the rest hashed per pixel, pass and candidate.
-vec3 resample_environment(vec3 wo, mat3 world_to_tangent, uvec2 pixel, vec2 first, out vec3 wi_world) {
+// directions, the first u_material_candidates of them drawn by material sampling and the rest by the environment's
+// luminance, each weighed by the mixture's density q = (1 - m) p_light + m p_material (m = u_material_candidates /
+// u_candidates: the balance heuristic across the two, so the sum of the weights estimates the target's integral),
+// one of them kept with probability proportional to target / q, where the target is what the network is expected to
+// give there, A * S * T(u, v) * Y(L): the A-term and Smith's shadowing exactly, the material's (u, v) table T for XYZ
+// (its floor keeps it > 0 wherever light can come from) and the luminance of the radiance. Returns
+// L(y) * (sum of target/q) / (candidates * target(y)) for the kept direction y (world, `wi_world`), so that the
+// pass's A * S * XYZ(y) times it is an unbiased estimate of the environment's integral (invalid candidates count in
+// the mean as zeros); 0 when every candidate was. Each strategy's candidates take their 2-D numbers from its own
+// Sobol sequence under a per-pixel shift (`shift`), points turn * n + j for its n candidates of this pixel's
+// `turn`-th pass: stratified within a pass and across passes, each point still uniform.
+vec3 resample_environment(vec3 wo, mat3 world_to_tangent, uvec2 pixel, uint turn, uvec3 shift, out vec3 wi_world) {
     mat3 tangent_to_world = transpose(world_to_tangent);
-    float share = u_candidate_material_share;
+    int by_material = u_material_candidates;
+    float share = float(by_material) / float(u_candidates);
+    uint lights = uint(u_candidates - by_material);
+    uvec2 material_shift = pcg3d(shift).yz;
     float total = 0.0;  // sum of target / q over the candidates
     float kept_target = 0.0;
     vec3 kept_radiance = vec3(0.0);
@@ -155,21 +161,19 @@ vec3 resample_environment(vec3 wo, mat3 world_to_tangent, uvec2 pixel, vec2 firs
         }
         uvec3 hashed = pcg3d(uvec3(pixel, (uint(u_sample_index) * 0x9e3779b9u) ^ (uint(k) * 0x85ebca6bu)
                                            ^ (u_seed * 0xc2b2ae35u) ^ 0x27d4eb2fu));
-        vec4 xi = vec4(vec3(hashed >> 8u), float(pcg3d(hashed).x >> 8u)) * (1.0 / 16777216.0);
-        if (k == 0) {
-            xi.yz = first;
-        }
+        vec2 hashed_xi = vec2(hashed.xy >> 8u) * (1.0 / 16777216.0);  // x: material's branch, y: the reservoir
         vec3 world;
         vec3 wi;
-        if (xi.x < share) {  // material sampling, its branch chosen by xi.x / share (uniform on [0, 1) again)
-            if (!sample_material(wo, vec3(xi.x / share, xi.yz), wi)) {
+        if (k < by_material) {
+            vec2 xi = stratified2(turn * uint(by_material) + uint(k), material_shift);
+            if (!sample_material(wo, vec3(hashed_xi.x, xi), wi)) {
                 continue;
             }
             wi = normalize(wi);
             world = tangent_to_world * wi;
         } else {
             float density;
-            world = sample_environment(xi.yz, density);
+            world = sample_environment(stratified2(turn * lights + uint(k - by_material), shift.yz), density);
             if (!(density > 0.0)) {
                 continue;
             }
@@ -188,7 +192,7 @@ vec3 resample_environment(vec3 wo, mat3 world_to_tangent, uvec2 pixel, vec2 firs
             continue;
         }
         total += weight;
-        if (xi.w * total < weight) {  // keep this candidate with probability weight / total (a one-slot reservoir)
+        if (hashed_xi.y * total < weight) {  // keep this candidate with probability weight / total (a one-slot reservoir)
             kept_target = target;
             kept_radiance = radiance;
             wi_world = world;
@@ -253,7 +257,7 @@ void environment_incidence(vec3 position, mat3 world_to_tangent, vec3 wo, out ve
         float chosen;
         vec3 radiance;
         if (emitter < 0 && resampled) {
-            tint = resample_environment(wo, world_to_tangent, pixel, xi.yz, wi_world) * strategies;
+            tint = resample_environment(wo, world_to_tangent, pixel, turn, shift, wi_world) * strategies;
             irradiance = 1.0;
             return;
         }

@@ -25,7 +25,7 @@ from gratnet.area_lights import MAX_AREA_LIGHTS, AreaLight
 from gratnet.codes import DEFAULT_ENVIRONMENT_SAMPLING, ENVIRONMENT_SAMPLING
 from gratnet.environment import Environment
 from gratnet.errors import GratNetError
-from gratnet.importance import DEFENSIVE_SHARE, RESAMPLING_CANDIDATES, RESAMPLING_MATERIAL_SHARE, MaterialTable
+from gratnet.importance import DEFENSIVE_SHARE, RESAMPLING_CANDIDATES, RESAMPLING_MATERIAL_CANDIDATES, MaterialTable
 from gratnet.sampling2d import PiecewiseConstant2D
 from viewer.shading import MaterialTexture, set_uniform
 from viewer.srgb import XYZ_TO_LINEAR_SRGB
@@ -130,7 +130,7 @@ class EnvironmentLighting:
         set_uniform(program, "u_material_key_range", (float(self.table.key_min), float(self.table.key_max)))
         set_uniform(program, "u_defensive_share", float(DEFENSIVE_SHARE))
         set_uniform(program, "u_candidates", RESAMPLING_CANDIDATES)
-        set_uniform(program, "u_candidate_material_share", float(RESAMPLING_MATERIAL_SHARE))
+        set_uniform(program, "u_material_candidates", RESAMPLING_MATERIAL_CANDIDATES)
         set_uniform(program, "u_seed", check_seed(seed))
         if tinted:
             self.set_colour_uniforms(program)

@@ -168,10 +168,10 @@ def test_the_generated_defines_are_the_python_tables():
 def test_resampling_fits_the_shader_loop():
     """shaders/environment.glsl's candidate loop stops at MAX_CANDIDATES but divides by u_candidates: more
     candidates than the loop holds would bias every pass."""
-    from gratnet.importance import RESAMPLING_CANDIDATES, RESAMPLING_MATERIAL_SHARE
+    from gratnet.importance import RESAMPLING_CANDIDATES, RESAMPLING_MATERIAL_CANDIDATES
 
     assert 1 <= RESAMPLING_CANDIDATES <= glsl_defines()["MAX_CANDIDATES"]
-    assert 0.0 < RESAMPLING_MATERIAL_SHARE < 1.0
+    assert 0 < RESAMPLING_MATERIAL_CANDIDATES < RESAMPLING_CANDIDATES  # both strategies draw some
 
 
 def test_the_shaders_type_no_code_of_their_own():

@@ -7,7 +7,8 @@ Shades with the ground-truth volume looked up per pixel (gratnet render --refere
 fraction of its cost). The reference (2,048 MIS passes, seed 1000) is cached in /tmp/gratnet_resampling_probe;
 then each strategy's 64 passes (seed 0) are scored by relative RMSE and FLIP, and a figure shows the reference and
 the per-pixel variance of one pass (log10). ``--candidates`` and ``--material-share`` set
-gratnet.importance.RESAMPLING_CANDIDATES and RESAMPLING_MATERIAL_SHARE before the renderer reads them.
+gratnet.importance.RESAMPLING_CANDIDATES and RESAMPLING_MATERIAL_CANDIDATES (the share times the candidates,
+rounded; the share itself at 6efff4f, when this log was measured) before the renderer reads them.
 Log: docs/experiments/2026-11-28-resampled-environment.md.
 """
 
@@ -38,7 +39,8 @@ def main() -> None:
     if arguments.candidates is not None:
         importance.RESAMPLING_CANDIDATES = arguments.candidates
     if arguments.material_share is not None:
-        importance.RESAMPLING_MATERIAL_SHARE = arguments.material_share
+        importance.RESAMPLING_MATERIAL_CANDIDATES = max(1, round(arguments.material_share
+                                                                 * importance.RESAMPLING_CANDIDATES))
     import matplotlib
 
     matplotlib.use("Agg")
@@ -89,7 +91,7 @@ def main() -> None:
             flip, _ = ldr_flip(display(reference, exposure), display(mean, exposure))
             top = np.sort(squared.ravel())[::-1][: squared.size // 100].sum() / squared.sum()
             print(f"{arguments.material} {arguments.mesh} {arguments.environment} {sampling}: K "
-                  f"{importance.RESAMPLING_CANDIDATES}, material share {importance.RESAMPLING_MATERIAL_SHARE}: "
+                  f"{importance.RESAMPLING_CANDIDATES}, {importance.RESAMPLING_MATERIAL_CANDIDATES} by material: "
                   f"relative RMSE {np.sqrt(squared.sum() / (reference ** 2).sum()):.4f}, FLIP {flip:.4f}, "
                   f"top 1 % of pixels {100 * top:.0f} % of the squared error", flush=True)
             axis.imshow(np.log10(samples.var(axis=0).sum(axis=-1) + 1e-12))
