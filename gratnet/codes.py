@@ -160,6 +160,7 @@ BINDINGS = {
     "DEFERRED_LIST_BINDING": 7,  # the deferred path's list of pixels to shade (shaders/deferred.glsl)
     "GBUFFER_IMAGE_BINDING": 0,  # image unit of the deferred path's G-buffer (shaders/deferred.glsl)
     "RESOLVED_IMAGE_BINDING": 1,  # image unit of its resolved picture (several samples)
+    "OFFSET_IMAGE_BINDING": 2,  # image unit of its control-variate terms under sampled light (the TINT kernel)
 }
 #: Texels per side of the deferred path's COMPACT and RESOLVE work groups.
 DEFERRED_TILE = 8

@@ -68,9 +68,17 @@ So the cells' size matters (a CD's peaks are ~0.004 wide in u: std λ/(2√2 π 
 logarithmically at the horizon unless Y vanishes there). A uniform instead of a cosine-weighted defensive share
 (5–20 %) did not reduce the error above, nor the largest weights; 10 % cosine-weighted is as good as 5 or 20 %.
 
-**Cost and cache.** A shipped model's table takes a few seconds on two CPU cores (float32 network evaluations), so
-tables are cached in-process and on disk as ``$XDG_CACHE_HOME/gratnet/importance/<hash>.npz`` (else
-``~/.cache/gratnet/importance/``), keyed by a hash of the material's content and the table's parameters.
+**The colour table** (:attr:`MaterialTable.colour`, resampled sampling's control variate, docs/physics.md
+"Environment light"): the material's CIE XYZ over the same cells (the mean over each cell's points) at the w fractions
+:data:`COLOUR_W_FRACTIONS`, evaluated with the luminance in one pass over the union of the fractions (five at the
+defaults). Measured (paper-cd, CD, sky, 64², 64 passes; docs/experiments/2026-11-28-environment-agreement.md): its
+average over t = 0.375, 0.75 took FLIP from 0.0277 to 0.0246, four slices read linearly in t to 0.0230, eight the
+same 0.0230, 1024² cells 0.0220: four slices at the table's 512² it is.
+
+**Cost and cache.** A shipped model's table takes a few seconds on two CPU cores (float32 network evaluations:
+paper-cd's 5 slices in ~5 s with a training beside it), so tables are cached in-process and on disk as
+``$XDG_CACHE_HOME/gratnet/importance/<hash>.npz`` (else ``~/.cache/gratnet/importance/``; 15 MB each at 512² with
+the colour table), keyed by a hash of the material's content and the table's parameters.
 
 numpy only (no torch, no GL).
 """
@@ -106,6 +114,9 @@ __all__ = [
     "KEY_LIMIT",
     "RESAMPLING_CANDIDATES",
     "RESAMPLING_MATERIAL_CANDIDATES",
+    "COLOUR_SLICES",
+    "COLOUR_W_FRACTIONS",
+    "Colour",
     "MAX_RESOLUTION",
     "MIN_RESOLUTION",
     "Luminance",
@@ -119,8 +130,11 @@ __all__ = [
     "luminance_table",
     "luminance_weights",
     "material_table",
+    "material_weights",
     "model_luminance",
+    "model_xyz",
     "volume_luminance",
+    "volume_xyz",
     "volume_table",
 ]
 
@@ -131,8 +145,8 @@ FLAT_RESOLUTION = 64
 DEFENSIVE_SHARE = 0.1
 #: Resampled sampling (gratnet.codes.ENVIRONMENT_SAMPLING ``resampled``, shaders/environment.glsl): candidates per
 #: pass, and how many of them material sampling draws (the rest the environment's luminance): a share of 0.25.
-RESAMPLING_CANDIDATES = 8
-RESAMPLING_MATERIAL_CANDIDATES = 2
+RESAMPLING_CANDIDATES = 32
+RESAMPLING_MATERIAL_CANDIDATES = 8
 #: The table's square is [−KEY_LIMIT, KEY_LIMIT]² in (u, v): the volume's axes (gratnet.volume.AXIS_LIMIT).
 KEY_LIMIT = 2.0
 #: Cells per axis of the default table.
@@ -142,6 +156,11 @@ DEFAULT_RESOLUTION = 512
 DEFAULT_SUBSAMPLES = 1
 #: The w slices averaged, as fractions t of the deepest reachable w: w = −t · sqrt(4 − u² − v²).
 DEFAULT_W_FRACTIONS: tuple[float, ...] = (0.375, 0.75)
+#: The control variate's colour table (shaders/environment.glsl, resampled sampling; docs/physics.md "Environment
+#: light"): the material's CIE XYZ over the same (u, v) cells (the mean over each cell's points) at the w fractions
+#: ``t_j = (j + 0.5) / COLOUR_SLICES``, read linearly in t between them (held at the end ones beyond).
+COLOUR_SLICES = 4
+COLOUR_W_FRACTIONS: tuple[float, ...] = tuple((j + 0.5) / COLOUR_SLICES for j in range(COLOUR_SLICES))
 #: Floor on every reachable cell's weight, relative to the mean over reachable cells.
 FLOOR_SHARE = 1e-3
 #: Resolutions accepted: powers of two in this range.
@@ -152,11 +171,13 @@ CHUNK = 1 << 15
 PROGRESS_DELAY = 1.0
 _COMBINES = ("mean", "max")
 _FORMAT = "gratnet-importance-table"
-_FORMAT_VERSION = 1
+_FORMAT_VERSION = 2  # 2: with the colour table
 _MEMORY_ENTRIES = 8
 
 #: ``luminance(u, v, w) -> Y`` over broadcast ``float64`` arrays: a material's CIE Y (dimensionless).
 Luminance = Callable[[np.ndarray, np.ndarray, np.ndarray], np.ndarray]
+#: ``xyz(u, v, w) -> (N, 3)``: a material's CIE XYZ (dimensionless) at ``N`` key vectors.
+Colour = Callable[[np.ndarray, np.ndarray, np.ndarray], np.ndarray]
 
 
 # ------------------------------------------------------------------------------------------------
@@ -179,6 +200,9 @@ class MaterialTable:
         subsamples: luminance points per cell and axis.
         combine: how the w slices were combined: ``mean`` or ``max``.
         build_seconds: wall time of the build (s), as first built (a cached table keeps it).
+        colour: the control variate's table, CIE XYZ ``float32 (COLOUR_SLICES, R, R, 3)`` (slice j at
+            ``COLOUR_W_FRACTIONS[j]``; row ↔ v, column ↔ u, as the distribution), or None (a flat table, or one of a
+            luminance function alone: no control variate).
     """
 
     distribution: PiecewiseConstant2D
@@ -191,6 +215,7 @@ class MaterialTable:
     subsamples: int
     combine: str
     build_seconds: float
+    colour: np.ndarray | None = None
 
     @property
     def span(self) -> float:
@@ -304,23 +329,19 @@ def _check_parameters(resolution: object, subsamples: object, w_range: Iterable[
     return size, int(subsamples), fractions, str(combine)
 
 
-def luminance_weights(luminance: Luminance, resolution: int = DEFAULT_RESOLUTION, *,
-                      subsamples: int = DEFAULT_SUBSAMPLES, w_range: Iterable[float] = DEFAULT_W_FRACTIONS,
-                      combine: str = "mean", progress: bool = True, description: str = "importance table"
-                      ) -> np.ndarray:
-    """The table's cell weights ``float64 (R, R)`` (row ↔ v, column ↔ u) for ``luminance(u, v, w)`` (module
-    docstring, "The weights"): per w fraction the maximum over each cell's ``subsamples²`` points, then the
-    ``combine`` over the fractions, then the floor on reachable cells; 0 on cells wholly outside u² + v² < 4."""
-    size, sub, fractions, how = _check_parameters(resolution, subsamples, w_range, combine)
+def _slice_values(function: Colour, size: int, sub: int, fractions: tuple[float, ...], progress: bool,
+                  description: str) -> np.ndarray:
+    """``function(u, v, w)`` (values ``(N, C)``) at the ``size·sub`` × ``size·sub`` points of the square (the centres
+    of a regular grid, never on a cell edge) for each w fraction: ``float64 (F, points², C)``, row-major (v, u); 0
+    outside the disc u² + v² < 4 (no pair of directions reaches it) and where not finite."""
     points = size * sub
-    # Sub-sample positions: the centres of a points × points grid over the square (never on a cell edge).
     axis = -KEY_LIMIT + (np.arange(points) + 0.5) * (2.0 * KEY_LIMIT / points)
     u, v = np.meshgrid(axis, axis)  # (rows ↔ v, columns ↔ u)
     radius_squared = u * u + v * v
-    inside = np.flatnonzero(radius_squared < 4.0)  # no pair of directions reaches u² + v² ≥ 4
+    inside = np.flatnonzero(radius_squared < 4.0)
     depth = np.sqrt(np.clip(4.0 - radius_squared.reshape(-1)[inside], 0.0, None))
     u_in, v_in = u.reshape(-1)[inside], v.reshape(-1)[inside]
-    per_slice = np.zeros((len(fractions), points * points))
+    per_slice: np.ndarray | None = None
     batches = [(k, start) for k in range(len(fractions)) for start in range(0, inside.size, CHUNK)]
     iterator: Iterable[tuple[int, int]] = batches
     if progress:
@@ -329,14 +350,50 @@ def luminance_weights(luminance: Luminance, resolution: int = DEFAULT_RESOLUTION
         iterator = tqdm(batches, desc=description, unit="batch", leave=False, delay=PROGRESS_DELAY, file=sys.stderr)
     for k, start in iterator:
         rows = slice(start, start + CHUNK)
-        values = np.asarray(luminance(u_in[rows], v_in[rows], -fractions[k] * depth[rows]), dtype=np.float64)
-        per_slice[k, inside[rows]] = np.where(np.isfinite(values), np.clip(values, 0.0, None), 0.0)
-    cells = per_slice.reshape(len(fractions), size, sub, size, sub).max(axis=(2, 4))
+        values = np.asarray(function(u_in[rows], v_in[rows], -fractions[k] * depth[rows]), dtype=np.float64)
+        values = values.reshape(values.shape[0], -1)
+        if per_slice is None:
+            per_slice = np.zeros((len(fractions), points * points, values.shape[1]))
+        per_slice[k, inside[rows]] = np.where(np.isfinite(values), values, 0.0)
+    assert per_slice is not None  # the disc holds points at every resolution
+    return per_slice
+
+
+def _weights(luminance: np.ndarray, size: int, sub: int, how: str) -> np.ndarray:
+    """The cell weights of per-slice luminance ``(F, points²)`` (module docstring, "The weights")."""
+    cells = np.clip(luminance, 0.0, None).reshape(-1, size, sub, size, sub).max(axis=(2, 4))
     weights = cells.mean(axis=0) if how == "mean" else cells.max(axis=0)
     reachable = _reachable_cells(size)
     mean = float(weights[reachable].mean())
     floor = FLOOR_SHARE * mean if mean > 0.0 else 1.0  # a black material: sample the disc uniformly
     return np.where(reachable, np.maximum(weights, floor), 0.0)
+
+
+def luminance_weights(luminance: Luminance, resolution: int = DEFAULT_RESOLUTION, *,
+                      subsamples: int = DEFAULT_SUBSAMPLES, w_range: Iterable[float] = DEFAULT_W_FRACTIONS,
+                      combine: str = "mean", progress: bool = True, description: str = "importance table"
+                      ) -> np.ndarray:
+    """The table's cell weights ``float64 (R, R)`` (row ↔ v, column ↔ u) for ``luminance(u, v, w)`` (module
+    docstring, "The weights"): per w fraction the maximum over each cell's ``subsamples²`` points, then the
+    ``combine`` over the fractions, then the floor on reachable cells; 0 on cells wholly outside u² + v² < 4."""
+    size, sub, fractions, how = _check_parameters(resolution, subsamples, w_range, combine)
+    values = _slice_values(lambda u, v, w: np.asarray(luminance(u, v, w))[:, None], size, sub, fractions, progress,
+                           description)
+    return _weights(values[..., 0], size, sub, how)
+
+
+def material_weights(xyz: Colour, resolution: int = DEFAULT_RESOLUTION, *, subsamples: int = DEFAULT_SUBSAMPLES,
+                     w_range: Iterable[float] = DEFAULT_W_FRACTIONS, combine: str = "mean", progress: bool = True,
+                     description: str = "importance table") -> tuple[np.ndarray, np.ndarray]:
+    """:func:`luminance_weights` of ``xyz``'s Y and the colour table (:attr:`MaterialTable.colour`: the mean XYZ over
+    each cell's points at :data:`COLOUR_W_FRACTIONS`), from one evaluation of ``xyz`` per point and fraction of
+    either."""
+    size, sub, fractions, how = _check_parameters(resolution, subsamples, w_range, combine)
+    union = tuple(sorted(set(fractions) | set(COLOUR_W_FRACTIONS)))
+    values = _slice_values(xyz, size, sub, union, progress, description)
+    weights = _weights(values[[union.index(t) for t in fractions], :, 1], size, sub, how)
+    colour = values[[union.index(t) for t in COLOUR_W_FRACTIONS]].reshape(COLOUR_SLICES, size, sub, size, sub, 3)
+    return weights, colour.mean(axis=(2, 4)).astype(np.float32)
 
 
 def _reachable_cells(size: int) -> np.ndarray:
@@ -371,19 +428,19 @@ def luminance_table(luminance: Luminance, resolution: int = DEFAULT_RESOLUTION, 
 
 
 def _table(weights: np.ndarray, source: str, digest: str, subsamples: int, fractions: tuple[float, ...],
-           combine: str, seconds: float) -> MaterialTable:
+           combine: str, seconds: float, colour: np.ndarray | None = None) -> MaterialTable:
     return MaterialTable(distribution=PiecewiseConstant2D.from_weights(weights), key_min=-KEY_LIMIT,
                          key_max=KEY_LIMIT, w_range=fractions, source=source, digest=digest,
                          resolution=int(weights.shape[0]), subsamples=subsamples, combine=combine,
-                         build_seconds=float(seconds))
+                         build_seconds=float(seconds), colour=colour)
 
 
 # ------------------------------------------------------------------------------------------------
 # Materials: a model file, a ground-truth volume
 
 
-def model_luminance(model: ModelFile) -> Luminance:
-    """The network's CIE Y at key vectors, evaluated in float32 (the table needs a few digits, and float32
+def model_xyz(model: ModelFile) -> Colour:
+    """The network's CIE XYZ ``(N, 3)`` at key vectors, evaluated in float32 (the table needs a few digits, and float32
     halves the cost of the float64 contract evaluator, gratnet.modelfile.evaluate_keys; relative difference
     ≤ 2e-3 on the shipped models)."""
     valid = validated(model)
@@ -391,29 +448,41 @@ def model_luminance(model: ModelFile) -> Luminance:
     biases = [bias.astype(np.float32) for bias in valid.biases]
     last = len(weights) - 1
 
-    def luminance(u: np.ndarray, v: np.ndarray, w: np.ndarray) -> np.ndarray:
+    def xyz(u: np.ndarray, v: np.ndarray, w: np.ndarray) -> np.ndarray:
         coordinates = network_coordinates(np.asarray(u, dtype=np.float32), np.asarray(v, dtype=np.float32),
                                           np.asarray(w, dtype=np.float32), valid.scheme)
         x = np.asarray(network_inputs(valid, coordinates.astype(np.float32)), dtype=np.float32)
         for layer, (weight, bias) in enumerate(zip(weights, biases, strict=True)):
             x = x @ weight + bias
             x = activate_output(x, valid.output_activation) if layer == last else activate_hidden(x, valid.activation)
-        return np.asarray(range_inverse(x.astype(np.float64), valid.range), dtype=np.float64)[..., 1]
+        return np.asarray(range_inverse(x.astype(np.float64), valid.range), dtype=np.float64)
 
-    return luminance
+    return xyz
+
+
+def model_luminance(model: ModelFile) -> Luminance:
+    """The network's CIE Y at key vectors (:func:`model_xyz`'s second channel)."""
+    xyz = model_xyz(model)
+    return lambda u, v, w: xyz(u, v, w)[..., 1]
+
+
+def volume_xyz(xyz: np.ndarray, scheme: str) -> Colour:
+    """The ground-truth volume's CIE XYZ ``(N, 3)`` at key vectors: the reference look-up
+    (gratnet.reference.reference_xyz, trilinear in the volume's own coordinates)."""
+    from gratnet.reference import reference_xyz
+
+    values = np.asarray(xyz, dtype=np.float32)
+
+    def colour(u: np.ndarray, v: np.ndarray, w: np.ndarray) -> np.ndarray:
+        return np.asarray(reference_xyz(values, scheme, u, v, w), dtype=np.float64)
+
+    return colour
 
 
 def volume_luminance(xyz: np.ndarray, scheme: str) -> Luminance:
     """The ground-truth volume's CIE Y at key vectors: the reference look-up (gratnet.reference.reference_xyz,
     trilinear in the volume's own coordinates), on the Y channel alone."""
-    from gratnet.reference import reference_xyz
-
-    values = np.asarray(xyz, dtype=np.float32)[..., 1:2]
-
-    def luminance(u: np.ndarray, v: np.ndarray, w: np.ndarray) -> np.ndarray:
-        return np.asarray(reference_xyz(values, scheme, u, v, w), dtype=np.float64)[..., 0]
-
-    return luminance
+    return lambda u, v, w: volume_xyz(np.asarray(xyz)[..., 1:2], scheme)(u, v, w)[..., 0]
 
 
 def _volume_digest(xyz: np.ndarray, scheme: str) -> str:
@@ -437,7 +506,7 @@ def clear_memory_cache() -> None:
         _MEMORY.clear()
 
 
-def _cached_table(material: str, source: str, luminance: Callable[[], Luminance], resolution: int, subsamples: int,
+def _cached_table(material: str, source: str, colour: Callable[[], Colour], resolution: int, subsamples: int,
                   w_range: Iterable[float], combine: str, cache: bool, progress: bool, build: bool = True
                   ) -> MaterialTable | None:
     """The table for ``material`` (a content hash) and the parameters: from memory, else from disk, else built
@@ -445,7 +514,7 @@ def _cached_table(material: str, source: str, luminance: Callable[[], Luminance]
     size, sub, fractions, how = _check_parameters(resolution, subsamples, w_range, combine)
     parameters = {"format": _FORMAT, "version": _FORMAT_VERSION, "material": material, "source": source,
                   "resolution": size, "subsamples": sub, "w_range": list(fractions), "combine": how,
-                  "floor_share": FLOOR_SHARE, "key_limit": KEY_LIMIT}
+                  "floor_share": FLOOR_SHARE, "key_limit": KEY_LIMIT, "colour_w_range": list(COLOUR_W_FRACTIONS)}
     digest = hashlib.sha256(json.dumps(parameters, sort_keys=True).encode("utf-8")).hexdigest()[:32]
     if cache:
         with _MEMORY_LOCK:
@@ -458,11 +527,11 @@ def _cached_table(material: str, source: str, luminance: Callable[[], Luminance]
         return None
     if table is None:
         started = time.perf_counter()
-        weights = luminance_weights(luminance(), size, subsamples=sub, w_range=fractions, combine=how,
-                                    progress=progress, description=f"importance table ({source})")
-        table = _table(weights, source, digest, sub, fractions, how, time.perf_counter() - started)
+        weights, colours = material_weights(colour(), size, subsamples=sub, w_range=fractions, combine=how,
+                                            progress=progress, description=f"importance table ({source})")
+        table = _table(weights, source, digest, sub, fractions, how, time.perf_counter() - started, colours)
         if cache:
-            _write_cached(path, parameters, weights, table.build_seconds)
+            _write_cached(path, parameters, weights, colours, table.build_seconds)
     if cache:
         with _MEMORY_LOCK:
             while len(_MEMORY) >= _MEMORY_ENTRIES:
@@ -476,24 +545,28 @@ def _read_cached(path: Path, parameters: dict[str, object], digest: str) -> Mate
         with np.load(path, allow_pickle=False) as archive:
             header = json.loads(str(archive["header"]))
             weights = np.asarray(archive["weights"], dtype=np.float64)
+            colour = np.asarray(archive["colour"], dtype=np.float32)
     except (OSError, ValueError, KeyError):
         return None  # missing or unreadable: rebuild
     size = int(parameters["resolution"])  # type: ignore[call-overload]
-    if header.get("parameters") != parameters or weights.shape != (size, size):
+    if (header.get("parameters") != parameters or weights.shape != (size, size)
+            or colour.shape != (COLOUR_SLICES, size, size, 3) or not np.all(np.isfinite(colour))):
         return None
     try:
         return _table(weights, str(parameters["source"]), digest, int(parameters["subsamples"]),  # type: ignore[call-overload]
                       tuple(parameters["w_range"]), str(parameters["combine"]),  # type: ignore[arg-type]
-                      float(header.get("build_seconds", 0.0)))
+                      float(header.get("build_seconds", 0.0)), colour)
     except GratNetError:
         return None  # corrupt weights: rebuild
 
 
-def _write_cached(path: Path, parameters: dict[str, object], weights: np.ndarray, seconds: float) -> None:
+def _write_cached(path: Path, parameters: dict[str, object], weights: np.ndarray, colour: np.ndarray,
+                  seconds: float) -> None:
     header = json.dumps({"parameters": parameters, "build_seconds": round(seconds, 3)})
     try:
         with atomic_path(path, output=False) as temporary, open(temporary, "wb") as handle:
-            np.savez(handle, header=np.array(header), weights=weights.astype(np.float64))
+            np.savez(handle, header=np.array(header), weights=weights.astype(np.float64),
+                     colour=colour.astype(np.float32))
     except (OSError, GratNetError) as error:  # a read-only cache only costs a rebuild
         print(f"note: could not cache the importance table at {path}: {error}", file=sys.stderr)
 
@@ -503,7 +576,7 @@ def material_table(model: ModelFile, resolution: int = DEFAULT_RESOLUTION, *, su
                    progress: bool = True) -> MaterialTable:
     """The importance table of a trained network (its CIE Y in float32), cached in memory and on disk
     (:func:`importance_cache_folder`) by the model's content hash and the parameters."""
-    table = _cached_table(content_digest(validated(model)), "model", lambda: model_luminance(model), resolution,
+    table = _cached_table(content_digest(validated(model)), "model", lambda: model_xyz(model), resolution,
                           subsamples, w_range, combine, cache, progress)
     assert table is not None  # built when not cached
     return table
@@ -513,7 +586,7 @@ def cached_material_table(model: ModelFile, resolution: int = DEFAULT_RESOLUTION
                           subsamples: int = DEFAULT_SUBSAMPLES, w_range: Iterable[float] = DEFAULT_W_FRACTIONS,
                           combine: str = "mean") -> MaterialTable | None:
     """:func:`material_table` if it is in memory or in the disk cache (milliseconds), else None: never builds."""
-    return _cached_table(content_digest(validated(model)), "model", lambda: model_luminance(model), resolution,
+    return _cached_table(content_digest(validated(model)), "model", lambda: model_xyz(model), resolution,
                          subsamples, w_range, combine, True, False, build=False)
 
 
@@ -532,7 +605,7 @@ def volume_table(volume: object, resolution: int = DEFAULT_RESOLUTION, *, subsam
     if scheme not in SCHEME:
         raise GratNetError(f"the volume's metadata names no sampling scheme ({', '.join(SCHEME.names)}), got "
                            f"{scheme!r}")
-    table = _cached_table(_volume_digest(xyz, str(scheme)), "volume", lambda: volume_luminance(xyz, str(scheme)),
+    table = _cached_table(_volume_digest(xyz, str(scheme)), "volume", lambda: volume_xyz(xyz, str(scheme)),
                           resolution, subsamples, w_range, combine, cache, progress)
     assert table is not None  # built when not cached
     return table

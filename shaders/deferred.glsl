@@ -13,7 +13,8 @@
 //            (GL_NV_gpu_shader5 or GL_AMD_gpu_shader_half_float, enabled here: TILED_HALF_NV / TILED_HALF_AMD).
 //   TINT     under sampled light (surface.glsl's GBUFFER with ENVIRONMENT), after SHADE / SHADE_TILED: every
 //            texel's exposed XYZ under its pass's linear sRGB tint (a second texture stacked as the G-buffer, 0
-//            where the pixel is not lit), by the forward path's environment_tint (tint.glsl).
+//            where the pixel is not lit), by the forward path's environment_tint (tint.glsl), plus the pass's
+//            control-variate term (a third texture, exposed linear sRGB).
 //   RESOLVE  per pixel: the mean of its u_samples texels (sample k at row y + k * u_height) times u_scale,
 //            added to the output when u_accumulate is set (samples in several chunks).
 //
@@ -150,6 +151,7 @@ void main() {
 layout(local_size_x = DEFERRED_TILE, local_size_y = DEFERRED_TILE) in;
 layout(rgba32f, binding = GBUFFER_IMAGE_BINDING) uniform restrict image2D u_gbuffer;
 layout(rgba32f, binding = RESOLVED_IMAGE_BINDING) uniform restrict readonly image2D u_tint;  // unit free till RESOLVE
+layout(rgba32f, binding = OFFSET_IMAGE_BINDING) uniform restrict readonly image2D u_offset;  // control variate's
 uniform int u_first_row;    // as COMPACT's
 #include "tint.glsl"  // environment_tint: the forward path's colour product
 
@@ -160,7 +162,8 @@ void main() {
     }
     vec4 value = imageLoad(u_gbuffer, texel);
     vec3 tint = imageLoad(u_tint, texel).rgb;
-    imageStore(u_gbuffer, texel, vec4(environment_tint(value.xyz, tint), value.w));
+    vec3 offset = u_rgb_to_xyz * imageLoad(u_offset, texel).rgb;  // 0 on the background (cleared) and unlit passes
+    imageStore(u_gbuffer, texel, vec4(environment_tint(value.xyz, tint) + offset, value.w));
 }
 #endif
 

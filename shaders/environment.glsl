@@ -42,6 +42,12 @@ uniform bool u_delta_light;                   // the delta light of lights.glsl 
 uniform bool u_has_environment;               // false: area lights only (the map's textures are placeholders)
 uniform int u_candidates;                     // SAMPLING_RESAMPLED: candidates per pass, 1 .. MAX_CANDIDATES
 uniform int u_material_candidates;           // SAMPLING_RESAMPLED: how many of them material sampling draws
+uniform highp sampler2D u_material_colour;    // the control variate's colour table: linear sRGB over the (u, v) cells,
+                                              // u_colour_slices w slices stacked in rows (gratnet.importance)
+uniform bool u_control_variate;               // SAMPLING_RESAMPLED: the colour table is the material's own
+uniform int u_colour_slices;                  // slice j at t = (j + 0.5) / u_colour_slices
+// This pass's control-variate term (linear sRGB, M * (H - h(y) * W): resample_environment), added after the network.
+vec3 g_environment_offset = vec3(0.0);
 
 // The map's unit-square point (x: azimuth, y: polar angle / pi) of a world direction (gratnet.environment).
 vec2 environment_point(vec3 world) {
@@ -133,6 +139,24 @@ bool sample_material(vec3 wo, vec3 xi, out vec3 wi) {
     return planar_squared < 1.0;
 }
 
+// The colour table at light direction wi for view wo (tangent frame): the (u, v) cell of the key, linear in
+// t = -w / sqrt(4 - u^2 - v^2) between the slices (held at the first and last), linear sRGB.
+vec3 material_colour(vec3 wo, vec3 wi) {
+    float span = u_material_key_range.y - u_material_key_range.x;
+    vec3 key = -(wi + wo);
+    vec2 point = (key.xy - u_material_key_range.x) / span;
+    ivec2 cell = clamp(ivec2(floor(point * vec2(u_material_cells))), ivec2(0), u_material_cells - ivec2(1));
+    float depth = sqrt(max(4.0 - dot(key.xy, key.xy), 1e-12));
+    float slice = clamp(-key.z / depth, 0.0, 1.0) * float(u_colour_slices) - 0.5;
+    int low = clamp(int(floor(slice)), 0, u_colour_slices - 1);
+    int high = min(low + 1, u_colour_slices - 1);
+    float f = clamp(slice - float(low), 0.0, 1.0);
+    vec3 a = texelFetch(u_material_colour, cell + ivec2(0, low * u_material_cells.y), 0).rgb;
+    vec3 b = texelFetch(u_material_colour, cell + ivec2(0, high * u_material_cells.y), 0).rgb;
+    return mix(a, b, f);
+}
+
+
 // Resampled importance sampling of the environment (SAMPLING_RESAMPLED; Talbot, Cline & Egbert 2005): u_candidates
 // directions, the first u_material_candidates of them drawn by material sampling and the rest by the environment's
 // luminance, each weighed by the mixture's density q = (1 - m) p_light + m p_material (m = u_material_candidates /
@@ -145,7 +169,12 @@ bool sample_material(vec3 wo, vec3 xi, out vec3 wi) {
 // the mean as zeros); 0 when every candidate was. Each strategy's candidates take their 2-D numbers from its own
 // Sobol sequence under a per-pixel shift (`shift`), points turn * n + j for its n candidates of this pixel's
 // `turn`-th pass: stratified within a pass and across passes, each point still uniform.
-vec3 resample_environment(vec3 wo, mat3 world_to_tangent, uvec2 pixel, uint turn, uvec3 shift, out vec3 wi_world) {
+// Control variate (u_control_variate; docs/physics.md "Environment light"): h = A * S * C(u, v, t) * L with C the
+// material's colour table. The candidates estimate its integral, H = sum of h/q over the candidates / candidates, and
+// `offset` = H - h(y) * W (W the kept direction's weight above) is added after the network: the pass is then
+// H + (f(y) - h(y)) * W, unbiased for any table, and the network's one direction only corrects what C misses.
+vec3 resample_environment(vec3 wo, mat3 world_to_tangent, uvec2 pixel, uint turn, uvec3 shift, out vec3 wi_world,
+                          out vec3 offset) {
     mat3 tangent_to_world = transpose(world_to_tangent);
     int by_material = u_material_candidates;
     float share = float(by_material) / float(u_candidates);
@@ -154,6 +183,9 @@ vec3 resample_environment(vec3 wo, mat3 world_to_tangent, uvec2 pixel, uint turn
     float total = 0.0;  // sum of target / q over the candidates
     float kept_target = 0.0;
     vec3 kept_radiance = vec3(0.0);
+    vec3 proxy_sum = vec3(0.0);
+    vec3 kept_proxy = vec3(0.0);
+    offset = vec3(0.0);
     wi_world = vec3(0.0, 0.0, 1.0);
     for (int k = 0; k < MAX_CANDIDATES; ++k) {
         if (k >= u_candidates) {
@@ -185,14 +217,20 @@ vec3 resample_environment(vec3 wo, mat3 world_to_tangent, uvec2 pixel, uint turn
         float material = material_pdf(wo, wi);
         float source = (1.0 - share) * environment_pdf(world) + share * material;
         vec3 radiance = environment_radiance(world);
-        float target = a_term(wi, wo, u_ior) * smith_shadowing(wi, wo, u_slope_covariance) * (material / wi.z)
-                       * dot(radiance, vec3(0.2126, 0.7152, 0.0722));  // linear sRGB's luminance
+        float as = a_term(wi, wo, u_ior) * smith_shadowing(wi, wo, u_slope_covariance);
+        float target = as * (material / wi.z) * dot(radiance, vec3(0.2126, 0.7152, 0.0722));  // linear sRGB's luminance
         float weight = target / source;
         if (!(source > 0.0) || !(weight > 0.0) || isinf(weight)) {
             continue;
         }
+        vec3 proxy = vec3(0.0);
+        if (u_control_variate) {
+            proxy = as * material_colour(wo, wi) * radiance;
+            proxy_sum += proxy / source;
+        }
         total += weight;
         if (hashed_xi.y * total < weight) {  // keep this candidate with probability weight / total (a one-slot reservoir)
+            kept_proxy = proxy;
             kept_target = target;
             kept_radiance = radiance;
             wi_world = world;
@@ -201,7 +239,9 @@ vec3 resample_environment(vec3 wo, mat3 world_to_tangent, uvec2 pixel, uint turn
     if (!(total > 0.0) || !(kept_target > 0.0)) {
         return vec3(0.0);
     }
-    return kept_radiance * (total / (float(u_candidates) * kept_target));
+    float w = total / (float(u_candidates) * kept_target);
+    offset = proxy_sum / float(u_candidates) - kept_proxy * w;
+    return kept_radiance * w;
 }
 
 // The power heuristic's weight of a strategy of density `chosen` beside one of density `other`.
@@ -257,7 +297,9 @@ void environment_incidence(vec3 position, mat3 world_to_tangent, vec3 wo, out ve
         float chosen;
         vec3 radiance;
         if (emitter < 0 && resampled) {
-            tint = resample_environment(wo, world_to_tangent, pixel, turn, shift, wi_world) * strategies;
+            vec3 offset;
+            tint = resample_environment(wo, world_to_tangent, pixel, turn, shift, wi_world, offset) * strategies;
+            g_environment_offset = offset * strategies;
             irradiance = 1.0;
             return;
         }

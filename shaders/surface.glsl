@@ -83,6 +83,9 @@ in vec3 v_tangent;
 
 layout(location = 0) out vec4 out_exposed;
 layout(location = 1) out vec4 out_key;  // (key, A); GBUFFER with ENVIRONMENT: (tint, 0)
+#if defined(GBUFFER) && defined(ENVIRONMENT)
+layout(location = 2) out vec4 out_offset;  // the control variate's term, exposed linear sRGB (environment.glsl)
+#endif
 
 // A unit tangent perpendicular to unit n (Duff et al. 2017; viewer.meshes.arbitrary_tangents).
 vec3 arbitrary_tangent(vec3 n) {
@@ -156,6 +159,7 @@ void main() {
     out_exposed = vec4(key, factor);
 #ifdef ENVIRONMENT
     out_key = vec4(lit ? tint : vec3(0.0), 0.0);
+    out_offset = vec4(u_exposure * g_environment_offset, 0.0);  // lit or not, as the forward path adds it
 #endif
 }
 #else
@@ -168,6 +172,10 @@ void main() {
     vec3 tint;
     bool lit = surface_inputs(key, a, factor, tint);
     out_key = vec4(key, a);
+#ifdef ENVIRONMENT
+    // the control variate's term (environment.glsl), whether or not the kept direction lights the point
+    out_exposed = vec4(u_exposure * (u_rgb_to_xyz * g_environment_offset), 1.0);
+#endif
     if (!lit) {
         count_event(COUNTER_SKIPPED_A_ZERO);
         return;  // and skip the network: nothing to light
@@ -185,7 +193,7 @@ void main() {
     vec3 xyz = range_inverse(mlp_evaluate());
 #endif
 #ifdef ENVIRONMENT
-    out_exposed = vec4(environment_tint(factor * xyz, tint), 1.0);
+    out_exposed.xyz += environment_tint(factor * xyz, tint);
 #else
     out_exposed = vec4(factor * xyz, 1.0);
 #endif

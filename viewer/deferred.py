@@ -35,9 +35,11 @@ the G-buffer pass is ``surface.glsl`` compiled with ``GBUFFER`` and ``ENVIRONMEN
 estimator (``environment_incidence``), sample k as pass ``first_sample + k`` with ``u_pixel_origin`` lowered by
 ``k·H`` rows, so its random numbers are keyed by the picture's pixel as the forward path's are, not by the stacked
 row. It writes the pass's linear sRGB tint (0 where the pixel is not lit) into a second RGBA32F texture stacked
-alike (16 bytes more per stacked texel); after the shading kernel, whichever it is, ``TINT`` turns each texel's
-``factor · XYZ`` into ``environment_tint``'s value. Skipping by the bound stays off (the caller's). Deferred equals
-forward per pixel to the float32 differences of the stacked samples (tests/runtime/test_environment_light.py).
+alike, and the pass's control-variate term (exposed linear sRGB, docs/physics.md "Environment light") into a third
+(32 bytes more per stacked texel); after the shading kernel, whichever it is, ``TINT`` turns each texel's
+``factor · XYZ`` into ``environment_tint``'s value plus that term. Skipping by the bound stays off (the caller's).
+Deferred equals forward per pixel to the float32 differences of the stacked samples
+(tests/runtime/test_environment_light.py).
 A scene takes this path under sampled light only for a render that asks for it
 (:meth:`viewer.scene.SceneRenderer.path_for_render`).
 
@@ -113,6 +115,7 @@ _LIST_BINDING = BINDINGS["DEFERRED_LIST_BINDING"]  # gratnet/codes.py: the bindi
 _WEIGHTS_BINDING = BINDINGS["WEIGHTS_BINDING"]
 _GBUFFER_IMAGE = BINDINGS["GBUFFER_IMAGE_BINDING"]
 _RESOLVED_IMAGE = BINDINGS["RESOLVED_IMAGE_BINDING"]
+_OFFSET_IMAGE = BINDINGS["OFFSET_IMAGE_BINDING"]
 CHUNK_TEXELS = 1 << 26  # G-buffer texels per chunk of samples at most (1 GiB of RGBA32F)
 _MAX_GROUPS = 65535  # work groups per dimension of a dispatch (the least GL 4.3 guarantees)
 _PIECE_ENTRIES = 256  # SHADE pieces start at multiples of 256 list entries: 1 KiB-aligned SSBO offsets
@@ -293,7 +296,8 @@ class DeferredRenderer:
         """The G-buffer's textures (``tinted``: and the tint's, stacked alike) and their framebuffer."""
         if self._targets is None or self._targets[0] != (width, rows, tinted):
             self._release_targets()
-            textures = [self.ctx.texture((width, rows), 4, dtype="f4") for _ in range(2 if tinted else 1)]
+            # tinted: the tint's and the control variate's textures, stacked as the G-buffer
+            textures = [self.ctx.texture((width, rows), 4, dtype="f4") for _ in range(3 if tinted else 1)]
             depth = self.ctx.depth_renderbuffer((width, rows))
             framebuffer = self.ctx.framebuffer(color_attachments=textures, depth_attachment=depth)
             self._targets = ((width, rows, tinted), textures, depth, framebuffer)
@@ -405,7 +409,7 @@ class DeferredRenderer:
                         self._shade(shade, list_buffer, first, end)
                     self.ctx.memory_barrier()
                     if tint is not None:
-                        self._tint(tint, texture, textures[1], width, height * len(chunk))
+                        self._tint(tint, texture, textures[1], textures[2], width, height * len(chunk))
                     if output is not None:
                         set_uniform(resolve, "u_samples", len(chunk))
                         set_uniform(resolve, "u_height", height)
@@ -498,11 +502,12 @@ class DeferredRenderer:
             texture.release()
         return result[:count, :3].copy()
 
-    def _tint(self, tint: moderngl.ComputeShader, texture: moderngl.Texture, tints: moderngl.Texture, width: int,
-              rows: int) -> None:
+    def _tint(self, tint: moderngl.ComputeShader, texture: moderngl.Texture, tints: moderngl.Texture,
+              offsets: moderngl.Texture, width: int, rows: int) -> None:
         """The TINT kernel over the chunk's ``rows`` texel rows, in bands (sampled light, after the shading)."""
         texture.bind_to_image(_GBUFFER_IMAGE, read=True, write=True)
         tints.bind_to_image(_RESOLVED_IMAGE, read=True, write=False)
+        offsets.bind_to_image(_OFFSET_IMAGE, read=True, write=False)
         for first, end in self.tint_pacer.pieces(rows, multiple=DEFERRED_TILE):
             set_uniform(tint, "u_first_row", first)
             tint.run(_groups(width, DEFERRED_TILE), _groups(end - first, DEFERRED_TILE))
@@ -518,7 +523,7 @@ class DeferredRenderer:
         ``done``: the fraction of the chunk's G-buffer drawn, after each band. ``passes``: sampled light and the
         pass index of the chunk's first sample."""
         framebuffer.use()
-        framebuffer.clear(0.0, 0.0, 0.0, -1.0, depth=1.0)  # factor −1: background (and tint 0)
+        framebuffer.clear(0.0, 0.0, 0.0, -1.0, depth=1.0)  # factor −1: background (and tint and offset 0)
         if vertex_array is None:
             return
         width, height = framebuffer.width, len(row_costs)

@@ -25,7 +25,13 @@ from gratnet.area_lights import MAX_AREA_LIGHTS, AreaLight
 from gratnet.codes import DEFAULT_ENVIRONMENT_SAMPLING, ENVIRONMENT_SAMPLING
 from gratnet.environment import Environment
 from gratnet.errors import GratNetError
-from gratnet.importance import DEFENSIVE_SHARE, RESAMPLING_CANDIDATES, RESAMPLING_MATERIAL_CANDIDATES, MaterialTable
+from gratnet.importance import (
+    COLOUR_SLICES,
+    DEFENSIVE_SHARE,
+    RESAMPLING_CANDIDATES,
+    RESAMPLING_MATERIAL_CANDIDATES,
+    MaterialTable,
+)
 from gratnet.sampling2d import PiecewiseConstant2D
 from viewer.shading import MaterialTexture, set_uniform
 from viewer.srgb import XYZ_TO_LINEAR_SRGB
@@ -38,6 +44,9 @@ ENVIRONMENT_DEFINES = {"ENVIRONMENT": 1}
 #: Texture units of the map, its distribution and the material's table: units no other program of a mesh render
 #: takes (0 weights, 1–2 passes' inputs, 3 skip bound, 6 reference volume, 8… grid levels).
 ENVIRONMENT_UNITS = {"u_environment": 4, "u_environment_table": 5, "u_material_table": 7}
+#: Texture unit of the control variate's colour table: above any feature-grid model's units (8 …), within GL 4.3's
+#: 96 combined units.
+COLOUR_UNIT = 47
 #: Seeds are 32-bit unsigned integers in the shader.
 MAX_SEED = 2**32 - 1
 
@@ -47,6 +56,19 @@ def check_seed(seed: object) -> int:
     if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or not 0 <= seed <= MAX_SEED:
         raise GratNetError(f"the seed must be an integer in 0…{MAX_SEED}, got {seed!r}")
     return int(seed)
+
+
+def _colour_texture(ctx: moderngl.Context, colour: np.ndarray | None) -> moderngl.Texture:
+    """The control variate's colour table (gratnet.importance.MaterialTable.colour) in linear sRGB, its w slices
+    stacked in rows (slice j: rows j·R … (j + 1)·R − 1); a 1 × 1 placeholder for a table without one."""
+    if colour is None:
+        rgb = np.zeros((1, 1, 3), np.float32)
+    else:
+        slices, rows, columns, _ = colour.shape
+        rgb = (colour.astype(np.float64) @ XYZ_TO_LINEAR_SRGB.T).astype(np.float32).reshape(slices * rows, columns, 3)
+    texture = ctx.texture((rgb.shape[1], rgb.shape[0]), 3, np.ascontiguousarray(rgb).tobytes(), dtype="f4")
+    texture.filter = moderngl.NEAREST, moderngl.NEAREST
+    return texture
 
 
 def _table_texture(ctx: moderngl.Context, distribution: PiecewiseConstant2D) -> moderngl.Texture:
@@ -97,6 +119,7 @@ class EnvironmentLighting:
                     placeholder.filter = moderngl.NEAREST, moderngl.NEAREST
                     self._textures.append(placeholder)
             self._textures.append(_table_texture(ctx, table.distribution))
+            self._textures.append(_colour_texture(ctx, table.colour))
         except BaseException:
             self.release()
             raise
@@ -107,7 +130,7 @@ class EnvironmentLighting:
 
     def textures(self) -> tuple[tuple[MaterialTexture, int], ...]:
         """``(texture, unit)`` pairs to bind before a draw."""
-        units = list(ENVIRONMENT_UNITS.values())
+        units = [*ENVIRONMENT_UNITS.values(), COLOUR_UNIT]
         return tuple(zip(self._textures, units, strict=True))
 
     def set_uniforms(self, program: moderngl.Program, delta_light: bool, seed: int,
@@ -131,6 +154,9 @@ class EnvironmentLighting:
         set_uniform(program, "u_defensive_share", float(DEFENSIVE_SHARE))
         set_uniform(program, "u_candidates", RESAMPLING_CANDIDATES)
         set_uniform(program, "u_material_candidates", RESAMPLING_MATERIAL_CANDIDATES)
+        set_uniform(program, "u_material_colour", COLOUR_UNIT)
+        set_uniform(program, "u_control_variate", self.table.colour is not None)
+        set_uniform(program, "u_colour_slices", COLOUR_SLICES)
         set_uniform(program, "u_seed", check_seed(seed))
         if tinted:
             self.set_colour_uniforms(program)

@@ -239,6 +239,30 @@ def test_model_luminance_is_the_contract_y() -> None:
     np.testing.assert_allclose(importance.model_luminance(model)(u, v, w), expected, rtol=2e-3, atol=1e-30)
 
 
+def test_colour_table_is_the_network_at_the_cells_and_the_luminance_the_same_evaluations() -> None:
+    """material_weights evaluates once over the union of the fractions: its Y weights are luminance_weights', and the
+    colour table (the control variate's, physics.md "Environment light") is the network's XYZ at each cell's points
+    (their mean: 2² here) at COLOUR_W_FRACTIONS, 0 on cells outside the disc u² + v² < 4."""
+    model = random_model([163, 24, 16, 3], scheme="simple-max", seed=9)
+    size, sub = 32, 2
+    weights, colour = importance.material_weights(importance.model_xyz(model), size, subsamples=sub, progress=False)
+    np.testing.assert_array_equal(weights, importance.luminance_weights(importance.model_luminance(model), size,
+                                                                        subsamples=sub, progress=False))
+    assert colour.shape == (importance.COLOUR_SLICES, size, size, 3) and colour.dtype == np.float32
+    points = size * sub
+    axis = -2.0 + (np.arange(points) + 0.5) * (4.0 / points)
+    u, v = np.meshgrid(axis, axis)
+    inside = u * u + v * v < 4.0
+    for j, t in enumerate(importance.COLOUR_W_FRACTIONS):
+        w = -t * np.sqrt(np.clip(4.0 - u * u - v * v, 0.0, None))
+        xyz = np.where(inside[..., None], evaluate_keys(model, u, v, w), 0.0)
+        expected = xyz.reshape(size, sub, size, sub, 3).mean(axis=(1, 3))
+        np.testing.assert_allclose(colour[j], expected, rtol=3e-3, atol=1e-6 * float(np.abs(expected).max()))
+    table = importance.material_table(model, size, subsamples=sub, cache=False, progress=False)
+    np.testing.assert_array_equal(table.colour, colour)
+    assert importance.flat_table().colour is None  # no material: no control variate
+
+
 # ------------------------------------------------------------------------------------------------
 # Bad input and the cache
 
@@ -277,6 +301,7 @@ def test_the_cache_gives_the_same_table(tmp_path: object, monkeypatch: pytest.Mo
     again = importance.material_table(model, 32, subsamples=1, progress=False)  # from disk
     assert again is not first
     np.testing.assert_array_equal(again.distribution.density, first.distribution.density)
+    np.testing.assert_array_equal(again.colour, first.colour)
     assert (again.resolution, again.w_range, again.source) == (first.resolution, first.w_range, "model")
     other = importance.material_table(random_model([163, 16, 3], scheme="simple-max", seed=8), 32, subsamples=1,
                                       progress=False)
