@@ -156,7 +156,6 @@ vec3 material_colour(vec3 wo, vec3 wi) {
     return mix(a, b, f);
 }
 
-
 // Resampled importance sampling of the environment (SAMPLING_RESAMPLED; Talbot, Cline & Egbert 2005): u_candidates
 // directions, the first u_material_candidates of them drawn by material sampling and the rest by the environment's
 // luminance, each weighed by the mixture's density q = (1 - m) p_light + m p_material (m = u_material_candidates /
@@ -217,19 +216,20 @@ vec3 resample_environment(vec3 wo, mat3 world_to_tangent, uvec2 pixel, uint turn
         float material = material_pdf(wo, wi);
         float source = (1.0 - share) * environment_pdf(world) + share * material;
         vec3 radiance = environment_radiance(world);
-        float as = a_term(wi, wo, u_ior) * smith_shadowing(wi, wo, u_slope_covariance);
-        float target = as * (material / wi.z) * dot(radiance, vec3(0.2126, 0.7152, 0.0722));  // linear sRGB's luminance
+        float shadowed_a = a_term(wi, wo, u_ior) * smith_shadowing(wi, wo, u_slope_covariance);
+        float luminance = dot(radiance, vec3(0.2126, 0.7152, 0.0722));  // linear sRGB's
+        float target = shadowed_a * (material / wi.z) * luminance;
         float weight = target / source;
         if (!(source > 0.0) || !(weight > 0.0) || isinf(weight)) {
             continue;
         }
         vec3 proxy = vec3(0.0);
         if (u_control_variate) {
-            proxy = as * material_colour(wo, wi) * radiance;
+            proxy = shadowed_a * material_colour(wo, wi) * radiance;
             proxy_sum += proxy / source;
         }
         total += weight;
-        if (hashed_xi.y * total < weight) {  // keep this candidate with probability weight / total (a one-slot reservoir)
+        if (hashed_xi.y * total < weight) {  // keep it with probability weight / total (a one-slot reservoir)
             kept_proxy = proxy;
             kept_target = target;
             kept_radiance = radiance;
