@@ -10,7 +10,8 @@
   :data:`TRACED_SPHERE`): Mitsuba's rays to a light meet the mesh's flat facets, so a direction above the
   shading normal's horizon but below its facet's is blocked (the shadow terminator), while the GL runtime, which
   has no visibility, lights it. Under an environment that band held 3–5 % of a 64 × 32 sphere's light; at
-  256 × 128 (facets of 1.4°) the two renderers' means agree within 0.1 %. The picture is the same sphere.
+  256 × 128 (facets of 1.4°) the two renderers' means agree within their noise (about 1 %). The picture is the
+  same sphere.
 - **Camera**: ``viewer.camera.Camera`` as Mitsuba's ``perspective`` sensor (same eye, target, up, vertical
   field of view, clip range), or an ``orthographic`` one looking along the same axis.
 - **Lights**: ``viewer.camera.Light``, as its kind's entry of gratnet.lights says (``LightKind.mitsuba``):
