@@ -329,11 +329,11 @@ def _check_parameters(resolution: object, subsamples: object, w_range: Iterable[
     return size, int(subsamples), fractions, str(combine)
 
 
-def _slice_values(function: Colour, size: int, sub: int, fractions: tuple[float, ...], progress: bool,
-                  description: str) -> np.ndarray:
-    """``function(u, v, w)`` (values ``(N, C)``) at the ``size·sub`` × ``size·sub`` points of the square (the centres
-    of a regular grid, never on a cell edge) for each w fraction: ``float64 (F, points², C)``, row-major (v, u); 0
-    outside the disc u² + v² < 4 (no pair of directions reaches it) and where not finite."""
+def _slice_values(function: Colour, channels: int, size: int, sub: int, fractions: tuple[float, ...],
+                  progress: bool, description: str) -> np.ndarray:
+    """``function(u, v, w)`` (``channels`` values per point) at the ``size·sub`` × ``size·sub`` points of the square
+    (the centres of a regular grid, never on a cell edge) for each w fraction: ``float64 (F, points², channels)``,
+    row-major (v, u); 0 outside the disc u² + v² < 4 (no pair of directions reaches it) and where not finite."""
     points = size * sub
     axis = -KEY_LIMIT + (np.arange(points) + 0.5) * (2.0 * KEY_LIMIT / points)
     u, v = np.meshgrid(axis, axis)  # (rows ↔ v, columns ↔ u)
@@ -341,7 +341,7 @@ def _slice_values(function: Colour, size: int, sub: int, fractions: tuple[float,
     inside = np.flatnonzero(radius_squared < 4.0)
     depth = np.sqrt(np.clip(4.0 - radius_squared.reshape(-1)[inside], 0.0, None))
     u_in, v_in = u.reshape(-1)[inside], v.reshape(-1)[inside]
-    per_slice: np.ndarray | None = None
+    per_slice = np.zeros((len(fractions), points * points, channels))
     batches = [(k, start) for k in range(len(fractions)) for start in range(0, inside.size, CHUNK)]
     iterator: Iterable[tuple[int, int]] = batches
     if progress:
@@ -351,11 +351,7 @@ def _slice_values(function: Colour, size: int, sub: int, fractions: tuple[float,
     for k, start in iterator:
         rows = slice(start, start + CHUNK)
         values = np.asarray(function(u_in[rows], v_in[rows], -fractions[k] * depth[rows]), dtype=np.float64)
-        values = values.reshape(values.shape[0], -1)
-        if per_slice is None:
-            per_slice = np.zeros((len(fractions), points * points, values.shape[1]))
-        per_slice[k, inside[rows]] = np.where(np.isfinite(values), values, 0.0)
-    assert per_slice is not None  # the disc holds points at every resolution
+        per_slice[k, inside[rows]] = np.where(np.isfinite(values), values, 0.0).reshape(-1, channels)
     return per_slice
 
 
@@ -377,8 +373,7 @@ def luminance_weights(luminance: Luminance, resolution: int = DEFAULT_RESOLUTION
     docstring, "The weights"): per w fraction the maximum over each cell's ``subsamples²`` points, then the
     ``combine`` over the fractions, then the floor on reachable cells; 0 on cells wholly outside u² + v² < 4."""
     size, sub, fractions, how = _check_parameters(resolution, subsamples, w_range, combine)
-    values = _slice_values(lambda u, v, w: np.asarray(luminance(u, v, w))[:, None], size, sub, fractions, progress,
-                           description)
+    values = _slice_values(luminance, 1, size, sub, fractions, progress, description)
     return _weights(values[..., 0], size, sub, how)
 
 
@@ -390,7 +385,7 @@ def material_weights(xyz: Colour, resolution: int = DEFAULT_RESOLUTION, *, subsa
     either."""
     size, sub, fractions, how = _check_parameters(resolution, subsamples, w_range, combine)
     union = tuple(sorted(set(fractions) | set(COLOUR_W_FRACTIONS)))
-    values = _slice_values(xyz, size, sub, union, progress, description)
+    values = _slice_values(xyz, 3, size, sub, union, progress, description)
     weights = _weights(values[[union.index(t) for t in fractions], :, 1], size, sub, how)
     colour = values[[union.index(t) for t in COLOUR_W_FRACTIONS]].reshape(COLOUR_SLICES, size, sub, size, sub, 3)
     return weights, colour.mean(axis=(2, 4)).astype(np.float32)
@@ -482,7 +477,8 @@ def volume_xyz(xyz: np.ndarray, scheme: str) -> Colour:
 def volume_luminance(xyz: np.ndarray, scheme: str) -> Luminance:
     """The ground-truth volume's CIE Y at key vectors: the reference look-up (gratnet.reference.reference_xyz,
     trilinear in the volume's own coordinates), on the Y channel alone."""
-    return lambda u, v, w: volume_xyz(np.asarray(xyz)[..., 1:2], scheme)(u, v, w)[..., 0]
+    luminance = volume_xyz(np.asarray(xyz)[..., 1:2], scheme)  # the Y channel alone, converted once
+    return lambda u, v, w: luminance(u, v, w)[..., 0]
 
 
 def _volume_digest(xyz: np.ndarray, scheme: str) -> str:
@@ -574,8 +570,8 @@ def _write_cached(path: Path, parameters: dict[str, object], weights: np.ndarray
 def material_table(model: ModelFile, resolution: int = DEFAULT_RESOLUTION, *, subsamples: int = DEFAULT_SUBSAMPLES,
                    w_range: Iterable[float] = DEFAULT_W_FRACTIONS, combine: str = "mean", cache: bool = True,
                    progress: bool = True) -> MaterialTable:
-    """The importance table of a trained network (its CIE Y in float32), cached in memory and on disk
-    (:func:`importance_cache_folder`) by the model's content hash and the parameters."""
+    """The importance table of a trained network (its CIE Y in float32) with its colour table, cached in memory and
+    on disk (:func:`importance_cache_folder`) by the model's content hash and the parameters."""
     table = _cached_table(content_digest(validated(model)), "model", lambda: model_xyz(model), resolution,
                           subsamples, w_range, combine, cache, progress)
     assert table is not None  # built when not cached

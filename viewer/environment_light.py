@@ -34,19 +34,18 @@ from gratnet.importance import (
 )
 from gratnet.sampling2d import PiecewiseConstant2D
 from viewer.shading import MaterialTexture, set_uniform
-from viewer.srgb import XYZ_TO_LINEAR_SRGB
+from viewer.srgb import XYZ_TO_LINEAR_SRGB, linear_srgb
 
 __all__ = ["ENVIRONMENT_DEFINES", "ENVIRONMENT_UNITS", "EnvironmentLighting", "EnvironmentPass", "MAX_SEED",
            "check_seed"]
 
 #: The define that compiles shaders/environment.glsl into the surface program.
 ENVIRONMENT_DEFINES = {"ENVIRONMENT": 1}
-#: Texture units of the map, its distribution and the material's table: units no other program of a mesh render
-#: takes (0 weights, 1–2 passes' inputs, 3 skip bound, 6 reference volume, 8… grid levels).
-ENVIRONMENT_UNITS = {"u_environment": 4, "u_environment_table": 5, "u_material_table": 7}
-#: Texture unit of the control variate's colour table: above any feature-grid model's units (8 …), within GL 4.3's
-#: 96 combined units.
-COLOUR_UNIT = 47
+#: Texture units of the map, its distribution, the material's table and its colour table (the control variate's), in
+#: the order the textures are made: units no other program of a mesh render takes (0 weights, 1–2 passes' inputs,
+#: 3 skip bound, 6 reference volume, 8… grid levels; the colour table's 47 lies above any model's grid units, within
+#: GL 4.3's 96 combined units).
+ENVIRONMENT_UNITS = {"u_environment": 4, "u_environment_table": 5, "u_material_table": 7, "u_material_colour": 47}
 #: Seeds are 32-bit unsigned integers in the shader.
 MAX_SEED = 2**32 - 1
 
@@ -65,7 +64,7 @@ def _colour_texture(ctx: moderngl.Context, colour: np.ndarray | None) -> moderng
         rgb = np.zeros((1, 1, 3), np.float32)
     else:
         slices, rows, columns, _ = colour.shape
-        rgb = (colour.astype(np.float64) @ XYZ_TO_LINEAR_SRGB.T).astype(np.float32).reshape(slices * rows, columns, 3)
+        rgb = linear_srgb(colour).astype(np.float32).reshape(slices * rows, columns, 3)
     texture = ctx.texture((rgb.shape[1], rgb.shape[0]), 3, np.ascontiguousarray(rgb).tobytes(), dtype="f4")
     texture.filter = moderngl.NEAREST, moderngl.NEAREST
     return texture
@@ -130,8 +129,7 @@ class EnvironmentLighting:
 
     def textures(self) -> tuple[tuple[MaterialTexture, int], ...]:
         """``(texture, unit)`` pairs to bind before a draw."""
-        units = [*ENVIRONMENT_UNITS.values(), COLOUR_UNIT]
-        return tuple(zip(self._textures, units, strict=True))
+        return tuple(zip(self._textures, ENVIRONMENT_UNITS.values(), strict=True))
 
     def set_uniforms(self, program: moderngl.Program, delta_light: bool, seed: int,
                      sampling: str = DEFAULT_ENVIRONMENT_SAMPLING, tinted: bool = True) -> None:
@@ -154,7 +152,6 @@ class EnvironmentLighting:
         set_uniform(program, "u_defensive_share", float(DEFENSIVE_SHARE))
         set_uniform(program, "u_candidates", RESAMPLING_CANDIDATES)
         set_uniform(program, "u_material_candidates", RESAMPLING_MATERIAL_CANDIDATES)
-        set_uniform(program, "u_material_colour", COLOUR_UNIT)
         set_uniform(program, "u_control_variate", self.table.colour is not None)
         set_uniform(program, "u_colour_slices", COLOUR_SLICES)
         set_uniform(program, "u_seed", check_seed(seed))
